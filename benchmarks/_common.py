@@ -1,0 +1,46 @@
+"""Shared helpers of the benchmarks: scenes and a timer that reports medians (this machine is noisy)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+import depthguard as dg
+from depthguard.scenes import Box, render_depth, scene_distance, standing_person
+from depthguard.transforms import look_at
+
+
+def timings(fn, repeats: int, warmup: int = 3) -> np.ndarray:
+    """Seconds per call of ``fn()`` over ``repeats`` calls, after ``warmup`` untimed calls."""
+    for _ in range(warmup):
+        fn()
+    out = np.empty(repeats)
+    for i in range(repeats):
+        t = time.perf_counter()
+        fn()
+        out[i] = time.perf_counter() - t
+    return out
+
+
+def person_scene(seed: int = 0):
+    """The single-camera benchmark scene of issue 2: a 640x480 Kinect-like camera, a standing person 1.5-2.5 m from
+    it reaching forward, a floor and a back wall, and 9 control points within 0.5 m of the person.
+
+    Returns (camera, depth image (uint16 millimetres, quantised), primitives, control points (9, 3) world metres).
+    """
+    camera = dg.PinholeCamera("kinect", 640, 480, 525.0, 525.0, 319.5, 239.5,
+                              look_at([2.4, 0.3, 1.5], [0.0, 0.0, 0.9]), depth_range=(0.4, 8.0))
+    primitives = [Box.from_bounds([-3, -3, -0.1], [4, 3, 0.0]), Box.from_bounds([-2.2, -3, 0], [-2.1, 3, 3])]
+    primitives += standing_person((0.1, 0.0), facing=0.0, reach=0.8)
+    depth_m = render_depth(camera, primitives)
+    depth = dg.depth_image(np.round(depth_m * 1000.0).astype(np.uint16), camera)
+    rng = np.random.default_rng(seed)
+    points = []
+    person = primitives[2:]
+    while len(points) < 9:
+        p = rng.uniform([-0.5, -0.7, 0.3], [1.3, 0.7, 1.9])
+        d = scene_distance(person, p[None])[0]
+        if 0.03 < d < 0.5 and scene_distance(primitives[:2], p[None])[0] > 0.3:
+            points.append(p)
+    return camera, depth, primitives, np.array(points)

@@ -1,0 +1,132 @@
+"""The user-facing monitor: rig + frames + control points in, distances out."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from depthguard import config
+from depthguard.cameras import Rig
+from depthguard.depth import DepthImage, OccupancyImage, depth_image, prepare_depth
+from depthguard.depthspace import check_points, single_camera_distances
+from depthguard.depthspace._distance import check_options
+from depthguard.errors import InputError
+from depthguard.results import DistanceResult, Flag
+
+
+class DistanceMonitor:
+    """Distances from robot control points to unknown obstacles seen by a rig's depth cameras.
+
+    Args:
+        rig: the cameras (:func:`depthguard.load_rig`).
+        rho: radius of each control point's surveillance region, metres; obstacles farther away are ignored.
+        aggregate: ``"min"``, ``"mean"`` or ``"hybrid"`` (SPEC section 6).
+        invalid: policy for pixels without a valid measurement: ``"occupied"`` (fail-safe), ``"neighbors"`` or
+            ``"free"`` (SPEC section 3).
+        unseen: policy for space no camera observes: ``"occupied"`` (fail-safe) or ``"free"``.
+        method: ``"exact"`` (SPEC) or ``"paper"`` (the 2015 paper's unsafe formulas, for comparison only).
+        max_age: seconds; a frame older than this at query time (``now``) makes its camera blind and the result
+            flagged. None: frames never go stale.
+        hole_pixels: largest hole filled by ``invalid="neighbors"``, pixels.
+
+    A frame passed as a :class:`DepthImage` is prepared once and reused while the same object is passed again; a
+    plain array is checked and prepared on every query.
+    """
+
+    def __init__(self, rig: Rig, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
+                 invalid: str = config.DEFAULT_INVALID, unseen: str = config.DEFAULT_UNSEEN,
+                 method: str = config.DEFAULT_METHOD, max_age: float | None = None,
+                 hole_pixels: int = config.DEFAULT_NEIGHBOR_HOLE_PIXELS):
+        if not isinstance(rig, Rig):
+            raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}")
+        check_options(rho, aggregate, unseen, method)
+        if invalid not in config.INVALID_POLICIES:
+            raise InputError(f"invalid must be one of {config.INVALID_POLICIES}, got {invalid!r}")
+        if max_age is not None and not (np.isfinite(max_age) and max_age > 0):
+            raise InputError(f"max_age must be a positive number of seconds or None, got {max_age!r}")
+        if isinstance(hole_pixels, bool) or not isinstance(hole_pixels, (int, np.integer)) or hole_pixels < 0:
+            raise InputError(f"hole_pixels must be a non-negative integer, got {hole_pixels!r}")
+        self.rig = rig
+        self.rho = float(rho)
+        self.aggregate = aggregate
+        self.invalid = invalid
+        self.unseen = unseen
+        self.method = method
+        self.max_age = None if max_age is None else float(max_age)
+        self.hole_pixels = int(hole_pixels)
+        self._prepared: dict[str, tuple[DepthImage, OccupancyImage]] = {}
+
+    def prepare(self, name: str, frame) -> OccupancyImage:
+        """Check a frame of camera ``name`` and prepare it (cached while the same :class:`DepthImage` comes back)."""
+        camera = self.rig.camera(name)
+        cached = self._prepared.get(name)
+        if cached is not None and cached[0] is frame:
+            return cached[1]
+        if isinstance(frame, DepthImage):
+            if frame.camera != name:
+                raise InputError(f"the frame given for camera {name!r} was taken by camera {frame.camera!r}")
+            image = frame if frame.data.shape == camera.shape else depth_image(frame.data, camera, frame.timestamp)
+        else:
+            image = depth_image(frame, camera)
+        occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels)
+        if isinstance(frame, DepthImage):
+            self._prepared[name] = (frame, occupancy)
+        return occupancy
+
+    def query(self, frames: Mapping[str, object], points_world, *, now: float | None = None,
+              check: bool = True) -> DistanceResult:
+        """Distances of control points given the latest frame of each camera.
+
+        Args:
+            frames: camera name -> :class:`DepthImage` (or a (height, width) array in the camera's units).
+            points_world: (n, 3) float64, metres, world frame.
+            now: the current time in the frames' clock, seconds; needed when ``max_age`` is set.
+            check: validate the points (``False`` for a hot loop that passes a checked (n, 3) float64 array).
+
+        With one frame, the single-camera method of SPEC sections 3-6 runs on it. With no usable frame (none given,
+        or every one stale) each point gets distance 0 and the flag ``MISSING_CAMERA`` or ``STALE_CAMERA``.
+        """
+        points = check_points(points_world) if check else points_world
+        if not isinstance(frames, Mapping):
+            raise InputError(f"frames must map camera names to depth images, got {type(frames).__name__}")
+        if self.max_age is not None and now is None:
+            raise InputError("this monitor has max_age set: pass now= (seconds, the frames' clock) to query()")
+        usable: dict[str, OccupancyImage] = {}
+        stale: list[str] = []
+        for name, frame in frames.items():
+            occupancy = self.prepare(name, frame)
+            if self.max_age is not None and (occupancy.timestamp is None or now - occupancy.timestamp > self.max_age):
+                stale.append(name)
+                continue
+            usable[name] = occupancy
+        if not usable:
+            flag = Flag.STALE_CAMERA if stale else Flag.MISSING_CAMERA
+            return _blind_result(len(points), flag, {n: self._prepared[n][1].timestamp for n in stale
+                                                     if n in self._prepared})
+        if len(usable) > 1:
+            raise InputError(
+                f"frames of {len(usable)} cameras given ({', '.join(usable)}); fusing several cameras needs the depth "
+                "grid, which this version does not have yet: pass one camera's frame"
+            )
+        (occupancy,) = usable.values()
+        result = single_camera_distances(occupancy, points, self.rho, self.aggregate, self.unseen, self.method,
+                                         check=False)
+        if stale:
+            flags = tuple(f | Flag.STALE_CAMERA for f in result.flags)
+            result = DistanceResult(result.distance, result.direction, result.count, result.invalid_count, flags,
+                                    result.timestamps, result.cameras)
+        return result
+
+
+def _blind_result(n: int, flag: Flag, timestamps: dict) -> DistanceResult:
+    """The conservative answer when no camera can see: distance 0 everywhere, flagged."""
+    return DistanceResult(
+        distance=np.zeros(n),
+        direction=np.zeros((n, 3)),
+        count=np.zeros(n, dtype=np.int64),
+        invalid_count=np.zeros(n, dtype=np.int64),
+        flags=tuple(flag for _ in range(n)),
+        timestamps=timestamps,
+        cameras=(),
+    )

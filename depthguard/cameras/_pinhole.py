@@ -1,0 +1,164 @@
+"""The pinhole depth camera: intrinsics, pose, valid range and noise."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from depthguard import config
+from depthguard.cameras._noise import NoiseModel
+from depthguard.errors import RigError
+from depthguard.transforms import check_transform, invert
+
+
+@dataclass(frozen=True, eq=False)
+class PinholeCamera:
+    """A calibrated, rectified (distortion-free) depth camera.
+
+    Axes of its optical frame (ROS REP 103): **x right, y down, z forward**. Pixel (u, v) is column u, row v; its
+    centre is at image coordinates (u, v) and its footprint is [u - 1/2, u + 1/2] x [v - 1/2, v + 1/2], as in OpenCV
+    and ROS. A point (x, y, z) in the optical frame projects to u = fx*x/z + cx, v = fy*y/z + cy. A depth value is
+    the z coordinate of the surface (not the ray length).
+
+    Attributes:
+        name: the camera's name in its rig.
+        width, height: image size, pixels.
+        fx, fy: focal lengths, pixels. cx, cy: principal point, pixels.
+        T_world_camera: (4, 4) float64, maps optical-frame coordinates (metres) to world coordinates (metres).
+        depth_range: (min, max) valid measurement depth, metres; outside it a measurement counts as missing and the
+            space counts as unseen. ``(0, inf)`` when the rig does not say.
+        depth_scale: metres per unit of this camera's ``uint16`` depth images.
+        noise: the depth noise model that gives the margin m(d).
+    """
+
+    name: str
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    T_world_camera: np.ndarray
+    depth_range: tuple[float, float] = config.DEFAULT_DEPTH_RANGE
+    depth_scale: float = config.DEFAULT_DEPTH_SCALE
+    noise: NoiseModel = field(default_factory=NoiseModel)
+
+    def __post_init__(self):
+        name = self.name
+        if not isinstance(name, str) or not name:
+            raise RigError("camera name must be a non-empty string", camera=repr(name), field="name")
+        for key in ("width", "height"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
+                raise RigError(f"must be a positive integer, got {value!r}", camera=name, field=key)
+            object.__setattr__(self, key, int(value))
+        for key in ("fx", "fy", "cx", "cy"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+                raise RigError(f"must be a number, got {value!r}", camera=name, field=key)
+            if not math.isfinite(value):
+                raise RigError(f"must be finite, got {value!r}", camera=name, field=key)
+            object.__setattr__(self, key, float(value))
+        for key in ("fx", "fy"):
+            if getattr(self, key) <= 0.0:
+                raise RigError(f"focal length must be positive, got {getattr(self, key)}", camera=name, field=key)
+        T = check_transform(self.T_world_camera, camera=name, field="T_world_camera")
+        T.setflags(write=False)
+        object.__setattr__(self, "T_world_camera", T)
+        T_cw = invert(T)
+        T_cw.setflags(write=False)
+        object.__setattr__(self, "_T_camera_world", T_cw)
+        try:
+            lo, hi = (float(x) for x in self.depth_range)
+        except (TypeError, ValueError):
+            raise RigError(f"must be [min, max] in metres, got {self.depth_range!r}", camera=name,
+                           field="depth_range") from None
+        if not (math.isfinite(lo) and lo >= 0.0 and hi > lo) or math.isnan(hi):
+            raise RigError(f"must satisfy 0 <= min < max, got [{lo}, {hi}]", camera=name, field="depth_range")
+        object.__setattr__(self, "depth_range", (lo, hi))
+        scale = self.depth_scale
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not (math.isfinite(scale) and scale > 0):
+            raise RigError(f"must be a positive number of metres per unit, got {scale!r}", camera=name,
+                           field="depth_scale")
+        object.__setattr__(self, "depth_scale", float(scale))
+        if not isinstance(self.noise, NoiseModel):
+            raise RigError(f"must be a NoiseModel, got {type(self.noise).__name__}", camera=name, field="noise")
+
+    @property
+    def T_camera_world(self) -> np.ndarray:
+        """(4, 4) float64: maps world coordinates to this camera's optical frame."""
+        return self._T_camera_world
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(height, width): the shape of this camera's images."""
+        return (self.height, self.width)
+
+    @property
+    def K(self) -> np.ndarray:
+        """(3, 3) float64 intrinsic matrix."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def world_to_camera(self, points_world) -> np.ndarray:
+        """(n, 3) metres, world frame -> (n, 3) metres, optical frame."""
+        T = self._T_camera_world
+        return np.asarray(points_world, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
+
+    def camera_to_world(self, points_camera) -> np.ndarray:
+        """(n, 3) metres, optical frame -> (n, 3) metres, world frame."""
+        T = self.T_world_camera
+        return np.asarray(points_camera, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
+
+    def project(self, points_camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Project (n, 3) optical-frame points (metres) to image coordinates.
+
+        Returns (u, v, z): (n,) float64 column and row coordinates (pixels; NaN for z <= 0) and depth z (metres).
+        """
+        p = np.asarray(points_camera, dtype=np.float64).reshape(-1, 3)
+        z = p[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ok = z > 0
+            u = np.where(ok, self.fx * p[:, 0] / z + self.cx, np.nan)
+            v = np.where(ok, self.fy * p[:, 1] / z + self.cy, np.nan)
+        return u, v, z
+
+    def back_project(self, u, v, depth) -> np.ndarray:
+        """Optical-frame points (..., 3), metres, of image coordinates ``u``, ``v`` (pixels) at depth z (metres)."""
+        u, v, depth = np.broadcast_arrays(np.asarray(u, np.float64), np.asarray(v, np.float64),
+                                          np.asarray(depth, np.float64))
+        return np.stack([(u - self.cx) / self.fx * depth, (v - self.cy) / self.fy * depth, depth], axis=-1)
+
+    def pixel_grid(self) -> tuple[np.ndarray, np.ndarray]:
+        """(u, v): two (height, width) float64 arrays holding each pixel's column and row."""
+        v, u = np.mgrid[0 : self.height, 0 : self.width]
+        return u.astype(np.float64), v.astype(np.float64)
+
+    def depth_to_points(self, depth_m: np.ndarray) -> np.ndarray:
+        """Back-project a (height, width) depth image in metres to (height, width, 3) optical-frame points."""
+        u, v = self.pixel_grid()
+        return self.back_project(u, v, depth_m)
+
+    def replace(self, **changes) -> "PinholeCamera":
+        """A copy with some fields changed (validated again)."""
+        fields = dict(name=self.name, width=self.width, height=self.height, fx=self.fx, fy=self.fy, cx=self.cx,
+                      cy=self.cy, T_world_camera=self.T_world_camera, depth_range=self.depth_range,
+                      depth_scale=self.depth_scale, noise=self.noise)
+        fields.update(changes)
+        return PinholeCamera(**fields)
+
+    def to_dict(self) -> dict:
+        """The camera as a rig-file entry (plain Python types)."""
+        lo, hi = self.depth_range
+        entry = dict(name=self.name, width=self.width, height=self.height, fx=self.fx, fy=self.fy, cx=self.cx,
+                     cy=self.cy, T_world_camera=[[float(x) for x in row] for row in self.T_world_camera])
+        if (lo, hi) != config.DEFAULT_DEPTH_RANGE:
+            entry["depth_range"] = [lo, hi]
+        entry["depth_scale"] = self.depth_scale
+        entry["noise"] = dict(a=self.noise.a, b=self.noise.b, c=self.noise.c, k=self.noise.k)
+        return entry
+
+    def __repr__(self) -> str:
+        return (f"PinholeCamera(name={self.name!r}, {self.width}x{self.height}, fx={self.fx:g}, fy={self.fy:g}, "
+                f"cx={self.cx:g}, cy={self.cy:g})")

@@ -1,0 +1,47 @@
+"""Numba kernels of the per-frame preparation. They trust their inputs; ``_prepare.py`` validates them."""
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def start_depths(raw, scale, z_min, z_max, m0, m1, m2, invalid_start, z_start, invalid):
+    """Per pixel, the depth from which its frustum is possibly occupied.
+
+    raw: (h, w) uint16 units or float32 metres. scale: metres per unit. [z_min, z_max]: valid range, metres.
+    m0 + m1*d + m2*d**2: the noise margin at depth d (metres), clamped at 0. invalid_start: where a pixel without a
+    valid measurement starts (z_min for "occupied", inf for "free").
+    Writes z_start (h, w) float32 metres (inf = nothing) and invalid (h, w) uint8 (1 = no valid measurement).
+    """
+    h, w = raw.shape
+    for v in prange(h):
+        for u in range(w):
+            d = np.float64(raw[v, u]) * scale
+            if np.isfinite(d) and d > 0.0 and d >= z_min and d <= z_max:
+                margin = m0 + (m1 + m2 * d) * d
+                if margin < 0.0:
+                    margin = 0.0
+                z = d - margin
+                if z < 0.0:
+                    z = 0.0
+                z_start[v, u] = z
+                invalid[v, u] = 0
+            else:
+                z_start[v, u] = invalid_start
+                invalid[v, u] = 1
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def block_minimum(z_start, block, out):
+    """out[i, j] = min of z_start over the block of pixels [i*block, (i+1)*block) x [j*block, (j+1)*block)."""
+    h, w = z_start.shape
+    hb, wb = out.shape
+    for bi in prange(hb):
+        for bj in range(wb):
+            m = np.inf
+            for v in range(bi * block, min(h, (bi + 1) * block)):
+                for u in range(bj * block, min(w, (bj + 1) * block)):
+                    z = z_start[v, u]
+                    if z < m:
+                        m = z
+            out[bi, bj] = m

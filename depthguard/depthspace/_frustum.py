@@ -1,0 +1,57 @@
+"""The exact point-to-frustum distance of SPEC section 4, for arrays of pairs (public face of the kernel)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from depthguard.depthspace._kernels import frustum_nearest, frustum_nearest_paper
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _many(points, bounds, nearest_out, distance_out, paper):
+    for i in prange(points.shape[0]):
+        X, Y, Z = points[i, 0], points[i, 1], points[i, 2]
+        a0, a1, b0, b1, z_lo, z_hi = bounds[i, 0], bounds[i, 1], bounds[i, 2], bounds[i, 3], bounds[i, 4], bounds[i, 5]
+        if paper:
+            d2, z = frustum_nearest_paper(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi)
+        else:
+            d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi)
+        distance_out[i] = np.sqrt(d2)
+        nearest_out[i, 0] = min(max(X, a0 * z), a1 * z)
+        nearest_out[i, 1] = min(max(Y, b0 * z), b1 * z)
+        nearest_out[i, 2] = z
+
+
+def _run(points_camera, tangents, z_range, paper):
+    points = np.ascontiguousarray(np.broadcast_to(np.asarray(points_camera, np.float64), (len(tangents), 3))
+                                  if np.ndim(points_camera) == 1 else np.asarray(points_camera, np.float64))
+    tangents = np.asarray(tangents, dtype=np.float64).reshape(-1, 4)
+    z_range = np.broadcast_to(np.asarray(z_range, dtype=np.float64), (len(tangents), 2))
+    if points.shape != (len(tangents), 3):
+        raise ValueError(f"points_camera {points.shape} and tangents {tangents.shape} do not pair up")
+    bounds = np.ascontiguousarray(np.concatenate([tangents, z_range], axis=1))
+    nearest = np.empty((len(points), 3))
+    distance = np.empty(len(points))
+    _many(points, bounds, nearest, distance, paper)
+    return distance, nearest
+
+
+def frustum_distance(points_camera, tangents, z_range):
+    """Exact distances from points to pixel frustum segments (SPEC section 4).
+
+    Args:
+        points_camera: (n, 3) float64, metres, optical frame (or (3,) for one point against every segment).
+        tangents: (n, 4) float64 ``a0, a1, b0, b1``: the segment's tangents, x/z in [a0, a1], y/z in [b0, b1]
+            (for pixel (u, v): a0 = (u - 1/2 - cx)/fx, a1 = (u + 1/2 - cx)/fx, b0, b1 alike with v, cy, fy).
+        z_range: (n, 2) or (2,) float64 ``z_lo, z_hi`` metres (z_hi may be inf).
+
+    Returns:
+        (distance (n,) float64 metres, nearest (n, 3) float64 optical-frame points of the segments).
+    """
+    return _run(points_camera, tangents, z_range, False)
+
+
+def paper_frustum_distance(points_camera, tangents, z_range):
+    """The papers' distance at the fixed depth clamp(Z, z_lo, z_hi): an upper bound, for comparison only."""
+    return _run(points_camera, tangents, z_range, True)

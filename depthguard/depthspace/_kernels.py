@@ -1,0 +1,648 @@
+"""Numba kernels of the single-camera depth-space distance (SPEC sections 4-6).
+
+Everything here works in one camera's optical frame (x right, y down, z forward; metres) and trusts its inputs:
+``_monitor.py`` validates them. A pixel (u, v) spans the tangents [a0, a1] x [b0, b1] with
+a0 = (u - 1/2 - cx)/fx, a1 = (u + 1/2 - cx)/fx, b0 = (v - 1/2 - cy)/fy, b1 = (v + 1/2 - cy)/fy.
+
+The tests hold every kernel against a slow NumPy twin (``tests/naive.py``).
+"""
+
+import numpy as np
+from numba import njit, prange
+
+# Aggregation codes (config.AGGREGATES order).
+AGG_MIN = 0
+AGG_MEAN = 1
+AGG_HYBRID = 2
+
+# Flag bits (depthguard.results.Flag holds the same values).
+FLAG_INSIDE_OBSTACLE = 1
+FLAG_REGION_OUTSIDE_VIEW = 2
+FLAG_INVALID_PIXELS_USED = 4
+
+# Tangent units by which the ball's silhouette spans are widened against rounding (about 5e-7 pixel at f = 525).
+SILHOUETTE_PAD = 1e-9
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def frustum_nearest(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
+    """Squared distance from P = (X, Y, Z) to the frustum segment {x/z in [a0, a1], y/z in [b0, b1], z in [z_lo,
+    z_hi]} (z_hi may be inf), and the depth z* of its nearest point.
+
+    The nearest point itself is (clamp(X, a0*z*, a1*z*), clamp(Y, b0*z*, b1*z*), z*).
+
+    g(z) = dx(z)^2 + dy(z)^2 + (Z - z)^2 with dx(z) = max(a0*z - X, 0, X - a1*z) (dy alike) is convex and, because
+    dx and dy vanish at their breakpoints X/a0, X/a1, Y/b0, Y/b1, continuously differentiable; on each piece between
+    breakpoints it is one quadratic with a closed-form minimiser. First try the piece that holds
+    clamp(Z, z_lo, z_hi), where the minimiser usually lies: its minimiser, clamped to [z_lo, z_hi], is the global
+    one if it lies in the closure of that same piece (each lateral state holds on an interval of z, so the test is
+    exact). Otherwise walk the pieces from z_lo (:func:`frustum_nearest_walk`).
+    """
+    z_guess = min(max(Z, z_lo), z_hi)
+    left_x = a0 * z_guess > X
+    right_x = X > a1 * z_guess
+    left_y = b0 * z_guess > Y
+    right_y = Y > b1 * z_guess
+    ax = a0 if left_x else (a1 if right_x else 0.0)
+    by = b0 if left_y else (b1 if right_y else 0.0)
+    z = min(max((Z + ax * X + by * Y) / (1.0 + ax * ax + by * by), z_lo), z_hi)
+    ok_x = (a0 * z >= X) if left_x else ((X >= a1 * z) if right_x else (a0 * z <= X and X <= a1 * z))
+    ok_y = (b0 * z >= Y) if left_y else ((Y >= b1 * z) if right_y else (b0 * z <= Y and Y <= b1 * z))
+    if not (ok_x and ok_y):
+        return frustum_nearest_walk(X, Y, Z, a0, a1, b0, b1, _breakpoint(X, a0), _breakpoint(X, a1),
+                                    _breakpoint(Y, b0), _breakpoint(Y, b1), z_lo, z_hi)
+    dx = max(a0 * z - X, 0.0, X - a1 * z)
+    dy = max(b0 * z - Y, 0.0, Y - b1 * z)
+    dz = Z - z
+    return dx * dx + dy * dy + dz * dz, z
+
+
+@njit(cache=True, error_model="numpy")
+def _breakpoint(c, a):
+    """Depth c/a where a*z - c changes sign; -1 (never, for z > 0) when a == 0."""
+    return c / a if a != 0.0 else -1.0
+
+
+@njit(cache=True, error_model="numpy")
+def frustum_nearest_walk(X, Y, Z, a0, a1, b0, b1, t0, t1, t2, t3, z_lo, z_hi):
+    """:func:`frustum_nearest` by walking the pieces from z_lo, given the breakpoints t0 = X/a0, t1 = X/a1,
+    t2 = Y/b0, t3 = Y/b1 (any value <= z_lo, or NaN, for "none").
+
+    On each piece the state (left of, inside or right of the frustum, in x and in y) is read at the piece's
+    midpoint; the first piece that holds its own minimiser holds the global one, and if a piece's minimiser lies
+    before the piece, the derivative changes sign at the piece's start, which can only be z_lo.
+    """
+    z = z_lo
+    z_star = z_lo
+    for _ in range(6):
+        s2 = 1.0
+        s1 = Z
+        z_next = z_hi
+        if z < t0 < z_next:
+            z_next = t0
+        if z < t1 < z_next:
+            z_next = t1
+        if z < t2 < z_next:
+            z_next = t2
+        if z < t3 < z_next:
+            z_next = t3
+        z_mid = 0.5 * (z + z_next) if z_next < np.inf else z + 1.0
+        if a0 * z_mid > X:
+            s2 += a0 * a0
+            s1 += a0 * X
+        elif X > a1 * z_mid:
+            s2 += a1 * a1
+            s1 += a1 * X
+        if b0 * z_mid > Y:
+            s2 += b0 * b0
+            s1 += b0 * Y
+        elif Y > b1 * z_mid:
+            s2 += b1 * b1
+            s1 += b1 * Y
+        z_c = s1 / s2
+        if z_c <= z:
+            z_star = z
+            break
+        if z_c < z_next:
+            z_star = z_c
+            break
+        z = z_next
+        z_star = z_next
+        if z_next >= z_hi:
+            break
+    dx = max(a0 * z_star - X, 0.0, X - a1 * z_star)
+    dy = max(b0 * z_star - Y, 0.0, Y - b1 * z_star)
+    dz = Z - z_star
+    return dx * dx + dy * dy + dz * dz, z_star
+
+
+@njit(cache=True, error_model="numpy")
+def frustum_nearest_paper(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
+    """The papers' distance (2015 eqs. 7-8): the frustum point at the fixed depth clamp(Z, z_lo, z_hi) nearest to P.
+
+    It lies on the frustum, so it is an upper bound of the true distance: unsafe, kept for comparison only.
+    Returns (squared distance, depth of the point).
+    """
+    z = min(max(Z, z_lo), z_hi)
+    dx = max(a0 * z - X, 0.0, X - a1 * z)
+    dy = max(b0 * z - Y, 0.0, Y - b1 * z)
+    dz = Z - z
+    return dx * dx + dy * dy + dz * dz, z
+
+
+@njit(cache=True, error_model="numpy")
+def view_boundary(X, Y, Z, tx0, tx1, ty0, ty1, z_min, z_max):
+    """Signed distance from P to the boundary of the observed volume and the boundary's inward unit normal.
+
+    The observed volume {tx0 <= x/z <= tx1, ty0 <= y/z <= ty1, z_min <= z <= z_max} (image edges at tangents tx0..
+    tx1, ty0..ty1; z_max may be inf) is convex, so for P inside it the distance to its boundary is the smallest
+    distance to a face plane. Returns (s, nx, ny, nz): s >= 0 inside (the distance), s < 0 outside; (nx, ny, nz)
+    points from that face into the view.
+    """
+    k = 1.0 / np.sqrt(1.0 + tx0 * tx0)
+    s = (X - tx0 * Z) * k
+    nx, ny, nz = k, 0.0, -tx0 * k
+    k = 1.0 / np.sqrt(1.0 + tx1 * tx1)
+    t = (tx1 * Z - X) * k
+    if t < s:
+        s, nx, ny, nz = t, -k, 0.0, tx1 * k
+    k = 1.0 / np.sqrt(1.0 + ty0 * ty0)
+    t = (Y - ty0 * Z) * k
+    if t < s:
+        s, nx, ny, nz = t, 0.0, k, -ty0 * k
+    k = 1.0 / np.sqrt(1.0 + ty1 * ty1)
+    t = (ty1 * Z - Y) * k
+    if t < s:
+        s, nx, ny, nz = t, 0.0, -k, ty1 * k
+    t = Z - z_min
+    if t < s:
+        s, nx, ny, nz = t, 0.0, 0.0, 1.0
+    t = z_max - Z
+    if t < s:
+        s, nx, ny, nz = t, 0.0, 0.0, -1.0
+    return s, nx, ny, nz
+
+
+@njit(cache=True, error_model="numpy")
+def cube_window(X, Y, Z, rho, fx, fy, cx, cy, width, height, near_eps):
+    """Pixels to visit for P: the image bounding box of the cube [P - rho, P + rho] (SPEC section 5).
+
+    Returns (u_lo, u_hi, v_lo, v_hi), inclusive, clamped to the image (u_lo > u_hi when it is empty). If a corner
+    lies at or behind the near plane z = near_eps, the whole image.
+    """
+    if Z - rho <= near_eps:
+        return 0, width - 1, 0, height - 1
+    zn = Z - rho
+    zf = Z + rho
+    x_lo = min((X - rho) / zn, (X - rho) / zf)
+    x_hi = max((X + rho) / zn, (X + rho) / zf)
+    y_lo = min((Y - rho) / zn, (Y - rho) / zf)
+    y_hi = max((Y + rho) / zn, (Y + rho) / zf)
+    u_lo, u_hi = footprint_span(x_lo, x_hi, fx, cx, width)
+    v_lo, v_hi = footprint_span(y_lo, y_hi, fy, cy, height)
+    return u_lo, u_hi, v_lo, v_hi
+
+
+@njit(cache=True, error_model="numpy")
+def footprint_span(t_lo, t_hi, f, c, size):
+    """Pixels i in [0, size) whose footprint [i - 1/2, i + 1/2] meets the image coordinates [f*t_lo + c, f*t_hi + c]
+    (t: tangents x/z or y/z). Returns (lo, hi), inclusive; lo > hi when there is none."""
+    lo = min(max(np.ceil(f * t_lo + c - 0.5), 0.0), float(size))
+    hi = min(max(np.floor(f * t_hi + c + 0.5), -1.0), float(size - 1))
+    return int(lo), int(hi)
+
+
+@njit(cache=True, error_model="numpy")
+def ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, u_hi, pad, spans):
+    """For each row v in [v_lo, v_hi], the columns whose pixel frustum can come closer than rho to P: those whose
+    footprint meets the ball's silhouette (the cone from the optical centre around the ball of radius rho).
+
+    Needs Z > rho (the ball in front of the camera, so the silhouette is an ellipse in the plane z = 1). The
+    silhouette is {(x, y): (x*X + y*Y + Z)^2 >= c*(x^2 + y^2 + 1)}, c = |P|^2 - rho^2; its part inside the row's band
+    of tangents [b0, b1] is convex, so its x-extent runs from the left boundary at the clamped y of the leftmost
+    point to the right boundary at the clamped y of the rightmost point. ``pad`` (tangent units) widens every span
+    against rounding. Writes spans[v, 0] = first column, spans[v, 1] = last column (first > last when none),
+    within [u_lo, u_hi].
+    """
+    c = X * X + Y * Y + Z * Z - rho * rho
+    q = Z * Z - rho * rho
+    root_x = rho * np.sqrt(max(X * X + Z * Z - rho * rho, 0.0))
+    root_y = rho * np.sqrt(max(Y * Y + Z * Z - rho * rho, 0.0))
+    x_left = (X * Z - root_x) / q  # the planes x = t*z that touch the ball
+    x_right = (X * Z + root_x) / q
+    y_top = (Y * Z - root_y) / q  # the planes y = t*z that touch the ball
+    y_bottom = (Y * Z + root_y) / q
+    w = X * X + Z * Z - rho * rho  # c - Y^2 > 0
+    y_of_left = Y * (x_left * X + Z) / w  # the row of the silhouette's leftmost point
+    y_of_right = Y * (x_right * X + Z) / w
+    A = rho * rho - Y * Y - Z * Z  # < 0: the x^2 coefficient
+    for v in range(v_lo, v_hi + 1):
+        b0 = (v - 0.5 - cy) / fy
+        b1 = (v + 0.5 - cy) / fy
+        y0 = max(b0, y_top - pad)
+        y1 = min(b1, y_bottom + pad)
+        if y0 > y1:
+            spans[v, 0] = 1
+            spans[v, 1] = 0
+            continue
+        yl = min(max(y_of_left, y0), y1)
+        B = X * (yl * Y + Z)
+        C = (yl * Y + Z) ** 2 - c * (yl * yl + 1.0)
+        x_lo = (-B + np.sqrt(max(B * B - A * C, 0.0))) / A
+        yr = min(max(y_of_right, y0), y1)
+        B = X * (yr * Y + Z)
+        C = (yr * Y + Z) ** 2 - c * (yr * yr + 1.0)
+        x_hi = (-B - np.sqrt(max(B * B - A * C, 0.0))) / A
+        lo, hi = footprint_span(x_lo - pad, x_hi + pad, fx, cx, width)
+        spans[v, 0] = max(lo, u_lo)
+        spans[v, 1] = min(hi, u_hi)
+
+
+@njit(cache=True, error_model="numpy")
+def _nearest_in_blocks(X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi,
+                       near_eps, spans):
+    """The nearest contributing pixel for ``min``: visit blocks of pixels in rings around P's pixel, skipping a
+    block whose minimum start depth lies behind the region or whose bounding frustum is farther than the best
+    distance so far. Ties go to the smallest (v, u), as in a full scan.
+
+    Returns (best d^2 (inf if none below rho^2), v, u, z*, invalid flag of that pixel).
+    """
+    height, width = z_start.shape
+    rho2 = rho * rho
+    z_far = Z + rho
+    inv_fx = 1.0 / fx
+    inv_fy = 1.0 / fy
+    best2 = np.inf
+    best_v = height
+    best_u = width
+    best_z = 0.0
+    best_invalid = 0
+    bu_lo = u_lo // block
+    bu_hi = u_hi // block
+    bv_lo = v_lo // block
+    bv_hi = v_hi // block
+    if Z > near_eps:
+        pu = fx * X / Z + cx
+        pv = fy * Y / Z + cy
+    else:
+        pu = 0.5 * (u_lo + u_hi)
+        pv = 0.5 * (v_lo + v_hi)
+    cbu = int(min(max(pu, u_lo), u_hi)) // block
+    cbv = int(min(max(pv, v_lo), v_hi)) // block
+    rings = max(cbu - bu_lo, bu_hi - cbu, cbv - bv_lo, bv_hi - cbv)
+    for r in range(rings + 1):
+        for bv in range(cbv - r, cbv + r + 1):
+            if bv < bv_lo or bv > bv_hi:
+                continue
+            step = 1 if (r == 0 or bv == cbv - r or bv == cbv + r) else 2 * r
+            for bu in range(cbu - r, cbu + r + 1, step):
+                if bu < bu_lo or bu > bu_hi:
+                    continue
+                z_block = np.float64(block_min[bv, bu])
+                if z_block > z_far:
+                    continue
+                v0 = max(bv * block, v_lo)
+                v1 = min(bv * block + block - 1, v_hi)
+                u0 = bu * block
+                u1 = bu * block + block - 1
+                c0 = u1 + 1  # the block's columns that some row's silhouette span reaches
+                c1 = u0 - 1
+                for v in range(v0, v1 + 1):
+                    c0 = min(c0, max(spans[v, 0], u0))
+                    c1 = max(c1, min(spans[v, 1], u1))
+                if c0 > c1:
+                    continue
+                lb2, _ = frustum_nearest(X, Y, Z, (c0 - 0.5 - cx) * inv_fx, (c1 + 0.5 - cx) * inv_fx,
+                                         (v0 - 0.5 - cy) * inv_fy, (v1 + 0.5 - cy) * inv_fy, z_block, np.inf)
+                if lb2 >= rho2 or lb2 > best2:
+                    continue
+                for v in range(v0, v1 + 1):
+                    b0 = (v - 0.5 - cy) * inv_fy
+                    b1 = (v + 0.5 - cy) * inv_fy
+                    for u in range(max(spans[v, 0], u0), min(spans[v, 1], u1) + 1):
+                        zs = z_start[v, u]
+                        if zs > z_far:
+                            continue
+                        d2, z_star = frustum_nearest(X, Y, Z, (u - 0.5 - cx) * inv_fx, (u + 0.5 - cx) * inv_fx, b0,
+                                                     b1, np.float64(zs), np.inf)
+                        if d2 < rho2 and (d2 < best2 or (d2 == best2 and (v < best_v or (v == best_v
+                                                                                         and u < best_u)))):
+                            best2 = d2
+                            best_v = v
+                            best_u = u
+                            best_z = z_star
+                            best_invalid = invalid[v, u]
+    return best2, best_v, best_u, best_z, best_invalid
+
+
+@njit(cache=True, error_model="numpy")
+def _guess_piece_row(X, Y, Z, b0, b1, z_in, u_in, m, inv_fx, cx, d2_out, z_out):
+    """The branch-free first step of :func:`frustum_nearest` for m pixels of one row (tangents b0, b1): pixel k has
+    column u_in[k] and start depth z_in[k] (z_hi = inf). Writes d2_out[k] = g(z*) and z_out[k] = z*, or
+    d2_out[k] = -1 where the guessed piece does not hold the minimiser and the caller must walk."""
+    for k in range(m):
+        z_lo = z_in[k]
+        a0 = (u_in[k] - 0.5 - cx) * inv_fx
+        a1 = (u_in[k] + 0.5 - cx) * inv_fx
+        z_guess = max(z_lo, Z)
+        left_x = a0 * z_guess > X
+        right_x = X > a1 * z_guess
+        left_y = b0 * z_guess > Y
+        right_y = Y > b1 * z_guess
+        ax = a0 if left_x else (a1 if right_x else 0.0)
+        by = b0 if left_y else (b1 if right_y else 0.0)
+        z = max((Z + ax * X + by * Y) / (1.0 + ax * ax + by * by), z_lo)
+        ok_x = (a0 * z >= X) if left_x else ((X >= a1 * z) if right_x else ((a0 * z <= X) & (X <= a1 * z)))
+        ok_y = (b0 * z >= Y) if left_y else ((Y >= b1 * z) if right_y else ((b0 * z <= Y) & (Y <= b1 * z)))
+        dx = max(max(a0 * z - X, 0.0), X - a1 * z)
+        dy = max(max(b0 * z - Y, 0.0), Y - b1 * z)
+        d2 = dx * dx + dy * dy + (Z - z) * (Z - z)
+        d2_out[k] = d2 if (ok_x & ok_y) else -1.0
+        z_out[k] = z
+
+
+@njit(cache=True, error_model="numpy")
+def _all_in_rows(X, Y, Z, rho, z_start, invalid, fx, fy, cx, cy, v_lo, v_hi, spans, scratch):
+    """Every contributing pixel for ``mean`` and ``hybrid``: per row, gather the silhouette span's pixels whose
+    start depth is not behind the region, take their exact distances (:func:`_guess_piece_row`, walking where the
+    guess fails), and sum the contributors' distances and unit directions. ``scratch`` is a (4, width) float64 array.
+
+    Returns (count, invalid count, inside?, sum of d, sum of unit directions x, y, z, best d^2).
+    """
+    rho2 = rho * rho
+    z_far = Z + rho
+    inv_fx = 1.0 / fx
+    inv_fy = 1.0 / fy
+    z_in = scratch[0]
+    u_in = scratch[1]
+    d2_row = scratch[2]
+    z_row = scratch[3]
+    best2 = np.inf
+    sum_d = 0.0
+    sx = 0.0
+    sy = 0.0
+    sz = 0.0
+    count = 0
+    n_invalid = 0
+    inside = False
+    for v in range(v_lo, v_hi + 1):
+        b0 = (v - 0.5 - cy) * inv_fy
+        b1 = (v + 0.5 - cy) * inv_fy
+        row = z_start[v]
+        m = 0
+        for u in range(spans[v, 0], spans[v, 1] + 1):
+            zs = row[u]
+            if zs <= z_far:  # else it and what it hides lie behind the region (also inf: nothing)
+                z_in[m] = zs
+                u_in[m] = u
+                m += 1
+        if m == 0:
+            continue
+        _guess_piece_row(X, Y, Z, b0, b1, z_in, u_in, m, inv_fx, cx, d2_row, z_row)
+        for k in range(m):
+            d2 = d2_row[k]
+            z_star = z_row[k]
+            u = int(u_in[k])
+            a0 = (u - 0.5 - cx) * inv_fx
+            a1 = (u + 0.5 - cx) * inv_fx
+            if d2 < 0.0:
+                d2, z_star = frustum_nearest(X, Y, Z, a0, a1, b0, b1, z_in[k], np.inf)
+            if d2 >= rho2:
+                continue
+            count += 1
+            n_invalid += invalid[v, u]
+            best2 = min(best2, d2)
+            if d2 <= 0.0:
+                inside = True
+                continue
+            d = np.sqrt(d2)
+            inv_d = 1.0 / d
+            sum_d += d
+            sx += (X - min(max(X, a0 * z_star), a1 * z_star)) * inv_d
+            sy += (Y - min(max(Y, b0 * z_star), b1 * z_star)) * inv_d
+            sz += (Z - z_star) * inv_d
+    return count, n_invalid, inside, sum_d, sx, sy, sz, best2
+
+
+@njit(cache=True, error_model="numpy")
+def query_point(X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min, z_max, aggregate,
+                unseen_occupied, near_eps, inside_tol, min_direction, spans, scratch, out_direction):
+    """Distance from one control point P = (X, Y, Z) (metres, optical frame) to what one camera says is possibly
+    occupied, aggregated as ``aggregate``.
+
+    Visits only the cube window's pixels whose footprint meets the silhouette of the ball B(P, rho) and whose start
+    depth is not behind the region; ``min`` also skips blocks that cannot beat the best distance so far. None of
+    these skips changes the result: it equals a scan of every pixel.
+
+    Returns (distance, count, invalid_count, flags); writes the unit direction (from the obstacle towards P, optical
+    frame) into out_direction (3,). ``spans`` (height, 2) int64 and ``scratch`` (4, width) float64 are scratch space.
+    """
+    height, width = z_start.shape
+    flags = 0
+    s_view, nx, ny, nz = view_boundary(X, Y, Z, (-0.5 - cx) / fx, (width - 0.5 - cx) / fx, (-0.5 - cy) / fy,
+                                       (height - 0.5 - cy) / fy, z_min, z_max)
+    if s_view < rho:
+        flags |= FLAG_REGION_OUTSIDE_VIEW
+    out_direction[0] = 0.0
+    out_direction[1] = 0.0
+    out_direction[2] = 0.0
+    if unseen_occupied and s_view <= inside_tol:  # P itself is unseen
+        return 0.0, 1, 0, flags
+    # The boundary of the observed volume is one more contributor when unseen space counts as occupied.
+    unseen_d = s_view if (unseen_occupied and s_view < rho) else np.inf
+
+    u_lo, u_hi, v_lo, v_hi = cube_window(X, Y, Z, rho, fx, fy, cx, cy, width, height, near_eps)
+    if u_lo <= u_hi and v_lo <= v_hi:
+        if Z - rho > near_eps:
+            ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, u_hi, SILHOUETTE_PAD,
+                                 spans)
+        else:
+            for v in range(v_lo, v_hi + 1):
+                spans[v, 0] = u_lo
+                spans[v, 1] = u_hi
+    else:
+        v_lo = 0
+        v_hi = -1
+
+    if aggregate == AGG_MIN:
+        best2 = np.inf
+        best_invalid = 0
+        if v_lo <= v_hi:
+            best2, best_v, best_u, best_z, best_invalid = _nearest_in_blocks(
+                X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi, near_eps,
+                spans)
+        if best_invalid:
+            flags |= FLAG_INVALID_PIXELS_USED
+        if best2 <= inside_tol * inside_tol:
+            return 0.0, 1, best_invalid, flags | FLAG_INSIDE_OBSTACLE
+        if unseen_d * unseen_d < best2:
+            out_direction[0] = nx
+            out_direction[1] = ny
+            out_direction[2] = nz
+            return unseen_d, 1, 0, flags & ~FLAG_INVALID_PIXELS_USED
+        if best2 == np.inf:
+            return np.inf, 0, 0, flags
+        d = np.sqrt(best2)
+        ox = min(max(X, (best_u - 0.5 - cx) / fx * best_z), (best_u + 0.5 - cx) / fx * best_z)
+        oy = min(max(Y, (best_v - 0.5 - cy) / fy * best_z), (best_v + 0.5 - cy) / fy * best_z)
+        out_direction[0] = (X - ox) / d
+        out_direction[1] = (Y - oy) / d
+        out_direction[2] = (Z - best_z) / d
+        return d, 1, best_invalid, flags
+
+    count = 0
+    n_invalid = 0
+    inside = False
+    sum_d = 0.0
+    sx = 0.0
+    sy = 0.0
+    sz = 0.0
+    best2 = np.inf
+    if v_lo <= v_hi:
+        count, n_invalid, inside, sum_d, sx, sy, sz, best2 = _all_in_rows(X, Y, Z, rho, z_start, invalid, fx, fy,
+                                                                          cx, cy, v_lo, v_hi, spans, scratch)
+    if n_invalid:
+        flags |= FLAG_INVALID_PIXELS_USED
+    if unseen_d < np.inf:
+        count += 1
+    if inside or best2 <= inside_tol * inside_tol:
+        return 0.0, count, n_invalid, flags | FLAG_INSIDE_OBSTACLE
+    d_min = np.sqrt(best2)
+    if unseen_d < np.inf:
+        sum_d += unseen_d
+        sx += nx
+        sy += ny
+        sz += nz
+        d_min = min(d_min, unseen_d)
+    if count == 0:
+        return np.inf, 0, 0, flags
+    norm = np.sqrt(sx * sx + sy * sy + sz * sz)
+    if norm > min_direction * count:
+        out_direction[0] = sx / norm
+        out_direction[1] = sy / norm
+        out_direction[2] = sz / norm
+    if aggregate == AGG_MEAN:
+        return sum_d / count, count, n_invalid, flags
+    return d_min, count, n_invalid, flags
+
+
+@njit(cache=True, error_model="numpy")
+def query_point_paper(X, Y, Z, rho, z_start, invalid, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied,
+                      inside_tol, min_direction, out_direction):
+    """The 2015 paper's method, for comparison only: window of half-width rho*f/(2*(Z - rho)) (eq. 10-11), pixels
+    with depth in [Z - rho, Z + rho], distance at the fixed depth clamp(Z, z_lo, inf) (eqs. 7-8).
+
+    Same outputs as :func:`query_point`. Unseen space and the observed-volume flag are handled as in the exact
+    method so that the two differ only in the papers' formulas.
+    """
+    height, width = z_start.shape
+    rho2 = rho * rho
+    flags = 0
+    s_view, nx, ny, nz = view_boundary(X, Y, Z, (-0.5 - cx) / fx, (width - 0.5 - cx) / fx, (-0.5 - cy) / fy,
+                                       (height - 0.5 - cy) / fy, z_min, z_max)
+    if s_view < rho:
+        flags |= FLAG_REGION_OUTSIDE_VIEW
+    out_direction[0] = 0.0
+    out_direction[1] = 0.0
+    out_direction[2] = 0.0
+    if unseen_occupied and s_view <= inside_tol:
+        return 0.0, 1, 0, flags
+    if Z - rho > 0.0:
+        half_u = 0.5 * rho * fx / (Z - rho)
+        half_v = 0.5 * rho * fy / (Z - rho)
+        pu = fx * X / Z + cx
+        pv = fy * Y / Z + cy
+        u_lo = int(min(max(np.ceil(pu - half_u), 0.0), float(width)))
+        u_hi = int(min(max(np.floor(pu + half_u), -1.0), float(width - 1)))
+        v_lo = int(min(max(np.ceil(pv - half_v), 0.0), float(height)))
+        v_hi = int(min(max(np.floor(pv + half_v), -1.0), float(height - 1)))
+    else:
+        u_lo, u_hi, v_lo, v_hi = 0, width - 1, 0, height - 1
+    best2 = np.inf
+    best_dx = 0.0
+    best_dy = 0.0
+    best_dz = 0.0
+    best_invalid = 0
+    count = 0
+    n_invalid = 0
+    sum_d = 0.0
+    sx = 0.0
+    sy = 0.0
+    sz = 0.0
+    inside = False
+    for v in range(v_lo, v_hi + 1):
+        b0 = (v - 0.5 - cy) / fy
+        b1 = (v + 0.5 - cy) / fy
+        for u in range(u_lo, u_hi + 1):
+            zs = np.float64(z_start[v, u])
+            if zs > Z + rho or zs < Z - rho:
+                continue
+            a0 = (u - 0.5 - cx) / fx
+            a1 = (u + 0.5 - cx) / fx
+            d2, z = frustum_nearest_paper(X, Y, Z, a0, a1, b0, b1, zs, np.inf)
+            if d2 >= rho2:
+                continue
+            count += 1
+            n_invalid += invalid[v, u]
+            d = np.sqrt(d2)
+            if d <= inside_tol:
+                inside = True
+                continue
+            ex = (X - min(max(X, a0 * z), a1 * z)) / d
+            ey = (Y - min(max(Y, b0 * z), b1 * z)) / d
+            ez = (Z - z) / d
+            if d2 < best2:
+                best2 = d2
+                best_dx, best_dy, best_dz = ex, ey, ez
+                best_invalid = invalid[v, u]
+            sum_d += d
+            sx += ex
+            sy += ey
+            sz += ez
+    if aggregate == AGG_MIN:
+        n_invalid = best_invalid
+        count = 1 if (best2 < np.inf or inside) else 0
+    if n_invalid:
+        flags |= FLAG_INVALID_PIXELS_USED
+    if inside:
+        return 0.0, count, n_invalid, flags | FLAG_INSIDE_OBSTACLE
+    unseen_d = s_view if (unseen_occupied and s_view < rho) else np.inf
+    if aggregate == AGG_MIN:
+        if unseen_d * unseen_d < best2:
+            out_direction[0] = nx
+            out_direction[1] = ny
+            out_direction[2] = nz
+            return unseen_d, 1, 0, flags
+        if best2 == np.inf:
+            return np.inf, 0, 0, flags
+        out_direction[0] = best_dx
+        out_direction[1] = best_dy
+        out_direction[2] = best_dz
+        return np.sqrt(best2), 1, n_invalid, flags
+    d_min = np.sqrt(best2)
+    if unseen_d < np.inf:
+        count += 1
+        sum_d += unseen_d
+        sx += nx
+        sy += ny
+        sz += nz
+        d_min = min(d_min, unseen_d)
+    if count == 0:
+        return np.inf, 0, 0, flags
+    norm = np.sqrt(sx * sx + sy * sy + sz * sz)
+    if norm > min_direction * count:
+        out_direction[0] = sx / norm
+        out_direction[1] = sy / norm
+        out_direction[2] = sz / norm
+    if aggregate == AGG_MEAN:
+        return sum_d / count, count, n_invalid, flags
+    return d_min, count, n_invalid, flags
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def query_points(points_camera, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min, z_max, aggregate,
+                 unseen_occupied, paper, near_eps, inside_tol, min_direction, distance, direction, count,
+                 invalid_count, flags):
+    """:func:`query_point` (or the paper's variant) for each of the (n, 3) optical-frame points, in parallel.
+
+    Writes distance (n,) float64, direction (n, 3) float64 (optical frame), count (n,) int64, invalid_count (n,)
+    int64 and flags (n,) int64.
+    """
+    n = points_camera.shape[0]
+    spans = np.empty((n, z_start.shape[0], 2), dtype=np.int64)
+    scratch = np.empty((n, 4, z_start.shape[1]), dtype=np.float64)
+    for i in prange(n):
+        X = points_camera[i, 0]
+        Y = points_camera[i, 1]
+        Z = points_camera[i, 2]
+        if paper:
+            d, c, k, f = query_point_paper(X, Y, Z, rho, z_start, invalid, fx, fy, cx, cy, z_min, z_max, aggregate,
+                                           unseen_occupied, inside_tol, min_direction, direction[i])
+        else:
+            d, c, k, f = query_point(X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min,
+                                     z_max, aggregate, unseen_occupied, near_eps, inside_tol, min_direction, spans[i],
+                                     scratch[i], direction[i])
+        distance[i] = d
+        count[i] = c
+        invalid_count[i] = k
+        flags[i] = f

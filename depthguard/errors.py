@@ -1,0 +1,46 @@
+"""The exceptions depthguard raises for its users' mistakes.
+
+Every error that concerns one camera names it and the offending field, so that a message read in a log is enough to
+fix the rig or the driver::
+
+    DepthguardError
+    ├── RigError          a rig, camera or camera_info file is malformed or inconsistent
+    ├── DepthImageError   a depth image cannot be read or does not fit its camera
+    └── InputError        points, options or other arguments are malformed
+"""
+
+from __future__ import annotations
+
+
+class DepthguardError(Exception):
+    """Base class of every error depthguard raises on purpose."""
+
+    def __init__(self, message: str, *, camera: str | None = None, field: str | None = None, source: str | None = None):
+        parts = [str(source)] if source else []
+        if camera is not None:
+            parts.append(f"camera {camera!r}")
+        if field is not None:
+            parts.append(f"field {field!r}")
+        super().__init__(": ".join(parts + [message]))
+        self.message = message
+        self.camera = camera
+        self.field = field
+        self.source = source
+
+    def with_source(self, source: str) -> "DepthguardError":
+        """The same error, also naming the file it came from (for errors raised below a file reader)."""
+        if self.source is not None:
+            return self
+        return type(self)(self.message, camera=self.camera, field=self.field, source=source)
+
+
+class RigError(DepthguardError, ValueError):
+    """A rig, camera or camera_info file is malformed or inconsistent."""
+
+
+class DepthImageError(DepthguardError, ValueError):
+    """A depth image cannot be read, or does not fit the camera it is given for."""
+
+
+class InputError(DepthguardError, ValueError):
+    """Points, options or other arguments are malformed (wrong shape, not finite, unknown policy)."""

@@ -1,0 +1,83 @@
+"""What every distance query returns (SPEC section 11)."""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+class Flag(enum.IntFlag):
+    """Why a result may be conservative or incomplete. Combine with ``|``; test with ``in``.
+
+    - ``INSIDE_OBSTACLE``: the point lies inside a possibly-occupied set (distance 0, zero direction).
+    - ``REGION_OUTSIDE_VIEW``: the surveillance region (the ball of radius rho) leaves the volume the cameras
+      observe; under ``unseen="occupied"`` the boundary of that volume counted as an obstacle (distance 0 when the
+      point itself is unseen).
+    - ``INVALID_PIXELS_USED``: pixels without a valid measurement contributed (see ``DistanceResult.invalid_count``).
+    - ``STALE_CAMERA``: a camera's latest frame was older than the allowed age, so it counted as blind.
+    - ``MISSING_CAMERA``: a camera the query needed had no frame, so it counted as blind.
+    - ``ROBOT_BLIND_SPOT``: the surveillance region touches space hidden behind the robot.
+    """
+
+    INSIDE_OBSTACLE = 1
+    REGION_OUTSIDE_VIEW = 2
+    INVALID_PIXELS_USED = 4
+    STALE_CAMERA = 8
+    MISSING_CAMERA = 16
+    ROBOT_BLIND_SPOT = 32
+
+    @property
+    def names(self) -> list[str]:
+        """The set flags as lower-case names, in bit order, e.g. ``["region_outside_view"]``."""
+        return [member.name.lower() for member in Flag if member in self]
+
+
+@dataclass(frozen=True, eq=False)
+class DistanceResult:
+    """Distances of n control points to what the cameras say is possibly occupied.
+
+    Attributes:
+        distance: (n,) float64, metres. The aggregated distance (``min``/``hybrid``: the smallest; ``mean``: the
+            mean over contributors). ``inf`` when nothing is within rho; 0 inside an obstacle or in unseen space
+            (under ``unseen="occupied"``).
+        direction: (n, 3) float64, world frame, unit vectors pointing **from the obstacle towards the point** (the
+            way to move away); ``min``: of the nearest obstacle point; ``mean``/``hybrid``: the normalised mean of
+            the contributors' unit directions. The zero vector when there is no contributor, inside an obstacle, or
+            when the contributors' directions cancel out.
+        count: (n,) int64, contributors used: ``mean``/``hybrid``: every pixel frustum closer than rho, plus the
+            boundary of the observed volume when it counts; ``min``: 1 when there is a nearest one, else 0.
+        invalid_count: (n,) int64, how many of those contributors were pixels without a valid measurement.
+        flags: n :class:`Flag` values, one per point.
+        timestamps: camera name -> capture time (seconds) of the frame used, or None when unknown.
+        cameras: names of the cameras whose frames were used.
+    """
+
+    distance: np.ndarray
+    direction: np.ndarray
+    count: np.ndarray
+    invalid_count: np.ndarray
+    flags: tuple[Flag, ...]
+    timestamps: dict[str, float | None] = field(default_factory=dict)
+    cameras: tuple[str, ...] = ()
+
+    def __len__(self) -> int:
+        return len(self.distance)
+
+    def records(self, points_world) -> list[dict]:
+        """One JSON-ready dict per point, in input order (``distance`` is None when nothing is within rho)."""
+        out = []
+        for i, point in enumerate(np.asarray(points_world, dtype=np.float64)):
+            d = float(self.distance[i])
+            out.append(
+                {
+                    "point": [float(x) for x in point],
+                    "distance": None if math.isinf(d) else d,
+                    "direction": [float(x) for x in self.direction[i]],
+                    "count": int(self.count[i]),
+                    "flags": self.flags[i].names,
+                }
+            )
+        return out

@@ -1,0 +1,97 @@
+"""Rigid transforms as 4x4 homogeneous matrices, named ``T_a_b``: they map coordinates in frame b to frame a.
+
+``T_world_camera`` maps camera coordinates to world coordinates, so ``p_world = T_world_camera @ p_camera``.
+Compose with :func:`concat` (``concat(T_a_b, T_b_c)`` gives ``T_a_c``) and invert with :func:`invert`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from depthguard import config
+from depthguard.errors import RigError
+
+
+def check_transform(matrix, *, camera: str | None = None, field: str = "T_world_camera") -> np.ndarray:
+    """Return ``matrix`` as a validated (4, 4) float64 rigid transform.
+
+    Raises :class:`RigError` naming ``camera`` and ``field`` when the matrix is not 4x4, not finite, its last row is
+    not ``[0, 0, 0, 1]``, or its rotation is not orthonormal with determinant +1 (within
+    ``config.ROTATION_TOLERANCE``).
+    """
+    try:
+        T = np.array(matrix, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise RigError(f"not a 4x4 matrix of numbers ({exc})", camera=camera, field=field) from None
+    if T.shape != (4, 4):
+        raise RigError(f"expected a 4x4 matrix, got shape {T.shape}", camera=camera, field=field)
+    if not np.all(np.isfinite(T)):
+        raise RigError("contains NaN or infinity", camera=camera, field=field)
+    if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=config.ROTATION_TOLERANCE):
+        raise RigError(f"last row must be [0, 0, 0, 1], got {T[3].tolist()}", camera=camera, field=field)
+    R = T[:3, :3]
+    off = np.abs(R.T @ R - np.eye(3)).max()
+    det = np.linalg.det(R)
+    if off > config.ROTATION_TOLERANCE or abs(det - 1.0) > config.ROTATION_TOLERANCE:
+        raise RigError(
+            f"rotation is not orthonormal with determinant +1 (max |R^T R - I| = {off:.3g}, det = {det:.6g})",
+            camera=camera,
+            field=field,
+        )
+    T[3] = (0.0, 0.0, 0.0, 1.0)
+    return T
+
+
+def invert(T_a_b: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid transform: ``T_b_a`` from ``T_a_b``, both (4, 4) float64."""
+    R = T_a_b[:3, :3]
+    T_b_a = np.eye(4)
+    T_b_a[:3, :3] = R.T
+    T_b_a[:3, 3] = -R.T @ T_a_b[:3, 3]
+    return T_b_a
+
+
+def concat(T_a_b: np.ndarray, T_b_c: np.ndarray) -> np.ndarray:
+    """``T_a_c`` from ``T_a_b`` and ``T_b_c``, all (4, 4) float64."""
+    return T_a_b @ T_b_c
+
+
+def transform_points(T_a_b: np.ndarray, points_b: np.ndarray) -> np.ndarray:
+    """Map (n, 3) points from frame b to frame a with the (4, 4) transform ``T_a_b``; returns (n, 3) float64."""
+    points_b = np.asarray(points_b, dtype=np.float64)
+    return points_b @ T_a_b[:3, :3].T + T_a_b[:3, 3]
+
+
+def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """``T_world_camera`` of an optical frame (x right, y down, z forward) at ``eye`` looking at ``target``.
+
+    ``eye``, ``target``: (3,) metres, world frame. ``up``: (3,) world direction that appears upwards in the image
+    (it must not be parallel to the viewing direction).
+    """
+    eye = np.asarray(eye, dtype=np.float64)
+    z = np.asarray(target, dtype=np.float64) - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, np.asarray(up, dtype=np.float64))
+    if np.linalg.norm(x) < 1e-9:
+        raise ValueError("look_at: 'up' is parallel to the viewing direction")
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, y, z, eye
+    return T
+
+
+def quaternion_to_matrix(qx: float, qy: float, qz: float, qw: float) -> np.ndarray:
+    """(3, 3) rotation matrix of a unit quaternion given as x, y, z, w (the ROS order)."""
+    q = np.array([qw, qx, qy, qz], dtype=np.float64)
+    n = np.linalg.norm(q)
+    if not np.isfinite(n) or n < 1e-12:
+        raise ValueError("quaternion has zero or non-finite norm")
+    w, x, y, z = q / n
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )

@@ -1,0 +1,169 @@
+"""Slow, obviously-correct NumPy twins of depthguard's kernels. Tests hold the kernels against these.
+
+Nothing here is fast or clever: every pixel is visited, every piece of every function is evaluated.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def g_of_z(X, Y, Z, a0, a1, b0, b1, z):
+    """SPEC section 4's g(z) = dx(z)^2 + dy(z)^2 + (Z - z)^2, elementwise."""
+    dx = np.maximum(np.maximum(a0 * z - X, 0.0), X - a1 * z)
+    dy = np.maximum(np.maximum(b0 * z - Y, 0.0), Y - b1 * z)
+    return dx * dx + dy * dy + (Z - z) ** 2
+
+
+def frustum_distance_pieces(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
+    """SPEC section 4 literally: cut [z_lo, z_hi] at the breakpoints, minimise each piece's quadratic in closed form
+    (clamped to the piece), take the smallest. Elementwise over broadcast arrays; returns (D, z*)."""
+    X, Y, Z, a0, a1, b0, b1, z_lo, z_hi = np.broadcast_arrays(*(np.asarray(x, np.float64) for x in
+                                                                (X, Y, Z, a0, a1, b0, b1, z_lo, z_hi)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        breaks = [np.where(a != 0, c / a, z_lo) for a, c in ((a0, X), (a1, X), (b0, Y), (b1, Y))]
+    breaks = [np.clip(np.nan_to_num(b, nan=0.0), z_lo, np.where(np.isinf(z_hi), np.maximum(z_lo, b), z_hi))
+              for b in breaks]
+    edges = np.sort(np.stack([z_lo] + breaks, axis=-1), axis=-1)
+    edges = np.concatenate([edges, z_hi[..., None]], axis=-1)
+    best_g = np.full(X.shape, np.inf)
+    best_z = np.array(z_lo, copy=True)
+    for k in range(edges.shape[-1] - 1):
+        lo, hi = edges[..., k], edges[..., k + 1]
+        mid = np.where(np.isinf(hi), lo + 1.0, 0.5 * (lo + hi))
+        left_x, right_x = a0 * mid - X > 0, X - a1 * mid > 0
+        left_y, right_y = b0 * mid - Y > 0, Y - b1 * mid > 0
+        s2 = 1.0 + np.where(left_x, a0 * a0, 0) + np.where(right_x, a1 * a1, 0) + np.where(left_y, b0 * b0, 0) \
+            + np.where(right_y, b1 * b1, 0)
+        s1 = Z + np.where(left_x, a0 * X, 0) + np.where(right_x, a1 * X, 0) + np.where(left_y, b0 * Y, 0) \
+            + np.where(right_y, b1 * Y, 0)
+        z = np.clip(s1 / s2, lo, hi)
+        g = g_of_z(X, Y, Z, a0, a1, b0, b1, z)
+        better = g < best_g
+        best_g = np.where(better, g, best_g)
+        best_z = np.where(better, z, best_z)
+    return np.sqrt(best_g), best_z
+
+
+def frustum_distance_brute(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi, iterations=200):
+    """Golden-section search of the convex g(z) on [z_lo, z_end], z_end = min(z_hi, z0 + sqrt(g(z0))) with
+    z0 = clamp(Z, z_lo, z_hi), beyond which g exceeds g(z0). Elementwise; returns D."""
+    X, Y, Z, a0, a1, b0, b1, z_lo, z_hi = np.broadcast_arrays(*(np.asarray(x, np.float64) for x in
+                                                                (X, Y, Z, a0, a1, b0, b1, z_lo, z_hi)))
+    z0 = np.clip(Z, z_lo, z_hi)
+    lo = z_lo.copy()
+    hi = np.minimum(z_hi, np.maximum(z_lo, z0 + np.sqrt(g_of_z(X, Y, Z, a0, a1, b0, b1, z0))))
+    ratio = (np.sqrt(5.0) - 1.0) / 2.0
+    for _ in range(iterations):
+        m1 = hi - ratio * (hi - lo)
+        m2 = lo + ratio * (hi - lo)
+        left = g_of_z(X, Y, Z, a0, a1, b0, b1, m1) <= g_of_z(X, Y, Z, a0, a1, b0, b1, m2)
+        hi = np.where(left, m2, hi)
+        lo = np.where(left, lo, m1)
+    candidates = np.stack([lo, hi, z_lo, z0])
+    return np.sqrt(np.min(g_of_z(X, Y, Z, a0, a1, b0, b1, candidates), axis=0))
+
+
+def pixel_tangents(camera):
+    """(h, w) arrays a0, a1, b0, b1 of every pixel's footprint tangents."""
+    v, u = np.mgrid[0 : camera.height, 0 : camera.width].astype(np.float64)
+    return ((u - 0.5 - camera.cx) / camera.fx, (u + 0.5 - camera.cx) / camera.fx,
+            (v - 0.5 - camera.cy) / camera.fy, (v + 0.5 - camera.cy) / camera.fy)
+
+
+def view_boundary(camera, P):
+    """Signed distance of optical-frame point P to the observed volume's boundary and the inward normal."""
+    tx0 = (-0.5 - camera.cx) / camera.fx
+    tx1 = (camera.width - 0.5 - camera.cx) / camera.fx
+    ty0 = (-0.5 - camera.cy) / camera.fy
+    ty1 = (camera.height - 0.5 - camera.cy) / camera.fy
+    X, Y, Z = P
+    z_min, z_max = camera.depth_range
+    faces = [
+        (np.array([1.0, 0.0, -tx0]), 0.0),
+        (np.array([-1.0, 0.0, tx1]), 0.0),
+        (np.array([0.0, 1.0, -ty0]), 0.0),
+        (np.array([0.0, -1.0, ty1]), 0.0),
+        (np.array([0.0, 0.0, 1.0]), -z_min),
+        (np.array([0.0, 0.0, -1.0]), z_max),
+    ]
+    best = (np.inf, np.zeros(3))
+    for normal, offset in faces:
+        length = np.linalg.norm(normal)
+        s = (normal @ P + offset) / length
+        if s < best[0]:
+            best = (s, normal / length)
+    return best
+
+
+def query_reference(occupancy, points_world, rho, aggregate, unseen, inside_tol=1e-12, min_direction=1e-9):
+    """The whole single-camera query, scanning every pixel of the image with the piecewise twin.
+
+    Returns (distance (n,), direction (n, 3) world, count (n,), invalid_count (n,), flag bits (n,)).
+    """
+    camera = occupancy.camera
+    a0, a1, b0, b1 = pixel_tangents(camera)
+    z_start = occupancy.z_start.astype(np.float64)
+    invalid = occupancy.invalid.astype(np.int64)
+    R_world_camera = camera.T_world_camera[:3, :3]
+    points_camera = camera.world_to_camera(points_world)
+    n = len(points_camera)
+    out_d = np.empty(n)
+    out_dir = np.zeros((n, 3))
+    out_count = np.zeros(n, dtype=np.int64)
+    out_invalid = np.zeros(n, dtype=np.int64)
+    out_flags = np.zeros(n, dtype=np.int64)
+    for i, P in enumerate(points_camera):
+        X, Y, Z = P
+        s_view, normal = view_boundary(camera, P)
+        flags = 2 if s_view < rho else 0
+        if unseen == "occupied" and s_view <= inside_tol:
+            out_d[i], out_count[i], out_flags[i] = 0.0, 1, flags
+            continue
+        finite = np.isfinite(z_start)
+        D = np.full(z_start.shape, np.inf)
+        zs = np.zeros(z_start.shape)
+        D[finite], zs[finite] = frustum_distance_pieces(X, Y, Z, a0[finite], a1[finite], b0[finite], b1[finite],
+                                                        z_start[finite], np.inf)
+        contributor = D < rho
+        vs, us = np.nonzero(contributor)
+        d = D[contributor]
+        z = zs[contributor]
+        nearest = np.stack([np.clip(X, a0[contributor] * z, a1[contributor] * z),
+                            np.clip(Y, b0[contributor] * z, b1[contributor] * z), z], axis=1)
+        unseen_d = s_view if (unseen == "occupied" and s_view < rho) else np.inf
+        inv = invalid[contributor]
+        if aggregate == "min":
+            if len(d):
+                k = np.lexsort((us, vs, d))[0]  # smallest distance, then smallest row, then smallest column
+            if len(d) and d[k] <= inside_tol:
+                out_d[i], out_count[i], out_invalid[i] = 0.0, 1, inv[k]
+                out_flags[i] = flags | 1 | (4 if inv[k] else 0)
+            elif unseen_d < np.inf and (not len(d) or unseen_d < d[k]):
+                out_d[i], out_count[i], out_dir[i] = unseen_d, 1, R_world_camera @ normal
+                out_flags[i] = flags
+            elif len(d):
+                out_d[i], out_count[i], out_invalid[i] = d[k], 1, inv[k]
+                out_dir[i] = R_world_camera @ ((P - nearest[k]) / d[k])
+                out_flags[i] = flags | (4 if inv[k] else 0)
+            else:
+                out_d[i], out_flags[i] = np.inf, flags
+            continue
+        count = len(d) + (1 if unseen_d < np.inf else 0)
+        out_invalid[i] = inv.sum()
+        flags |= 4 if inv.sum() else 0
+        if len(d) and d.min() <= inside_tol:
+            out_d[i], out_count[i], out_flags[i] = 0.0, count, flags | 1
+            continue
+        out_count[i], out_flags[i] = count, flags
+        if count == 0:
+            out_d[i] = np.inf
+            continue
+        units = (P - nearest) / d[:, None]
+        total = units.sum(axis=0) + (normal if unseen_d < np.inf else 0.0)
+        norm = np.linalg.norm(total)
+        if norm > min_direction * count:
+            out_dir[i] = R_world_camera @ (total / norm)
+        all_d = np.concatenate([d, [unseen_d] if unseen_d < np.inf else []])
+        out_d[i] = all_d.mean() if aggregate == "mean" else all_d.min()
+    return out_d, out_dir, out_count, out_invalid, out_flags
