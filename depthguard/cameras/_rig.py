@@ -89,9 +89,21 @@ def load_rig(path) -> Rig:
         raise exc.with_source(str(path)) from None
 
 
+class _RigDumper(yaml.SafeDumper):
+    """Safe YAML, with lists of plain numbers in flow style, so a 4x4 matrix reads as four rows."""
+
+
+def _represent_list(dumper, data):
+    flow = all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in data)
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flow)
+
+
+_RigDumper.add_representer(list, _represent_list)
+
+
 def save_rig(rig: Rig, path) -> None:
     """Write ``rig`` as a YAML file that :func:`load_rig` reads back to an equal rig."""
-    Path(path).write_text(yaml.safe_dump(rig.to_dict(), sort_keys=False))
+    Path(path).write_text(yaml.dump(rig.to_dict(), Dumper=_RigDumper, sort_keys=False))
 
 
 def rig_from_dict(data, base_dir=".") -> Rig:

@@ -1,0 +1,104 @@
+"""The ``depthguard`` command line.
+
+    depthguard distance --rig RIG.yaml --depth NAME=PATH --points POINTS [--rho 0.4] [--aggregate hybrid] ...
+    depthguard scenario-a [--out DIR]
+    depthguard demo [--out DIR]
+
+Bad input ends with exit status 2 and one line on standard error that says what is wrong.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from depthguard import config
+from depthguard.errors import DepthguardError
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (no usage dump) and exit status 2."""
+
+    def error(self, message):
+        self.exit(2, f"depthguard: error: {message}\n")
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="depthguard", description="Distances between a robot and unknown obstacles, computed in "
+                                                     "the depth space of calibrated depth cameras.")
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    distance = commands.add_parser("distance", help="distances from control points to what the cameras see")
+    distance.add_argument("--rig", required=True, help="rig YAML file (SPEC section 2)")
+    distance.add_argument("--depth", action="append", required=True, metavar="NAME=PATH",
+                          help="depth image of camera NAME (16-bit PNG/PGM in depth_scale units, .npy, float TIFF)")
+    distance.add_argument("--points", required=True, help="control points: CSV with header x,y,z or JSON list of "
+                                                          "[x, y, z] (world frame, metres)")
+    distance.add_argument("--rho", type=float, default=config.DEFAULT_RHO, help="surveillance radius, metres")
+    distance.add_argument("--aggregate", choices=config.AGGREGATES, default=config.DEFAULT_AGGREGATE)
+    distance.add_argument("--invalid", choices=config.INVALID_POLICIES, default=config.DEFAULT_INVALID,
+                          help="pixels without a measurement: occupied (fail-safe), neighbors, free")
+    distance.add_argument("--unseen", choices=config.UNSEEN_POLICIES, default=config.DEFAULT_UNSEEN,
+                          help="space no camera observes: occupied (fail-safe) or free")
+    distance.add_argument("--method", choices=config.METHODS, default=config.DEFAULT_METHOD,
+                          help="exact (SPEC) or paper (the 2015 paper's unsafe formulas, for comparison)")
+    distance.add_argument("--json", action="store_true", help="print one JSON array, one object per point")
+
+    for name, text in (("scenario-a", "reference scenario A of the 2015 paper: plots and a timing table"),
+                       ("demo", "the Quick start's main job on a built-in simulated workcell")):
+        sub = commands.add_parser(name, help=text)
+        sub.add_argument("--out", default=f"out/{name}", help="output folder for plots and tables")
+        sub.add_argument("--repeats", type=int, default=20, help="timing repetitions per control point position")
+    return parser
+
+
+def main(argv=None) -> int:
+    args = _build_parser().parse_args(argv)
+    try:
+        if args.command == "distance":
+            return _distance(args)
+        from depthguard.experiments import scenario_a
+
+        return scenario_a.main(out=args.out, repeats=args.repeats)
+    except DepthguardError as exc:
+        print(f"depthguard: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"depthguard: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+
+
+def _distance(args) -> int:
+    from depthguard import DistanceMonitor, load_depth, load_rig
+    from depthguard._points_io import load_points
+    from depthguard.errors import InputError
+
+    rig = load_rig(args.rig)
+    frames = {}
+    for item in args.depth:
+        name, sep, path = item.partition("=")
+        if not sep or not name or not path:
+            raise InputError(f"--depth expects NAME=PATH, got {item!r}")
+        if name in frames:
+            raise InputError(f"--depth names camera {name!r} twice")
+        frames[name] = load_depth(path, rig.camera(name))
+    points = load_points(args.points)
+    monitor = DistanceMonitor(rig, rho=args.rho, aggregate=args.aggregate, invalid=args.invalid, unseen=args.unseen,
+                              method=args.method)
+    result = monitor.query(frames, points)
+    records = result.records(points)
+    if args.json:
+        print(json.dumps(records))
+        return 0
+    print(f"{'x':>8s} {'y':>8s} {'z':>8s} {'distance':>9s} {'direction':>26s} {'count':>6s}  flags")
+    for r in records:
+        d = "none" if r["distance"] is None else f"{r['distance']:.4f}"
+        direction = "[" + ", ".join(f"{c:+.3f}" for c in r["direction"]) + "]"
+        print(f"{r['point'][0]:8.3f} {r['point'][1]:8.3f} {r['point'][2]:8.3f} {d:>9s} {direction:>26s} "
+              f"{r['count']:6d}  {','.join(r['flags']) or '-'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,67 @@
+#!/usr/bin/env bash
+# depthguard's one entry point for a fresh machine: it sets up everything it needs, then runs a job.
+#
+#   ./dev.sh demo    set up, then run the main job on the built-in default scene (plots + tables in out/demo)
+#   ./dev.sh test    set up, then run the test suite (what CI runs)
+#   ./dev.sh bench   set up, then run the benchmarks
+#   ./dev.sh setup   only set up
+#
+# Setup: system packages (when missing, through apt-get), a virtual environment in .venv with depthguard installed
+# in editable mode with its test dependencies. It is skipped when pyproject.toml has not changed since the last run.
+set -euo pipefail
+cd "$(dirname "$0")"
+
+SYSTEM_PACKAGES=()  # Debian packages the project needs at run time (none yet)
+
+python_for_venv() {
+  for candidate in python3.11 python3 python; do
+    if command -v "$candidate" >/dev/null 2>&1 &&
+       "$candidate" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)' 2>/dev/null; then
+      echo "$candidate"
+      return
+    fi
+  done
+  echo "dev.sh: needs Python >= 3.11 on PATH" >&2
+  exit 1
+}
+
+setup() {
+  local missing=()
+  for pkg in "${SYSTEM_PACKAGES[@]}"; do
+    dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
+  done
+  if [ ${#missing[@]} -gt 0 ]; then
+    local sudo=""
+    [ "$(id -u)" -eq 0 ] || sudo="sudo"
+    echo "dev.sh: installing system packages: ${missing[*]}"
+    $sudo apt-get update -qq && $sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+  fi
+  if [ ! -x .venv/bin/python ]; then
+    echo "dev.sh: creating .venv"
+    "$(python_for_venv)" -m venv .venv
+  fi
+  local stamp=".venv/.depthguard-installed"
+  local want
+  want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+  if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+    echo "dev.sh: installing depthguard and its dependencies into .venv"
+    .venv/bin/python -m pip install -q --upgrade pip >/dev/null
+    .venv/bin/python -m pip install -q -e '.[test]'
+    echo "$want" > "$stamp"
+  fi
+}
+
+job="${1:-demo}"
+shift || true
+setup
+case "$job" in
+  setup) ;;
+  demo) exec .venv/bin/depthguard demo "$@" ;;
+  test) exec .venv/bin/python -m pytest -q "$@" ;;
+  bench)
+    for bench in benchmarks/bench_*.py; do
+      echo "== $bench"
+      .venv/bin/python "$bench" "$@"
+    done ;;
+  *) echo "usage: ./dev.sh [demo|test|bench|setup]" >&2; exit 2 ;;
+esac
