@@ -167,3 +167,44 @@ def query_reference(occupancy, points_world, rho, aggregate, unseen, inside_tol=
         all_d = np.concatenate([d, [unseen_d] if unseen_d < np.inf else []])
         out_d[i] = all_d.mean() if aggregate == "mean" else all_d.min()
     return out_d, out_dir, out_count, out_invalid, out_flags
+
+
+def paper_query_reference(occupancy, points_world, rho, aggregate):
+    """The 2015 paper's method literally (unseen space free): window of half-width rho*f/(2*(Z - rho)) around P's
+    pixel, pixels with depth in [Z - rho, Z + rho], distance at the fixed depth max(Z, z_lo).
+    Returns (distance (n,), direction (n, 3) world)."""
+    camera = occupancy.camera
+    a0, a1, b0, b1 = pixel_tangents(camera)
+    zs = occupancy.z_start.astype(np.float64)
+    v_idx, u_idx = np.mgrid[0 : camera.height, 0 : camera.width]
+    out_d = np.full(len(points_world), np.inf)
+    out_dir = np.zeros((len(points_world), 3))
+    for i, P in enumerate(camera.world_to_camera(points_world)):
+        X, Y, Z = P
+        if Z - rho > 0:
+            pu, pv = camera.fx * X / Z + camera.cx, camera.fy * Y / Z + camera.cy
+            hu, hv = 0.5 * rho * camera.fx / (Z - rho), 0.5 * rho * camera.fy / (Z - rho)
+            window = (np.abs(u_idx - pu) <= hu) & (np.abs(v_idx - pv) <= hv)
+        else:
+            window = np.ones(zs.shape, bool)
+        use = window & (zs <= Z + rho) & (zs >= Z - rho)
+        z = np.maximum(Z, zs[use])
+        nearest = np.stack([np.clip(X, a0[use] * z, a1[use] * z), np.clip(Y, b0[use] * z, b1[use] * z), z], 1)
+        d = np.linalg.norm(P - nearest, axis=1)
+        c = d < rho
+        if not c.any():
+            continue
+        d, nearest = d[c], nearest[c]
+        if d.min() <= 1e-12:  # inside a possibly-occupied set
+            out_d[i] = 0.0
+            continue
+        units = (P - nearest) / d[:, None]
+        R = camera.T_world_camera[:3, :3]
+        if aggregate == "min":
+            k = np.argmin(d)
+            out_d[i], out_dir[i] = d[k], R @ units[k]
+        else:
+            total = units.sum(axis=0)
+            out_dir[i] = R @ (total / np.linalg.norm(total))
+            out_d[i] = d.mean() if aggregate == "mean" else d.min()
+    return out_d, out_dir

@@ -1,0 +1,17 @@
+import os
+import sys
+
+import pytest
+
+sys.path.insert(0, os.path.dirname(__file__))
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SHARED = os.path.join(os.path.dirname(REPO), "shared")
+REAL_DATA = os.path.join(SHARED, "data", "real")
+
+
+@pytest.fixture
+def real_data():
+    if not os.path.isdir(REAL_DATA):
+        pytest.skip(f"real data not found at {REAL_DATA} (the shared folder sits beside the checkout)")
+    return REAL_DATA
