@@ -33,10 +33,24 @@ def frustum_nearest(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
 
     g(z) = dx(z)^2 + dy(z)^2 + (Z - z)^2 with dx(z) = max(a0*z - X, 0, X - a1*z) (dy alike) is convex and, because
     dx and dy vanish at their breakpoints X/a0, X/a1, Y/b0, Y/b1, continuously differentiable; on each piece between
-    breakpoints it is one quadratic with a closed-form minimiser. First try the piece that holds
-    clamp(Z, z_lo, z_hi), where the minimiser usually lies: its minimiser, clamped to [z_lo, z_hi], is the global
-    one if it lies in the closure of that same piece (each lateral state holds on an interval of z, so the test is
-    exact). Otherwise walk the pieces from z_lo (:func:`frustum_nearest_walk`).
+    breakpoints it is one quadratic with a closed-form minimiser. :func:`guessed_piece` tries the piece at
+    clamp(Z, z_lo, z_hi), where the minimiser usually lies; where it fails, walk the pieces from z_lo
+    (:func:`frustum_nearest_walk`).
+    """
+    d2, z, ok = guessed_piece(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi)
+    if ok:
+        return d2, z
+    return frustum_nearest_walk(X, Y, Z, a0, a1, b0, b1, _breakpoint(X, a0), _breakpoint(X, a1), _breakpoint(Y, b0),
+                                _breakpoint(Y, b1), z_lo, z_hi)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def guessed_piece(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
+    """The minimiser of g on the piece that holds z_g = clamp(Z, z_lo, z_hi), clamped to [z_lo, z_hi].
+
+    It is the global minimiser if it lies in the closure of that same piece: each lateral state (left of, inside
+    or right of the frustum) holds on an interval of z, so checking the states at the minimiser is exact. Branch-free
+    apart from the selects, so that loops over pixels vectorise. Returns (g(z), z, ok).
     """
     z_guess = min(max(Z, z_lo), z_hi)
     left_x = a0 * z_guess > X
@@ -46,15 +60,11 @@ def frustum_nearest(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
     ax = a0 if left_x else (a1 if right_x else 0.0)
     by = b0 if left_y else (b1 if right_y else 0.0)
     z = min(max((Z + ax * X + by * Y) / (1.0 + ax * ax + by * by), z_lo), z_hi)
-    ok_x = (a0 * z >= X) if left_x else ((X >= a1 * z) if right_x else (a0 * z <= X and X <= a1 * z))
-    ok_y = (b0 * z >= Y) if left_y else ((Y >= b1 * z) if right_y else (b0 * z <= Y and Y <= b1 * z))
-    if not (ok_x and ok_y):
-        return frustum_nearest_walk(X, Y, Z, a0, a1, b0, b1, _breakpoint(X, a0), _breakpoint(X, a1),
-                                    _breakpoint(Y, b0), _breakpoint(Y, b1), z_lo, z_hi)
-    dx = max(a0 * z - X, 0.0, X - a1 * z)
-    dy = max(b0 * z - Y, 0.0, Y - b1 * z)
-    dz = Z - z
-    return dx * dx + dy * dy + dz * dz, z
+    ok_x = (a0 * z >= X) if left_x else ((X >= a1 * z) if right_x else ((a0 * z <= X) & (X <= a1 * z)))
+    ok_y = (b0 * z >= Y) if left_y else ((Y >= b1 * z) if right_y else ((b0 * z <= Y) & (Y <= b1 * z)))
+    dx = max(max(a0 * z - X, 0.0), X - a1 * z)
+    dy = max(max(b0 * z - Y, 0.0), Y - b1 * z)
+    return dx * dx + dy * dy + (Z - z) * (Z - z), z, ok_x & ok_y
 
 
 @njit(cache=True, error_model="numpy")
@@ -317,27 +327,13 @@ def _nearest_in_blocks(X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy,
 
 @njit(cache=True, error_model="numpy")
 def _guess_piece_row(X, Y, Z, b0, b1, z_in, u_in, m, inv_fx, cx, d2_out, z_out):
-    """The branch-free first step of :func:`frustum_nearest` for m pixels of one row (tangents b0, b1): pixel k has
-    column u_in[k] and start depth z_in[k] (z_hi = inf). Writes d2_out[k] = g(z*) and z_out[k] = z*, or
-    d2_out[k] = -1 where the guessed piece does not hold the minimiser and the caller must walk."""
+    """:func:`guessed_piece` for m pixels of one row (tangents b0, b1; z_hi = inf): pixel k has column u_in[k] and
+    start depth z_in[k]. Writes d2_out[k] = g(z*) and z_out[k] = z*, or d2_out[k] = -1 where the guessed piece does
+    not hold the minimiser and the caller must walk. A loop of its own, so that it vectorises."""
     for k in range(m):
-        z_lo = z_in[k]
-        a0 = (u_in[k] - 0.5 - cx) * inv_fx
-        a1 = (u_in[k] + 0.5 - cx) * inv_fx
-        z_guess = max(z_lo, Z)
-        left_x = a0 * z_guess > X
-        right_x = X > a1 * z_guess
-        left_y = b0 * z_guess > Y
-        right_y = Y > b1 * z_guess
-        ax = a0 if left_x else (a1 if right_x else 0.0)
-        by = b0 if left_y else (b1 if right_y else 0.0)
-        z = max((Z + ax * X + by * Y) / (1.0 + ax * ax + by * by), z_lo)
-        ok_x = (a0 * z >= X) if left_x else ((X >= a1 * z) if right_x else ((a0 * z <= X) & (X <= a1 * z)))
-        ok_y = (b0 * z >= Y) if left_y else ((Y >= b1 * z) if right_y else ((b0 * z <= Y) & (Y <= b1 * z)))
-        dx = max(max(a0 * z - X, 0.0), X - a1 * z)
-        dy = max(max(b0 * z - Y, 0.0), Y - b1 * z)
-        d2 = dx * dx + dy * dy + (Z - z) * (Z - z)
-        d2_out[k] = d2 if (ok_x & ok_y) else -1.0
+        d2, z, ok = guessed_piece(X, Y, Z, (u_in[k] - 0.5 - cx) * inv_fx, (u_in[k] + 0.5 - cx) * inv_fx, b0, b1,
+                                  z_in[k], np.inf)
+        d2_out[k] = d2 if ok else -1.0
         z_out[k] = z
 
 
