@@ -115,7 +115,7 @@ class DistanceMonitor:
         if stale:
             flags = tuple(f | Flag.STALE_CAMERA for f in result.flags)
             result = DistanceResult(result.distance, result.direction, result.count, result.invalid_count, flags,
-                                    result.timestamps, result.cameras)
+                                    result.timestamps, result.cameras, result.invalid_pixels)
         return result
 
 

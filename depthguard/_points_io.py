@@ -19,7 +19,7 @@ def load_points(path) -> np.ndarray:
     """
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")  # tolerate the byte-order mark spreadsheets write
     except OSError as exc:
         raise InputError(f"{path}: cannot read points file ({exc.strerror or exc})") from None
     except UnicodeDecodeError:

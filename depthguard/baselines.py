@@ -21,11 +21,12 @@ from depthguard.depthspace._distance import check_points
 from depthguard.depthspace._kernels import cube_window
 
 
-def _metres(depth: DepthImage, camera) -> np.ndarray:
-    """(h, w) float64 metres with NaN where there is no valid measurement (outside the camera's range too)."""
+def valid_metres(depth: DepthImage, camera) -> np.ndarray:
+    """(h, w) float64 metres, 0 where there is no valid measurement (outside the camera's range too): the form the
+    baselines work on, to convert once per frame."""
     d = depth.metres().astype(np.float64)
     z_min, z_max = camera.depth_range
-    d[~((d >= z_min) & (d <= z_max))] = np.nan
+    d[~((d >= z_min) & (d <= z_max))] = 0.0
     return d
 
 
@@ -66,10 +67,13 @@ def _nearest_points_in_windows(depth_m, points_camera, rho, fx, fy, cx, cy, near
             distance[i] = np.inf
 
 
-def cartesian_region_distances(depth: DepthImage, camera, points_world, rho: float = config.DEFAULT_RHO):
-    """The paper's Cartesian baseline: nearest back-projected pixel centre within each control point's window."""
+def cartesian_region_distances(depth, camera, points_world, rho: float = config.DEFAULT_RHO):
+    """The paper's Cartesian baseline: nearest back-projected pixel centre within each control point's window.
+
+    ``depth``: a :class:`DepthImage`, or its :func:`valid_metres` computed once per frame.
+    """
     points = check_points(points_world)
-    depth_m = np.nan_to_num(_metres(depth, camera), nan=0.0)
+    depth_m = valid_metres(depth, camera) if isinstance(depth, DepthImage) else depth
     distance = np.full(len(points), np.inf)
     direction = np.zeros((len(points), 3))
     if len(points):
@@ -81,8 +85,8 @@ def cartesian_region_distances(depth: DepthImage, camera, points_world, rho: flo
 
 def point_cloud(depth: DepthImage, camera) -> np.ndarray:
     """(m, 3) float64 world-frame points of every valid pixel (pixel centres back-projected at their depth)."""
-    depth_m = _metres(depth, camera)
-    valid = np.isfinite(depth_m)
+    depth_m = valid_metres(depth, camera)
+    valid = depth_m > 0
     v, u = np.nonzero(valid)
     return camera.camera_to_world(camera.back_project(u, v, depth_m[valid]))
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 
 from depthguard import config
@@ -67,6 +68,12 @@ def main(argv=None) -> int:
     except OSError as exc:
         print(f"depthguard: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2
+    except Exception as exc:  # a bug, not bad input: still one line, the traceback on request
+        if os.environ.get("DEPTHGUARD_DEBUG"):
+            raise
+        print(f"depthguard: internal error: {type(exc).__name__}: {exc} (set DEPTHGUARD_DEBUG=1 for the traceback)",
+              file=sys.stderr)
+        return 3
 
 
 def _distance(args) -> int:

@@ -53,6 +53,8 @@ class DistanceResult:
         flags: n :class:`Flag` values, one per point.
         timestamps: camera name -> capture time (seconds) of the frame used, or None when unknown.
         cameras: names of the cameras whose frames were used.
+        invalid_pixels: camera name -> pixels of its frame without a valid measurement (whatever the policy did
+            with them): a frame that is mostly invalid shows here even under the permissive ``invalid="free"``.
     """
 
     distance: np.ndarray
@@ -62,6 +64,7 @@ class DistanceResult:
     flags: tuple[Flag, ...]
     timestamps: dict[str, float | None] = field(default_factory=dict)
     cameras: tuple[str, ...] = ()
+    invalid_pixels: dict[str, int] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return len(self.distance)

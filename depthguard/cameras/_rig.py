@@ -40,7 +40,7 @@ class Rig:
             if camera.name != name:
                 raise RigError(f"is filed under the name {name!r}", camera=camera.name, field="name")
         if self.principal is not None and self.principal not in self.cameras:
-            raise RigError(f"names no camera of the rig (cameras: {', '.join(self.cameras)})",
+            raise RigError(f"{self.principal!r} names no camera of the rig (cameras: {', '.join(self.cameras)})",
                            field="principal")
 
     def camera(self, name: str) -> PinholeCamera:
@@ -79,6 +79,8 @@ def load_rig(path) -> Rig:
         text = path.read_text()
     except OSError as exc:
         raise RigError(f"cannot read rig file ({exc.strerror or exc})", source=str(path)) from None
+    except UnicodeDecodeError:
+        raise RigError("rig file is not UTF-8 text", source=str(path)) from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
@@ -143,7 +145,10 @@ def _camera_from(entry, index: int, depth_scale: float, rig_noise: NoiseModel, b
     intrinsics = {}
     if "camera_info" in entry:
         info_path = base_dir / str(entry["camera_info"])
-        intrinsics.update(load_camera_info(info_path, camera=name, rectified=bool(entry.get("rectified", False))))
+        rectified = entry.get("rectified", False)
+        if not isinstance(rectified, bool):
+            raise RigError(f"must be true or false, got {rectified!r}", camera=name, field="rectified")
+        intrinsics.update(load_camera_info(info_path, camera=name, rectified=rectified))
     for key in _INTRINSIC_KEYS:
         if key in entry:
             intrinsics[key] = entry[key]
@@ -207,6 +212,8 @@ def load_camera_info(path, camera: str | None = None, rectified: bool = False) -
     except OSError as exc:
         raise RigError(f"cannot read camera_info file {path} ({exc.strerror or exc})", camera=camera,
                        field="camera_info") from None
+    except UnicodeDecodeError:
+        raise RigError(f"camera_info file {path} is not UTF-8 text", camera=camera, field="camera_info") from None
     except yaml.YAMLError as exc:
         raise RigError(f"malformed YAML in {path} ({_one_line(exc)})", camera=camera, field="camera_info") from None
     if not isinstance(data, dict):
@@ -226,17 +233,32 @@ def load_camera_info(path, camera: str | None = None, rectified: bool = False) -
     if width is None or height is None:
         raise RigError(f"{where}: image width/height missing", camera=camera, field="camera_info")
     if rectified:
-        if P is None or len(P) != 12:
+        if P is None:
             raise RigError(f"{where}: 'rectified' needs a 3x4 projection matrix P", camera=camera,
                            field="projection_matrix")
+        P = _matrix(P, 12, f"{where}: 'rectified' needs a 3x4 projection matrix P", camera, "projection_matrix")
         fx, fy, cx, cy = P[0], P[5], P[2], P[6]
     else:
-        if K is None or len(K) != 9:
+        if K is None:
             raise RigError(f"{where}: needs a 3x3 camera matrix K", camera=camera, field="camera_matrix")
+        K = _matrix(K, 9, f"{where}: needs a 3x3 camera matrix K", camera, "camera_matrix")
         if D is not None:
             _refuse_distortion(D, camera=camera, field="distortion_coefficients")
         fx, fy, cx, cy = K[0], K[4], K[2], K[5]
     return dict(width=width, height=height, fx=fx, fy=fy, cx=cx, cy=cy)
+
+
+def _matrix(value, size: int, what: str, camera, field) -> list[float]:
+    """``value`` as a flat list of ``size`` finite floats (row-major), or a :class:`RigError` naming the field."""
+    try:
+        values = np.asarray(value, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise RigError(f"{what}, got {value!r}", camera=camera, field=field) from None
+    if values.size != size:
+        raise RigError(f"{what} ({size} numbers), got {values.size}", camera=camera, field=field)
+    if not np.all(np.isfinite(values)):
+        raise RigError(f"{what}: contains NaN or infinity", camera=camera, field=field)
+    return [float(x) for x in values]
 
 
 def _refuse_distortion(coefficients, camera, field) -> None:

@@ -69,7 +69,7 @@ def depth_image(data, camera: PinholeCamera, timestamp: float | None = None) -> 
             camera=camera.name,
             field="width/height",
         )
-    if array.dtype == np.uint16:
+    if array.dtype.kind == "u" and array.dtype.itemsize == 2:  # uint16, either byte order
         scale = camera.depth_scale
         array = np.array(array, dtype=np.uint16, order="C", copy=True)
     elif np.issubdtype(array.dtype, np.floating):

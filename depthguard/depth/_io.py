@@ -101,10 +101,13 @@ def _read_pgm(path: Path) -> np.ndarray:
 def _read_npy(path: Path) -> np.ndarray:
     try:
         array = np.load(path, allow_pickle=False)
-    except ValueError as exc:
-        raise DepthImageError(f"not a plain .npy array ({exc})", source=str(path)) from None
-    if array.dtype == np.uint16:
-        return np.ascontiguousarray(array)
+    except (ValueError, EOFError) as exc:
+        raise DepthImageError(f"not a plain .npy array ({exc or 'empty file'})", source=str(path)) from None
+    if not isinstance(array, np.ndarray):  # a .npz archive under a .npy name
+        getattr(array, "close", lambda: None)()
+        raise DepthImageError(f"not a plain .npy array (got {type(array).__name__})", source=str(path))
+    if array.dtype.kind == "u" and array.dtype.itemsize == 2:  # uint16 of either byte order
+        return np.ascontiguousarray(array, dtype=np.uint16)
     if np.issubdtype(array.dtype, np.floating):
         return np.ascontiguousarray(array, dtype=np.float32)
     raise DepthImageError(f"unsupported dtype {array.dtype} (expected uint16 units or float metres)",
@@ -120,6 +123,8 @@ def _read_pillow(path: Path) -> np.ndarray:
         raise DepthImageError("not a readable image file", source=str(path)) from None
     except (SyntaxError, ValueError) as exc:  # Pillow reports some corrupt files this way
         raise DepthImageError(f"corrupt image file ({exc})", source=str(path)) from None
+    except Image.DecompressionBombError as exc:  # a corrupt or hostile header claiming a gigantic image
+        raise DepthImageError(f"refused: {exc}", source=str(path)) from None
     if mode in ("I;16", "I;16B", "I;16L"):
         return array.astype(np.uint16)
     if mode == "I":  # 32-bit integer container; PNG loads 16-bit grayscale this way in some Pillow versions

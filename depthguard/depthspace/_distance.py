@@ -72,14 +72,16 @@ def single_camera_distances(occupancy: OccupancyImage, points_world, rho: float 
     flags = np.empty(n, dtype=np.int64)
     if n:
         z_min, z_max = camera.depth_range
-        with parallel_chunksize(1):  # points differ a lot in cost: hand them to threads one at a time
-            _kernels.query_points(
-                points_camera, float(rho), occupancy.z_start, occupancy.invalid, occupancy.block_min,
+        args = (points_camera, float(rho), occupancy.z_start, occupancy.invalid, occupancy.block_min,
                 config.BLOCK_SIZE, camera.fx, camera.fy, camera.cx, camera.cy, z_min, z_max,
                 config.AGGREGATES.index(aggregate), unseen == "occupied", method == "paper", config.NEAR_PLANE_EPSILON,
                 config.INSIDE_TOLERANCE, config.MIN_DIRECTION_NORM, distance, direction_camera, count, invalid_count,
-                flags,
-            )
+                flags)
+        if n == 1:
+            _kernels.query_points_serial(*args)
+        else:
+            with parallel_chunksize(1):  # points differ a lot in cost: hand them to threads one at a time
+                _kernels.query_points(*args)
     direction = direction_camera @ camera.T_world_camera[:3, :3].T
     return DistanceResult(
         distance=distance,
@@ -89,4 +91,5 @@ def single_camera_distances(occupancy: OccupancyImage, points_world, rho: float 
         flags=tuple(Flag(int(f)) for f in flags),
         timestamps={camera.name: occupancy.timestamp},
         cameras=(camera.name,),
+        invalid_pixels={camera.name: occupancy.invalid_pixels},
     )

@@ -615,6 +615,26 @@ def query_point_paper(X, Y, Z, rho, z_start, invalid, fx, fy, cx, cy, z_min, z_m
     return d_min, count, n_invalid, flags
 
 
+@njit(cache=True, error_model="numpy")
+def _query_one(i, points_camera, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min, z_max, aggregate,
+               unseen_occupied, paper, near_eps, inside_tol, min_direction, spans, scratch, distance, direction, count,
+               invalid_count, flags):
+    X = points_camera[i, 0]
+    Y = points_camera[i, 1]
+    Z = points_camera[i, 2]
+    if paper:
+        d, c, k, f = query_point_paper(X, Y, Z, rho, z_start, invalid, fx, fy, cx, cy, z_min, z_max, aggregate,
+                                       unseen_occupied, inside_tol, min_direction, direction[i])
+    else:
+        d, c, k, f = query_point(X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min, z_max,
+                                 aggregate, unseen_occupied, near_eps, inside_tol, min_direction, spans, scratch,
+                                 direction[i])
+    distance[i] = d
+    count[i] = c
+    invalid_count[i] = k
+    flags[i] = f
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
 def query_points(points_camera, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min, z_max, aggregate,
                  unseen_occupied, paper, near_eps, inside_tol, min_direction, distance, direction, count,
@@ -628,17 +648,20 @@ def query_points(points_camera, rho, z_start, invalid, block_min, block, fx, fy,
     spans = np.empty((n, z_start.shape[0], 2), dtype=np.int64)
     scratch = np.empty((n, 4, z_start.shape[1]), dtype=np.float64)
     for i in prange(n):
-        X = points_camera[i, 0]
-        Y = points_camera[i, 1]
-        Z = points_camera[i, 2]
-        if paper:
-            d, c, k, f = query_point_paper(X, Y, Z, rho, z_start, invalid, fx, fy, cx, cy, z_min, z_max, aggregate,
-                                           unseen_occupied, inside_tol, min_direction, direction[i])
-        else:
-            d, c, k, f = query_point(X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min,
-                                     z_max, aggregate, unseen_occupied, near_eps, inside_tol, min_direction, spans[i],
-                                     scratch[i], direction[i])
-        distance[i] = d
-        count[i] = c
-        invalid_count[i] = k
-        flags[i] = f
+        _query_one(i, points_camera, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min, z_max, aggregate,
+                   unseen_occupied, paper, near_eps, inside_tol, min_direction, spans[i], scratch[i], distance,
+                   direction, count, invalid_count, flags)
+
+
+@njit(cache=True, error_model="numpy")
+def query_points_serial(points_camera, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min, z_max,
+                        aggregate, unseen_occupied, paper, near_eps, inside_tol, min_direction, distance, direction,
+                        count, invalid_count, flags):
+    """:func:`query_points` on the calling thread: for one point, a parallel region only adds a barrier that a busy
+    machine can hold up for milliseconds."""
+    spans = np.empty((z_start.shape[0], 2), dtype=np.int64)
+    scratch = np.empty((4, z_start.shape[1]), dtype=np.float64)
+    for i in range(points_camera.shape[0]):
+        _query_one(i, points_camera, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min, z_max, aggregate,
+                   unseen_occupied, paper, near_eps, inside_tol, min_direction, spans, scratch, distance, direction,
+                   count, invalid_count, flags)
