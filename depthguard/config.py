@@ -53,3 +53,65 @@ NEAR_PLANE_EPSILON = 1e-6
 
 #: Side of the square pixel blocks whose minimum depth bounds whole blocks at once, pixels.
 BLOCK_SIZE = 8
+
+#: Self-filtering: metres by which a measurement may lie in front of the rendered robot and still count as the robot
+#: (calibration and joint-state timing), on top of the noise margin (SPEC section 7).
+SELF_FILTER_TOLERANCE = 0.02
+
+# ------------------------------------------------------------------------------------------------------------ robots
+
+#: The default robot: pybullet_data's KUKA LBR iiwa 7 R800 (7 revolute joints, like the papers' KUKA LWR IV), and the
+#: Franka Emika Panda. Paths are relative to ``pybullet_data.getDataPath()``, resolved only when asked for.
+DEFAULT_ROBOT_URDF = "kuka_iiwa/model.urdf"
+PANDA_URDF = "franka_panda/panda.urdf"
+
+#: Padding added to every link capsule's radius, metres: the capsules contain the collision meshes plus this much.
+DEFAULT_ROBOT_PADDING = 0.02
+
+#: A joint value at most this far beyond its URDF limits (radians for revolute, metres for prismatic joints) is
+#: accepted as given (a measured state may overshoot a little; it is never clipped, so the geometry stays where the
+#: robot is). Further out is an error: it means wrong units (degrees), a wrong joint order or a wrong model.
+JOINT_LIMIT_TOLERANCE = 0.01
+
+#: URDF primitive shapes become meshes that contain the true shape (their faces lie on or outside it): a cylinder is
+#: a prism over a regular polygon circumscribed about its circle, a sphere a scaled icosphere.
+PRIMITIVE_CYLINDER_SECTIONS = 32
+PRIMITIVE_SPHERE_SUBDIVISIONS = 2
+
+#: Capsule fit: radii tried on each principal axis before a golden-section refinement of the best one.
+CAPSULE_RADIUS_SAMPLES = 64
+
+#: The default robot's 9 control points (the papers' count: Flacco et al. 2015 section 5, 2016 section VIII), as
+#: (name, link, offset (3,) metres in the link frame). They lie on the arm's centre line about 0.1 m apart: three on
+#: the upper arm, the elbow, three on the forearm, the wrist, and the end-effector at the flange (the top face of
+#: link 7, 0.126 m beyond the wrist). Link 1 carries none: joint 1 only turns it about its own axis, so a point on it
+#: cannot move away from anything. Heights are with all joints at zero (base at z = 0).
+IIWA_CONTROL_POINTS = (
+    ("upper_arm_1", "lbr_iiwa_link_2", (0.0, 0.1, 0.0)),  # z = 0.46
+    ("upper_arm_2", "lbr_iiwa_link_3", (0.0, 0.0, 0.0)),  # z = 0.5645
+    ("upper_arm_3", "lbr_iiwa_link_3", (0.0, 0.0, 0.11)),  # z = 0.6745
+    ("elbow", "lbr_iiwa_link_4", (0.0, 0.0, 0.0)),  # z = 0.78
+    ("forearm_1", "lbr_iiwa_link_4", (0.0, 0.09, 0.0)),  # z = 0.87
+    ("forearm_2", "lbr_iiwa_link_5", (0.0, 0.0, 0.0)),  # z = 0.9645
+    ("forearm_3", "lbr_iiwa_link_5", (0.0, 0.0, 0.11)),  # z = 1.0745
+    ("wrist", "lbr_iiwa_link_6", (0.0, 0.0, 0.0)),  # z = 1.18
+    ("end_effector", "lbr_iiwa_link_7", (0.0, 0.0, 0.045)),  # z = 1.306, the flange
+)
+
+#: Rendering (depthguard.rendering): surfaces nearer to a camera's optical centre than this (metres, optical z) are
+#: clipped. There is no far plane: the depth buffer holds near / z in float32, so its resolution is relative
+#: (about 1e-7 of the depth) and does not depend on this value.
+RENDER_NEAR = 1e-3
+
+#: Rendering: ambient term of the Lambertian intensity image, intensity = albedo * (a + (1 - a) * |cos|), where
+#: |cos| is the cosine between the surface normal and the ray to the camera (the light sits at the camera).
+RENDER_AMBIENT = 0.1
+
+#: Rendering: segments around a sphere or capsule in primitive_mesh (a circumscribed UV-sphere hull). At 48 the
+#: mesh exceeds the true surface by at most 0.43 % of the radius.
+PRIMITIVE_MESH_SEGMENTS = 48
+
+#: Rendering: the EGL and OpenGL libraries opened for the headless context (Debian packages libegl1, libgl1; the
+#: unversioned names libEGL.so / libGL.so come only with the -dev packages).
+EGL_LIBRARY = "libEGL.so.1"
+GL_LIBRARY = "libGL.so.1"

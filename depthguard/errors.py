@@ -6,7 +6,9 @@ fix the rig or the driver::
     DepthguardError
     ├── RigError          a rig, camera or camera_info file is malformed or inconsistent
     ├── DepthImageError   a depth image cannot be read or does not fit its camera
-    └── InputError        points, options or other arguments are malformed
+    ├── InputError        points, options or other arguments are malformed
+    ├── RobotError        a robot description (URDF, meshes, control points) is missing, malformed or unsupported
+    └── RenderingError    no headless OpenGL (EGL) context, or its OpenGL lacks what rendering needs
 """
 
 from __future__ import annotations
@@ -44,3 +46,13 @@ class DepthImageError(DepthguardError, ValueError):
 
 class InputError(DepthguardError, ValueError):
     """Points, options or other arguments are malformed (wrong shape, not finite, unknown policy)."""
+
+
+class RobotError(DepthguardError, ValueError):
+    """A robot description cannot be used: the URDF or a mesh it names is missing or malformed, a joint type is
+    unsupported, or a control point names no link. The message names the file and the link or joint."""
+
+
+class RenderingError(DepthguardError, RuntimeError):
+    """No headless OpenGL context can be created (EGL or its system libraries missing), or the OpenGL it offers
+    lacks what depthguard's renderer needs."""

@@ -19,7 +19,8 @@ class Flag(enum.IntFlag):
     - ``INVALID_PIXELS_USED``: pixels without a valid measurement contributed (see ``DistanceResult.invalid_count``).
     - ``STALE_CAMERA``: a camera's latest frame was older than the allowed age, so it counted as blind.
     - ``MISSING_CAMERA``: a camera the query needed had no frame, so it counted as blind.
-    - ``ROBOT_BLIND_SPOT``: the surveillance region touches space hidden behind the robot.
+    - ``ROBOT_BLIND_SPOT``: the surveillance region touches space hidden behind the robot, which one camera cannot
+      see (SPEC section 7); it is not counted as occupied, so the distance may miss an obstacle there.
     """
 
     INSIDE_OBSTACLE = 1

@@ -104,6 +104,8 @@ def query_reference(occupancy, points_world, rho, aggregate, unseen, inside_tol=
     camera = occupancy.camera
     a0, a1, b0, b1 = pixel_tangents(camera)
     z_start = occupancy.z_start.astype(np.float64)
+    z_end = occupancy.z_end.astype(np.float64)
+    blind = occupancy.blind.astype(np.float64)
     invalid = occupancy.invalid.astype(np.int64)
     R_world_camera = camera.T_world_camera[:3, :3]
     points_camera = camera.world_to_camera(points_world)
@@ -124,7 +126,13 @@ def query_reference(occupancy, points_world, rho, aggregate, unseen, inside_tol=
         D = np.full(z_start.shape, np.inf)
         zs = np.zeros(z_start.shape)
         D[finite], zs[finite] = frustum_distance_pieces(X, Y, Z, a0[finite], a1[finite], b0[finite], b1[finite],
-                                                        z_start[finite], np.inf)
+                                                        z_start[finite], z_end[finite])
+        behind_robot = np.isfinite(blind)
+        if behind_robot.any():
+            D_blind, _ = frustum_distance_pieces(X, Y, Z, a0[behind_robot], a1[behind_robot], b0[behind_robot],
+                                                 b1[behind_robot], blind[behind_robot], np.inf)
+            if D_blind.min() < rho:
+                flags |= 32
         contributor = D < rho
         vs, us = np.nonzero(contributor)
         d = D[contributor]
@@ -176,6 +184,7 @@ def paper_query_reference(occupancy, points_world, rho, aggregate):
     camera = occupancy.camera
     a0, a1, b0, b1 = pixel_tangents(camera)
     zs = occupancy.z_start.astype(np.float64)
+    ze = occupancy.z_end.astype(np.float64)
     v_idx, u_idx = np.mgrid[0 : camera.height, 0 : camera.width]
     out_d = np.full(len(points_world), np.inf)
     out_dir = np.zeros((len(points_world), 3))
@@ -188,7 +197,7 @@ def paper_query_reference(occupancy, points_world, rho, aggregate):
         else:
             window = np.ones(zs.shape, bool)
         use = window & (zs <= Z + rho) & (zs >= Z - rho)
-        z = np.maximum(Z, zs[use])
+        z = np.minimum(np.maximum(Z, zs[use]), ze[use])
         nearest = np.stack([np.clip(X, a0[use] * z, a1[use] * z), np.clip(Y, b0[use] * z, b1[use] * z), z], 1)
         d = np.linalg.norm(P - nearest, axis=1)
         c = d < rho

@@ -7,6 +7,9 @@ margin m(d) for a valid pixel; for a pixel without a valid measurement, what the
 - ``"neighbors"``: a hole of at most ``hole_pixels`` 8-connected pixels takes the smallest valid depth around it
   (minus its margin); larger holes stay occupied;
 - ``"free"``: nothing (``inf``), what the papers do.
+
+With the robot rendered into the camera (SPEC section 7, :func:`prepare_depth`'s ``robot_near``), pixels that show
+the robot are free up to it and blind behind it, and a pixel without a measurement is occupied only up to the robot.
 """
 
 from __future__ import annotations
@@ -30,27 +33,50 @@ class OccupancyImage:
     Attributes:
         camera: the camera.
         z_start: (height, width) float32 metres, optical frame: pixel (u, v) is possibly occupied along its frustum
-            for z >= z_start[v, u]; ``inf`` where it says nothing.
+            for z_start[v, u] <= z <= z_end[v, u]; ``inf`` where it says nothing.
+        z_end: (height, width) float32 metres: where that occupied segment ends; ``inf`` except in front of the
+            robot on pixels without a measurement.
+        blind: (height, width) float32 metres: where the space hidden behind the robot starts along the pixel
+            (``inf``: no robot there). Queries flag regions that touch it.
         invalid: (height, width) uint8, 1 where the pixel had no valid measurement (whatever the policy made of it).
         block_min: (ceil(h/B), ceil(w/B)) float32, the minimum of z_start over blocks of B x B pixels
             (B = ``config.BLOCK_SIZE``); kernels use it to skip whole blocks.
+        blind_block_min: the same for ``blind``.
         invalid_policy: the policy that made z_start.
         timestamp: the frame's capture time in seconds, or None.
         invalid_pixels: number of pixels without a valid measurement.
+        robot_pixels: number of pixels that show the robot (0 without self-filtering).
     """
 
     camera: PinholeCamera
     z_start: np.ndarray
+    z_end: np.ndarray
+    blind: np.ndarray
     invalid: np.ndarray
     block_min: np.ndarray
+    blind_block_min: np.ndarray
     invalid_policy: str
     timestamp: float | None
     invalid_pixels: int
+    robot_pixels: int = 0
 
 
 def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = config.DEFAULT_INVALID,
-                  hole_pixels: int = config.DEFAULT_NEIGHBOR_HOLE_PIXELS) -> OccupancyImage:
-    """Turn a checked :class:`DepthImage` of ``camera`` into an :class:`OccupancyImage` (one pass, numba)."""
+                  hole_pixels: int = config.DEFAULT_NEIGHBOR_HOLE_PIXELS, robot_near: np.ndarray | None = None,
+                  robot_far: np.ndarray | None = None,
+                  robot_tolerance: float = config.SELF_FILTER_TOLERANCE) -> OccupancyImage:
+    """Turn a checked :class:`DepthImage` of ``camera`` into an :class:`OccupancyImage` (one pass, numba).
+
+    Args:
+        depth: the frame. invalid, hole_pixels: the invalid-pixel policy (module docstring).
+        robot_near: optional (height, width) float32 metres, the robot's collision geometry rendered into this
+            camera at the frame's joint positions (nearest surface; 0 where the robot is not). Enables
+            self-filtering.
+        robot_far: optional, the same for the farthest surface (where the robot's body ends along each pixel);
+            the blind spot starts there. Without it, it starts at ``robot_near``.
+        robot_tolerance: metres by which a measurement may lie in front of the rendered robot and still be the
+            robot (calibration, joint-state timing), on top of the noise margin.
+    """
     if invalid not in config.INVALID_POLICIES:
         raise InputError(f"invalid-pixel policy must be one of {config.INVALID_POLICIES}, got {invalid!r}")
     if depth.camera != camera.name or depth.shape != camera.shape:
@@ -67,13 +93,42 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
     n_invalid = int(np.count_nonzero(invalid_mask))
     if invalid == "neighbors" and n_invalid:
         _fill_small_holes(z_start, invalid_mask, depth, camera, hole_pixels)
+    z_end = np.empty((h, w), dtype=np.float32)
+    blind = np.empty((h, w), dtype=np.float32)
+    robot_pixels = 0
+    if robot_near is None:
+        z_end.fill(np.inf)
+        blind.fill(np.inf)
+    else:
+        near = _robot_image(robot_near, camera, "robot_near")
+        far = near if robot_far is None else _robot_image(robot_far, camera, "robot_far")
+        if not (np.isfinite(robot_tolerance) and robot_tolerance >= 0):
+            raise InputError(f"robot_tolerance must be a non-negative number of metres, got {robot_tolerance!r}")
+        _kernels.robot_filter(z_start, invalid_mask, np.float32(invalid_start), near, far, float(robot_tolerance),
+                              m0, m1, m2, z_end, blind)
+        robot_pixels = int(np.count_nonzero(np.isfinite(blind)))
     block = config.BLOCK_SIZE
-    block_min = np.empty(((h + block - 1) // block, (w + block - 1) // block), dtype=np.float32)
+    shape = ((h + block - 1) // block, (w + block - 1) // block)
+    block_min = np.empty(shape, dtype=np.float32)
     _kernels.block_minimum(z_start, block, block_min)
-    for array in (z_start, invalid_mask, block_min):
+    blind_block_min = np.full(shape, np.inf, dtype=np.float32)
+    if robot_pixels:
+        _kernels.block_minimum(blind, block, blind_block_min)
+    for array in (z_start, z_end, blind, invalid_mask, block_min, blind_block_min):
         array.setflags(write=False)
-    return OccupancyImage(camera=camera, z_start=z_start, invalid=invalid_mask, block_min=block_min,
-                          invalid_policy=invalid, timestamp=depth.timestamp, invalid_pixels=n_invalid)
+    return OccupancyImage(camera=camera, z_start=z_start, z_end=z_end, blind=blind, invalid=invalid_mask,
+                          block_min=block_min, blind_block_min=blind_block_min, invalid_policy=invalid,
+                          timestamp=depth.timestamp, invalid_pixels=n_invalid, robot_pixels=robot_pixels)
+
+
+def _robot_image(image, camera: PinholeCamera, field: str) -> np.ndarray:
+    array = np.asarray(image)
+    if array.shape != camera.shape:
+        raise InputError(f"{field} of camera {camera.name!r} is {array.shape}, the camera is {camera.shape}")
+    array = np.ascontiguousarray(array, dtype=np.float32)
+    if not np.all(np.isfinite(array)) or np.any(array < 0):
+        raise InputError(f"{field} of camera {camera.name!r} must be finite depths >= 0 (0 = no robot)")
+    return array
 
 
 def _fill_small_holes(z_start, invalid_mask, depth: DepthImage, camera: PinholeCamera, hole_pixels: int) -> None:

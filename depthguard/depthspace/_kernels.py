@@ -19,6 +19,7 @@ AGG_HYBRID = 2
 FLAG_INSIDE_OBSTACLE = 1
 FLAG_REGION_OUTSIDE_VIEW = 2
 FLAG_INVALID_PIXELS_USED = 4
+FLAG_ROBOT_BLIND_SPOT = 32
 
 # Tangent units by which the ball's silhouette spans are widened against rounding (about 5e-7 pixel at f = 525).
 SILHOUETTE_PAD = 1e-9
@@ -249,8 +250,8 @@ def ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, 
 
 
 @njit(cache=True, error_model="numpy")
-def _nearest_in_blocks(X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi,
-                       near_eps, spans):
+def _nearest_in_blocks(X, Y, Z, rho, z_start, z_end, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi, v_lo,
+                       v_hi, near_eps, spans):
     """The nearest contributing pixel for ``min``: visit blocks of pixels in rings around P's pixel, skipping a
     block whose minimum start depth lies behind the region or whose bounding frustum is farther than the best
     distance so far. Ties go to the smallest (v, u), as in a full scan.
@@ -314,7 +315,7 @@ def _nearest_in_blocks(X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy,
                         if zs > z_far:
                             continue
                         d2, z_star = frustum_nearest(X, Y, Z, (u - 0.5 - cx) * inv_fx, (u + 0.5 - cx) * inv_fx, b0,
-                                                     b1, np.float64(zs), np.inf)
+                                                     b1, np.float64(zs), np.float64(z_end[v, u]))
                         if d2 < rho2 and (d2 < best2 or (d2 == best2 and (v < best_v or (v == best_v
                                                                                          and u < best_u)))):
                             best2 = d2
@@ -326,22 +327,22 @@ def _nearest_in_blocks(X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy,
 
 
 @njit(cache=True, error_model="numpy")
-def _guess_piece_row(X, Y, Z, b0, b1, z_in, u_in, m, inv_fx, cx, d2_out, z_out):
-    """:func:`guessed_piece` for m pixels of one row (tangents b0, b1; z_hi = inf): pixel k has column u_in[k] and
-    start depth z_in[k]. Writes d2_out[k] = g(z*) and z_out[k] = z*, or d2_out[k] = -1 where the guessed piece does
+def _guess_piece_row(X, Y, Z, b0, b1, z_in, z_hi_in, u_in, m, inv_fx, cx, d2_out, z_out):
+    """:func:`guessed_piece` for m pixels of one row (tangents b0, b1): pixel k has column u_in[k] and segment
+    [z_in[k], z_hi_in[k]]. Writes d2_out[k] = g(z*) and z_out[k] = z*, or d2_out[k] = -1 where the guessed piece does
     not hold the minimiser and the caller must walk. A loop of its own, so that it vectorises."""
     for k in range(m):
         d2, z, ok = guessed_piece(X, Y, Z, (u_in[k] - 0.5 - cx) * inv_fx, (u_in[k] + 0.5 - cx) * inv_fx, b0, b1,
-                                  z_in[k], np.inf)
+                                  z_in[k], z_hi_in[k])
         d2_out[k] = d2 if ok else -1.0
         z_out[k] = z
 
 
 @njit(cache=True, error_model="numpy")
-def _all_in_rows(X, Y, Z, rho, z_start, invalid, fx, fy, cx, cy, v_lo, v_hi, spans, scratch):
+def _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, v_lo, v_hi, spans, scratch):
     """Every contributing pixel for ``mean`` and ``hybrid``: per row, gather the silhouette span's pixels whose
     start depth is not behind the region, take their exact distances (:func:`_guess_piece_row`, walking where the
-    guess fails), and sum the contributors' distances and unit directions. ``scratch`` is a (4, width) float64 array.
+    guess fails), and sum the contributors' distances and unit directions. ``scratch`` is a (5, width) float64 array.
 
     Returns (count, invalid count, inside?, sum of d, sum of unit directions x, y, z, best d^2).
     """
@@ -353,6 +354,7 @@ def _all_in_rows(X, Y, Z, rho, z_start, invalid, fx, fy, cx, cy, v_lo, v_hi, spa
     u_in = scratch[1]
     d2_row = scratch[2]
     z_row = scratch[3]
+    z_hi_in = scratch[4]
     best2 = np.inf
     sum_d = 0.0
     sx = 0.0
@@ -365,16 +367,18 @@ def _all_in_rows(X, Y, Z, rho, z_start, invalid, fx, fy, cx, cy, v_lo, v_hi, spa
         b0 = (v - 0.5 - cy) * inv_fy
         b1 = (v + 0.5 - cy) * inv_fy
         row = z_start[v]
+        row_end = z_end[v]
         m = 0
         for u in range(spans[v, 0], spans[v, 1] + 1):
             zs = row[u]
             if zs <= z_far:  # else it and what it hides lie behind the region (also inf: nothing)
                 z_in[m] = zs
+                z_hi_in[m] = row_end[u]
                 u_in[m] = u
                 m += 1
         if m == 0:
             continue
-        _guess_piece_row(X, Y, Z, b0, b1, z_in, u_in, m, inv_fx, cx, d2_row, z_row)
+        _guess_piece_row(X, Y, Z, b0, b1, z_in, z_hi_in, u_in, m, inv_fx, cx, d2_row, z_row)
         for k in range(m):
             d2 = d2_row[k]
             z_star = z_row[k]
@@ -382,7 +386,7 @@ def _all_in_rows(X, Y, Z, rho, z_start, invalid, fx, fy, cx, cy, v_lo, v_hi, spa
             a0 = (u - 0.5 - cx) * inv_fx
             a1 = (u + 0.5 - cx) * inv_fx
             if d2 < 0.0:
-                d2, z_star = frustum_nearest(X, Y, Z, a0, a1, b0, b1, z_in[k], np.inf)
+                d2, z_star = frustum_nearest(X, Y, Z, a0, a1, b0, b1, z_in[k], z_hi_in[k])
             if d2 >= rho2:
                 continue
             count += 1
@@ -401,8 +405,36 @@ def _all_in_rows(X, Y, Z, rho, z_start, invalid, fx, fy, cx, cy, v_lo, v_hi, spa
 
 
 @njit(cache=True, error_model="numpy")
-def query_point(X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min, z_max, aggregate,
-                unseen_occupied, near_eps, inside_tol, min_direction, spans, scratch, out_direction):
+def _touches_blind(X, Y, Z, rho, blind, blind_block_min, block, fx, fy, cx, cy, v_lo, v_hi, spans):
+    """Whether some pixel's blind segment (from blind[v, u] on, behind the robot) comes closer than rho to P, over
+    the rows' silhouette spans; blocks whose blind spot starts behind the region are skipped."""
+    rho2 = rho * rho
+    z_far = Z + rho
+    inv_fx = 1.0 / fx
+    inv_fy = 1.0 / fy
+    for v in range(v_lo, v_hi + 1):
+        b0 = (v - 0.5 - cy) * inv_fy
+        b1 = (v + 0.5 - cy) * inv_fy
+        row_blocks = blind_block_min[v // block]
+        u = spans[v, 0]
+        while u <= spans[v, 1]:
+            if row_blocks[u // block] > z_far:
+                u = (u // block + 1) * block
+                continue
+            zb = blind[v, u]
+            if zb <= z_far:
+                d2, _ = frustum_nearest(X, Y, Z, (u - 0.5 - cx) * inv_fx, (u + 0.5 - cx) * inv_fx, b0, b1,
+                                        np.float64(zb), np.inf)
+                if d2 < rho2:
+                    return True
+            u += 1
+    return False
+
+
+@njit(cache=True, error_model="numpy")
+def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block, fx, fy, cx,
+                cy, z_min, z_max, aggregate, unseen_occupied, near_eps, inside_tol, min_direction, spans, scratch,
+                out_direction):
     """Distance from one control point P = (X, Y, Z) (metres, optical frame) to what one camera says is possibly
     occupied, aggregated as ``aggregate``.
 
@@ -411,7 +443,9 @@ def query_point(X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy, cx, cy
     these skips changes the result: it equals a scan of every pixel.
 
     Returns (distance, count, invalid_count, flags); writes the unit direction (from the obstacle towards P, optical
-    frame) into out_direction (3,). ``spans`` (height, 2) int64 and ``scratch`` (4, width) float64 are scratch space.
+    frame) into out_direction (3,). ``spans`` (height, 2) int64 and ``scratch`` (5, width) float64 are scratch space.
+    With ``has_blind``, the flag ROBOT_BLIND_SPOT tells whether the region touches the space hidden behind the robot
+    (``blind``: where it starts along each pixel, inf for none; ``blind_block_min``: its block minima).
     """
     height, width = z_start.shape
     flags = 0
@@ -439,14 +473,17 @@ def query_point(X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy, cx, cy
     else:
         v_lo = 0
         v_hi = -1
+    if has_blind and v_lo <= v_hi and _touches_blind(X, Y, Z, rho, blind, blind_block_min, block, fx, fy, cx, cy, v_lo,
+                                                     v_hi, spans):
+        flags |= FLAG_ROBOT_BLIND_SPOT
 
     if aggregate == AGG_MIN:
         best2 = np.inf
         best_invalid = 0
         if v_lo <= v_hi:
             best2, best_v, best_u, best_z, best_invalid = _nearest_in_blocks(
-                X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi, near_eps,
-                spans)
+                X, Y, Z, rho, z_start, z_end, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi,
+                near_eps, spans)
         if best_invalid:
             flags |= FLAG_INVALID_PIXELS_USED
         if best2 <= inside_tol * inside_tol:
@@ -475,8 +512,8 @@ def query_point(X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy, cx, cy
     sz = 0.0
     best2 = np.inf
     if v_lo <= v_hi:
-        count, n_invalid, inside, sum_d, sx, sy, sz, best2 = _all_in_rows(X, Y, Z, rho, z_start, invalid, fx, fy,
-                                                                          cx, cy, v_lo, v_hi, spans, scratch)
+        count, n_invalid, inside, sum_d, sx, sy, sz, best2 = _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx,
+                                                                          fy, cx, cy, v_lo, v_hi, spans, scratch)
     if n_invalid:
         flags |= FLAG_INVALID_PIXELS_USED
     if unseen_d < np.inf:
@@ -503,7 +540,7 @@ def query_point(X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy, cx, cy
 
 
 @njit(cache=True, error_model="numpy")
-def query_point_paper(X, Y, Z, rho, z_start, invalid, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied,
+def query_point_paper(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied,
                       inside_tol, min_direction, out_direction):
     """The 2015 paper's method, for comparison only: window of half-width rho*f/(2*(Z - rho)) (eq. 10-11), pixels
     with depth in [Z - rho, Z + rho], distance at the fixed depth clamp(Z, z_lo, inf) (eqs. 7-8).
@@ -555,7 +592,7 @@ def query_point_paper(X, Y, Z, rho, z_start, invalid, fx, fy, cx, cy, z_min, z_m
                 continue
             a0 = (u - 0.5 - cx) / fx
             a1 = (u + 0.5 - cx) / fx
-            d2, z = frustum_nearest_paper(X, Y, Z, a0, a1, b0, b1, zs, np.inf)
+            d2, z = frustum_nearest_paper(X, Y, Z, a0, a1, b0, b1, zs, np.float64(z_end[v, u]))
             if d2 >= rho2:
                 continue
             count += 1
@@ -616,19 +653,19 @@ def query_point_paper(X, Y, Z, rho, z_start, invalid, fx, fy, cx, cy, z_min, z_m
 
 
 @njit(cache=True, error_model="numpy")
-def _query_one(i, points_camera, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min, z_max, aggregate,
-               unseen_occupied, paper, near_eps, inside_tol, min_direction, spans, scratch, distance, direction, count,
-               invalid_count, flags):
+def _query_one(i, points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block, fx,
+               fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol, min_direction, spans,
+               scratch, distance, direction, count, invalid_count, flags):
     X = points_camera[i, 0]
     Y = points_camera[i, 1]
     Z = points_camera[i, 2]
     if paper:
-        d, c, k, f = query_point_paper(X, Y, Z, rho, z_start, invalid, fx, fy, cx, cy, z_min, z_max, aggregate,
-                                       unseen_occupied, inside_tol, min_direction, direction[i])
+        d, c, k, f = query_point_paper(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, z_min, z_max,
+                                       aggregate, unseen_occupied, inside_tol, min_direction, direction[i])
     else:
-        d, c, k, f = query_point(X, Y, Z, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min, z_max,
-                                 aggregate, unseen_occupied, near_eps, inside_tol, min_direction, spans, scratch,
-                                 direction[i])
+        d, c, k, f = query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind,
+                                 block, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, near_eps, inside_tol,
+                                 min_direction, spans, scratch, direction[i])
     distance[i] = d
     count[i] = c
     invalid_count[i] = k
@@ -636,9 +673,9 @@ def _query_one(i, points_camera, rho, z_start, invalid, block_min, block, fx, fy
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def query_points(points_camera, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min, z_max, aggregate,
-                 unseen_occupied, paper, near_eps, inside_tol, min_direction, distance, direction, count,
-                 invalid_count, flags):
+def query_points(points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block,
+                 fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol, min_direction,
+                 distance, direction, count, invalid_count, flags):
     """:func:`query_point` (or the paper's variant) for each of the (n, 3) optical-frame points, in parallel.
 
     Writes distance (n,) float64, direction (n, 3) float64 (optical frame), count (n,) int64, invalid_count (n,)
@@ -646,22 +683,22 @@ def query_points(points_camera, rho, z_start, invalid, block_min, block, fx, fy,
     """
     n = points_camera.shape[0]
     spans = np.empty((n, z_start.shape[0], 2), dtype=np.int64)
-    scratch = np.empty((n, 4, z_start.shape[1]), dtype=np.float64)
+    scratch = np.empty((n, 5, z_start.shape[1]), dtype=np.float64)
     for i in prange(n):
-        _query_one(i, points_camera, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min, z_max, aggregate,
-                   unseen_occupied, paper, near_eps, inside_tol, min_direction, spans[i], scratch[i], distance,
-                   direction, count, invalid_count, flags)
+        _query_one(i, points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block,
+                   fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol,
+                   min_direction, spans[i], scratch[i], distance, direction, count, invalid_count, flags)
 
 
 @njit(cache=True, error_model="numpy")
-def query_points_serial(points_camera, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min, z_max,
-                        aggregate, unseen_occupied, paper, near_eps, inside_tol, min_direction, distance, direction,
-                        count, invalid_count, flags):
+def query_points_serial(points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind,
+                        block, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol,
+                        min_direction, distance, direction, count, invalid_count, flags):
     """:func:`query_points` on the calling thread: for one point, a parallel region only adds a barrier that a busy
     machine can hold up for milliseconds."""
     spans = np.empty((z_start.shape[0], 2), dtype=np.int64)
-    scratch = np.empty((4, z_start.shape[1]), dtype=np.float64)
+    scratch = np.empty((5, z_start.shape[1]), dtype=np.float64)
     for i in range(points_camera.shape[0]):
-        _query_one(i, points_camera, rho, z_start, invalid, block_min, block, fx, fy, cx, cy, z_min, z_max, aggregate,
-                   unseen_occupied, paper, near_eps, inside_tol, min_direction, spans, scratch, distance, direction,
-                   count, invalid_count, flags)
+        _query_one(i, points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block,
+                   fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol,
+                   min_direction, spans, scratch, distance, direction, count, invalid_count, flags)

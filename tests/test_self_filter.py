@@ -1,0 +1,118 @@
+"""Self-filtering (SPEC section 7) in the frame preparation and the single-camera kernels, on ray-cast scenes whose
+"robot" is a chain of capsules (the robot model and its rendering are tested elsewhere)."""
+
+import numpy as np
+import pytest
+
+import depthguard as dg
+import naive
+from depthguard.scenes import Box, Capsule, Sphere, render_depth, scene_distance
+from depthguard.transforms import look_at
+
+ROOM = [Box.from_bounds([-3, -3, -0.1], [3, 3, 0.0]), Box.from_bounds([-2.5, -3, 0], [-2.4, 3, 3])]
+ARM = [Capsule((0.0, 0.0, 0.0), (0.0, 0.0, 0.6), 0.07), Capsule((0.0, 0.0, 0.6), (0.4, 0.1, 0.9), 0.06),
+       Capsule((0.4, 0.1, 0.9), (0.5, 0.3, 0.6), 0.05)]
+CONTROL_POINTS = np.array([[0.0, 0.0, 0.3], [0.0, 0.0, 0.6], [0.2, 0.05, 0.75], [0.4, 0.1, 0.9], [0.5, 0.3, 0.6]])
+
+
+def camera(width=320, height=240, noise=None):
+    f = 525.0 * width / 640
+    return dg.PinholeCamera("cam", width, height, f, f, (width - 1) / 2, (height - 1) / 2,
+                            look_at([2.2, 0.5, 1.5], [0.1, 0.1, 0.5]), depth_range=(0.3, 6.0),
+                            noise=noise or dg.NoiseModel.none())
+
+
+def prepare(cam, obstacles, invalid="occupied", holes=None, padding=0.01):
+    depth = render_depth(cam, ROOM + ARM + obstacles)
+    if holes is not None:
+        depth[holes] = 0.0
+    padded = [Capsule(c.p0, c.p1, c.radius + padding) for c in ARM]
+    robot_near = render_depth(cam, padded)
+    return dg.prepare_depth(dg.depth_image(depth, cam), cam, invalid, robot_near=robot_near)
+
+
+def test_robot_is_not_its_own_obstacle():
+    cam = camera()
+    occupancy = prepare(cam, [])
+    unfiltered = dg.prepare_depth(dg.depth_image(render_depth(cam, ROOM + ARM), cam), cam)
+    truth = scene_distance(ROOM, CONTROL_POINTS)
+    filtered = dg.single_camera_distances(occupancy, CONTROL_POINTS, 0.4, "min")
+    raw = dg.single_camera_distances(unfiltered, CONTROL_POINTS, 0.4, "min")
+    assert np.all(raw.distance == 0.0)  # without the filter, the robot sits inside its own occupied set
+    # With it, only the room counts (the floor, for the lowest point), never more than the truth.
+    near = truth < 0.4
+    assert near[0] and not near[1:].any()
+    assert filtered.distance[0] <= truth[0] + 2 * 2.5 / cam.fx and filtered.distance[0] > 0.25
+    assert np.all(filtered.distance[1:] == np.inf)
+    assert occupancy.robot_pixels > 1000
+    assert all(dg.Flag.ROBOT_BLIND_SPOT in f for f in filtered.flags)  # a camera cannot see behind the arm
+
+
+def test_obstacle_in_front_of_the_robot_stays():
+    cam = camera()
+    hand = Sphere((0.75, 0.3, 0.85), 0.05)  # between the camera and the arm's elbow
+    occupancy = prepare(cam, [hand])
+    truth = scene_distance([hand] + ROOM, CONTROL_POINTS)
+    result = dg.single_camera_distances(occupancy, CONTROL_POINTS, 0.4, "min")
+    near = truth < 0.4
+    assert near.sum() >= 2
+    assert np.all(result.distance[near] <= truth[near] + 1e-9 + 2 * 2.5 / cam.fx)
+    # The hand (and the space it hides, which covers part of the arm) counts: without it these points see nothing.
+    without = dg.single_camera_distances(prepare(cam, []), CONTROL_POINTS, 0.4, "min")
+    assert np.all(result.distance[near] < np.minimum(without.distance[near], 0.4))
+
+
+def test_hidden_hand_behind_the_robot_is_flagged_not_seen():
+    cam = camera()
+    # A hand exactly behind the upper arm as the camera sees it.
+    elbow = np.array([0.2, 0.05, 0.75])
+    eye = cam.T_world_camera[:3, 3]
+    behind = elbow + 0.15 * (elbow - eye) / np.linalg.norm(elbow - eye)
+    hand = Sphere(tuple(behind), 0.03)
+    depth_with = render_depth(cam, ROOM + ARM + [hand])
+    assert np.array_equal(depth_with, render_depth(cam, ROOM + ARM))  # the hand is hidden
+    occupancy = prepare(cam, [hand])
+    result = dg.single_camera_distances(occupancy, elbow[None], 0.4, "min")
+    assert dg.Flag.ROBOT_BLIND_SPOT in result.flags[0]
+
+
+def test_missing_measurements_on_the_robot_are_occupied_only_in_front_of_it():
+    cam = camera()
+    robot_mask = render_depth(cam, ARM) > 0
+    occupancy = prepare(cam, [], holes=robot_mask)
+    result = dg.single_camera_distances(occupancy, CONTROL_POINTS, 0.4, "min")
+    # The holes' frusta end in front of the robot, so a point inside the arm is not at distance 0 ...
+    assert np.all(result.distance[1:] > 0.0)
+    # ... but the space in front of the robot, where a hand could hide in the holes, counts as occupied.
+    toward_camera = cam.T_world_camera[:3, 3] - CONTROL_POINTS[0]
+    in_front = CONTROL_POINTS[0] + 0.15 * toward_camera / np.linalg.norm(toward_camera)
+    front = dg.single_camera_distances(occupancy, in_front[None], 0.4, "min")
+    assert front.distance[0] == 0.0 and dg.Flag.INVALID_PIXELS_USED in front.flags[0]
+
+
+@pytest.mark.parametrize("invalid", ["occupied", "neighbors", "free"])
+def test_kernels_equal_twin_with_self_filtering(invalid):
+    rng = np.random.default_rng(7)
+    cam = camera(160, 120)
+    holes = rng.random(cam.shape) < 0.05
+    occupancy = prepare(cam, [Sphere((0.7, 0.3, 0.8), 0.06)], invalid, holes=holes)
+    assert np.isfinite(occupancy.z_end).any() == (invalid == "occupied")
+    points = np.concatenate([CONTROL_POINTS, rng.uniform([-0.5, -0.5, 0.1], [1.0, 1.0, 1.2], (8, 3))])
+    for aggregate in ("min", "mean", "hybrid"):
+        result = dg.single_camera_distances(occupancy, points, 0.4, aggregate)
+        distance, direction, count, invalid_count, flags = naive.query_reference(occupancy, points, 0.4, aggregate,
+                                                                                 "occupied")
+        assert np.allclose(result.distance, distance, atol=1e-10)
+        assert np.array_equal(result.count, count)
+        assert [int(f) for f in result.flags] == list(flags)
+        if aggregate != "min":
+            assert np.allclose(result.direction, direction, atol=1e-9)
+
+
+def test_robot_images_are_checked():
+    cam = camera(160, 120)
+    image = dg.depth_image(render_depth(cam, ROOM), cam)
+    with pytest.raises(dg.InputError, match="robot_near"):
+        dg.prepare_depth(image, cam, robot_near=np.zeros((10, 10), np.float32))
+    with pytest.raises(dg.InputError, match="robot_near"):
+        dg.prepare_depth(image, cam, robot_near=np.full(cam.shape, np.nan, np.float32))
