@@ -44,9 +44,13 @@ setup() {
   local want
   want=$(sha256sum pyproject.toml | cut -d' ' -f1)
   if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-    echo "dev.sh: installing depthguard and its dependencies into .venv"
-    .venv/bin/python -m pip install -q --upgrade pip >/dev/null
-    .venv/bin/python -m pip install -q -e '.[test]'
+    echo "dev.sh: installing depthguard and its dependencies into .venv (log: .venv/pip.log)"
+    if ! { .venv/bin/python -m pip install --upgrade pip && .venv/bin/python -m pip install -e '.[test]'; } \
+        > .venv/pip.log 2>&1; then
+      tail -n 30 .venv/pip.log >&2
+      echo "dev.sh: pip install failed (full log: .venv/pip.log)" >&2
+      exit 1
+    fi
     echo "$want" > "$stamp"
   fi
 }
