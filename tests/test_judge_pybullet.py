@@ -51,9 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-pytest.importorskip("pybullet")
-pytest.importorskip("coal")
-
+import coal  # noqa: F401,E402  (the judges are required: a missing one must fail, never skip)
 import pybullet as p  # noqa: E402
 
 import depthguard as dg  # noqa: E402
