@@ -11,7 +11,10 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 
-SYSTEM_PACKAGES=()  # Debian packages the project needs at run time (none yet)
+# Debian packages the project needs at run time. Rendering (moderngl, headless EGL on Mesa's llvmpipe) opens
+# libEGL.so.1 (libegl1, which pulls in Mesa's EGL, libegl-mesa0) and libGL.so.1 (libgl1), and Mesa's software
+# rasteriser swrast_dri.so (libgl1-mesa-dri).
+SYSTEM_PACKAGES=(libegl1 libgl1 libgl1-mesa-dri)
 
 python_for_venv() {
   for candidate in python3.11 python3 python; do

@@ -73,13 +73,19 @@ DEFAULT_ROBOT_PADDING = 0.02
 #: robot is). Further out is an error: it means wrong units (degrees), a wrong joint order or a wrong model.
 JOINT_LIMIT_TOLERANCE = 0.01
 
+#: Largest | |axis| - 1 | accepted for a movable joint's URDF <axis xyz> (tools disagree on non-unit axes).
+URDF_AXIS_TOLERANCE = 1e-4
+
 #: URDF primitive shapes become meshes that contain the true shape (their faces lie on or outside it): a cylinder is
 #: a prism over a regular polygon circumscribed about its circle, a sphere a scaled icosphere.
 PRIMITIVE_CYLINDER_SECTIONS = 32
 PRIMITIVE_SPHERE_SUBDIVISIONS = 2
 
-#: Capsule fit: radii tried on each principal axis before a golden-section refinement of the best one.
+#: Capsule fit (depthguard.robots): radii scanned per axis direction (twice: coarse, then around the best), axis
+#: directions tried besides the three principal axes, and Nelder-Mead iterations refining the best direction.
 CAPSULE_RADIUS_SAMPLES = 64
+CAPSULE_AXIS_CANDIDATES = 64
+CAPSULE_REFINE_ITERATIONS = 200
 
 #: The default robot's 9 control points (the papers' count: Flacco et al. 2015 section 5, 2016 section VIII), as
 #: (name, link, offset (3,) metres in the link frame). They lie on the arm's centre line about 0.1 m apart: three on
@@ -96,6 +102,23 @@ IIWA_CONTROL_POINTS = (
     ("forearm_3", "lbr_iiwa_link_5", (0.0, 0.0, 0.11)),  # z = 1.0745
     ("wrist", "lbr_iiwa_link_6", (0.0, 0.0, 0.0)),  # z = 1.18
     ("end_effector", "lbr_iiwa_link_7", (0.0, 0.0, 0.045)),  # z = 1.306, the flange
+)
+
+#: The Panda's 9 control points, placed like the iiwa's along the arm (heights and reaches below are in the pose
+#: q = (0, 0, 0, -1.5, 0, 1.5, 0), base at the origin): two on the upper arm (z = 0.433, 0.549), the elbow (link 4's
+#: origin), two on the forearm, a third and two thirds of the way from the elbow to the wrist, the wrist centre
+#: (links 5/6's origin), link 7's origin (on link 6's body), the flange (the hand's origin), and the end-effector
+#: between the finger tips (panda_grasptarget, 0.105 m beyond the flange). Neighbours are 0.10-0.14 m apart.
+PANDA_CONTROL_POINTS = (
+    ("upper_arm_1", "panda_link2", (0.0, -0.1, 0.0)),
+    ("upper_arm_2", "panda_link3", (0.0, 0.0, -0.1)),
+    ("elbow", "panda_link4", (0.0, 0.0, 0.0)),
+    ("forearm_1", "panda_link5", (0.055, 0.0, -0.256)),
+    ("forearm_2", "panda_link5", (0.0275, 0.0, -0.128)),
+    ("wrist", "panda_link6", (0.0, 0.0, 0.0)),
+    ("wrist_2", "panda_link6", (0.088, 0.0, 0.0)),
+    ("flange", "panda_hand", (0.0, 0.0, 0.0)),
+    ("end_effector", "panda_grasptarget", (0.0, 0.0, 0.0)),
 )
 
 #: Rendering (depthguard.rendering): surfaces nearer to a camera's optical centre than this (metres, optical z) are
