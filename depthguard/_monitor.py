@@ -29,15 +29,22 @@ class DistanceMonitor:
         max_age: seconds; a frame older than this at query time (``now``) makes its camera blind and the result
             flagged. None: frames never go stale.
         hole_pixels: largest hole filled by ``invalid="neighbors"``, pixels.
+        robot: a :class:`depthguard.robots.RobotModel` to filter out of every frame (SPEC section 7); then each new
+            frame needs the robot's joint positions at its capture time (``query(..., joints=...)``).
+        self_filter: the geometry rendered for self-filtering: ``"hulls"`` (default), ``"capsules"`` or
+            ``"meshes"`` (:mod:`depthguard.self_filter`).
+        self_filter_tolerance: metres by which a measurement may lie in front of the rendered robot and still be the
+            robot (on top of the noise margin).
 
-    A frame passed as a :class:`DepthImage` is prepared once and reused while the same object is passed again; a
-    plain array is checked and prepared on every query.
+    A frame passed as a :class:`DepthImage` is prepared once (and filtered with the joints given with it) and reused
+    while the same object is passed again; a plain array is checked and prepared on every query.
     """
 
     def __init__(self, rig: Rig, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
                  invalid: str = config.DEFAULT_INVALID, unseen: str = config.DEFAULT_UNSEEN,
                  method: str = config.DEFAULT_METHOD, max_age: float | None = None,
-                 hole_pixels: int = config.DEFAULT_NEIGHBOR_HOLE_PIXELS):
+                 hole_pixels: int = config.DEFAULT_NEIGHBOR_HOLE_PIXELS, robot=None, self_filter: str = "hulls",
+                 self_filter_tolerance: float = config.SELF_FILTER_TOLERANCE):
         if not isinstance(rig, Rig):
             raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}")
         check_options(rho, aggregate, unseen, method)
@@ -55,10 +62,21 @@ class DistanceMonitor:
         self.method = method
         self.max_age = None if max_age is None else float(max_age)
         self.hole_pixels = int(hole_pixels)
+        self.robot = robot
+        self.self_filter_tolerance = float(self_filter_tolerance)
+        self._silhouette = None
+        if robot is not None:
+            from depthguard.self_filter import RobotSilhouette  # needs OpenGL: only with a robot
+
+            self._silhouette = RobotSilhouette(robot, geometry=self_filter)
         self._prepared: dict[str, tuple[DepthImage, OccupancyImage]] = {}
 
-    def prepare(self, name: str, frame) -> OccupancyImage:
-        """Check a frame of camera ``name`` and prepare it (cached while the same :class:`DepthImage` comes back)."""
+    def prepare(self, name: str, frame, joints=None) -> OccupancyImage:
+        """Check a frame of camera ``name`` and prepare it (cached while the same :class:`DepthImage` comes back).
+
+        ``joints``: with a robot, its joint positions at the frame's capture time (by name or in
+        ``robot.joint_names`` order), for self-filtering.
+        """
         camera = self.rig.camera(name)
         cached = self._prepared.get(name)
         if cached is not None and cached[0] is frame:
@@ -69,18 +87,28 @@ class DistanceMonitor:
             image = frame if frame.data.shape == camera.shape else depth_image(frame.data, camera, frame.timestamp)
         else:
             image = depth_image(frame, camera)
-        occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels)
+        robot_near = None
+        if self._silhouette is not None:
+            if joints is None:
+                raise InputError(f"camera {name!r}: this monitor filters the robot out of its frames: pass the robot's "
+                                 "joint positions at the frame's capture time (query(..., joints=...))")
+            robot_near, _ = self._silhouette.render(camera, self.robot.joint_vector(joints))
+        occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels, robot_near=robot_near,
+                                  robot_tolerance=self.self_filter_tolerance)
         if isinstance(frame, DepthImage):
             self._prepared[name] = (frame, occupancy)
         return occupancy
 
-    def query(self, frames: Mapping[str, object], points_world, *, now: float | None = None,
+    def query(self, frames: Mapping[str, object], points_world, *, joints=None, now: float | None = None,
               check: bool = True) -> DistanceResult:
         """Distances of control points given the latest frame of each camera.
 
         Args:
             frames: camera name -> :class:`DepthImage` (or a (height, width) array in the camera's units).
             points_world: (n, 3) float64, metres, world frame.
+            joints: with a robot: its joint positions when the new frames were captured (a dict by name or a
+                sequence in ``robot.joint_names`` order, radians), or a mapping camera name -> such joint positions
+                when the cameras' frames were captured at different times. Only frames not prepared before use it.
             now: the current time in the frames' clock, seconds; needed when ``max_age`` is set.
             check: validate the points (``False`` for a hot loop that passes a checked (n, 3) float64 array).
 
@@ -95,7 +123,7 @@ class DistanceMonitor:
         usable: dict[str, OccupancyImage] = {}
         stale: list[str] = []
         for name, frame in frames.items():
-            occupancy = self.prepare(name, frame)
+            occupancy = self.prepare(name, frame, _joints_for(name, joints, frames))
             if self.max_age is not None and (occupancy.timestamp is None or now - occupancy.timestamp > self.max_age):
                 stale.append(name)
                 continue
@@ -117,6 +145,14 @@ class DistanceMonitor:
             result = DistanceResult(result.distance, result.direction, result.count, result.invalid_count, flags,
                                     result.timestamps, result.cameras, result.invalid_pixels)
         return result
+
+
+def _joints_for(name: str, joints, frames):
+    """The joint positions for camera ``name``: ``joints`` itself, or its entry when it maps camera names."""
+    if isinstance(joints, Mapping) and joints and set(joints) <= set(frames) and all(
+            not isinstance(v, (int, float)) for v in joints.values()):
+        return joints.get(name)
+    return joints
 
 
 def _blind_result(n: int, flag: Flag, timestamps: dict) -> DistanceResult:

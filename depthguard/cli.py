@@ -44,6 +44,12 @@ def _build_parser() -> argparse.ArgumentParser:
                           help="space no camera observes: occupied (fail-safe) or free")
     distance.add_argument("--method", choices=config.METHODS, default=config.DEFAULT_METHOD,
                           help="exact (SPEC) or paper (the 2015 paper's unsafe formulas, for comparison)")
+    distance.add_argument("--robot", metavar="URDF",
+                          help="filter this robot out of the images (a URDF file, or 'iiwa' / 'panda' for the models "
+                               "shipped with pybullet_data); needs --joints")
+    distance.add_argument("--joints", metavar="VALUES",
+                          help="the robot's joint positions when the images were taken, radians: name=value,... or "
+                               "the movable joints' values in URDF order, comma-separated")
     distance.add_argument("--json", action="store_true", help="print one JSON array, one object per point")
 
     for name, text in (("scenario-a", "reference scenario A of the 2015 paper: plots and a timing table"),
@@ -91,9 +97,10 @@ def _distance(args) -> int:
             raise InputError(f"--depth names camera {name!r} twice")
         frames[name] = load_depth(path, rig.camera(name))
     points = load_points(args.points)
+    robot, joints = _robot_and_joints(args)
     monitor = DistanceMonitor(rig, rho=args.rho, aggregate=args.aggregate, invalid=args.invalid, unseen=args.unseen,
-                              method=args.method)
-    result = monitor.query(frames, points)
+                              method=args.method, robot=robot)
+    result = monitor.query(frames, points, joints=joints)
     records = result.records(points)
     if args.json:
         print(json.dumps(records))
@@ -105,6 +112,44 @@ def _distance(args) -> int:
         print(f"{r['point'][0]:8.3f} {r['point'][1]:8.3f} {r['point'][2]:8.3f} {d:>9s} {direction:>26s} "
               f"{r['count']:6d}  {','.join(r['flags']) or '-'}")
     return 0
+
+
+def _robot_and_joints(args):
+    """(RobotModel or None, joint positions or None) from ``--robot`` and ``--joints``."""
+    from depthguard.errors import InputError
+
+    if args.robot is None:
+        if args.joints is not None:
+            raise InputError("--joints needs --robot")
+        return None, None
+    if args.joints is None:
+        raise InputError("--robot needs --joints (the robot's joint positions when the images were taken)")
+    from depthguard.robots import RobotModel
+
+    robot = {"iiwa": RobotModel.default, "panda": RobotModel.panda}.get(args.robot)
+    robot = robot() if robot is not None else RobotModel.from_urdf(args.robot)
+    return robot, robot.joint_vector(parse_joints(args.joints))
+
+
+def parse_joints(text: str):
+    """``"a=0.1,b=0.2"`` -> {"a": 0.1, "b": 0.2}; ``"0.1,0.2"`` -> [0.1, 0.2]. InputError if malformed."""
+    from depthguard.errors import InputError
+
+    items = [item.strip() for item in text.split(",") if item.strip()]
+    if not items:
+        raise InputError(f"--joints: no values in {text!r}")
+    try:
+        if all("=" in item for item in items):
+            pairs = [item.split("=", 1) for item in items]
+            names = [name.strip() for name, _ in pairs]
+            if len(set(names)) != len(names):
+                raise InputError(f"--joints names a joint twice: {text!r}")
+            return {name: float(value) for name, value in zip(names, (v for _, v in pairs))}
+        if any("=" in item for item in items):
+            raise InputError(f"--joints mixes name=value and plain values: {text!r}")
+        return [float(item) for item in items]
+    except ValueError:
+        raise InputError(f"--joints: not numbers: {text!r}") from None
 
 
 if __name__ == "__main__":

@@ -8,7 +8,8 @@ fix the rig or the driver::
     ├── DepthImageError   a depth image cannot be read or does not fit its camera
     ├── InputError        points, options or other arguments are malformed
     ├── RobotError        a robot description (URDF, meshes, control points) is missing, malformed or unsupported
-    └── RenderingError    no headless OpenGL (EGL) context, or its OpenGL lacks what rendering needs
+    ├── RenderingError    no headless OpenGL (EGL) context, or its OpenGL lacks what rendering needs
+    └── SceneError        a simulation scene file (depthguard.simulation) is malformed or describes the impossible
 """
 
 from __future__ import annotations
@@ -56,3 +57,9 @@ class RobotError(DepthguardError, ValueError):
 class RenderingError(DepthguardError, RuntimeError):
     """No headless OpenGL context can be created (EGL or its system libraries missing), or the OpenGL it offers
     lacks what depthguard's renderer needs."""
+
+
+class SceneError(DepthguardError, ValueError):
+    """A simulation scene (depthguard.simulation) is malformed, names something that does not exist, or asks for
+    the impossible (an unreachable trajectory). ``field`` is the path of the offending key, e.g.
+    ``people[0].actions[2].reach.target``."""

@@ -1,0 +1,108 @@
+"""Numba kernels of the capsule fit (see ``_capsules.py`` for the method). They trust their inputs: contiguous
+float64 arrays, a unit axis, at least one point. The tests hold them against slow NumPy twins and run their bodies
+as plain Python (``.py_func``)."""
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def circumcircle(ax, ay, bx, by, cx, cy):
+    """(centre x, centre y, radius) of the circle through three points; for (nearly) collinear points, the circle
+    on the farthest pair."""
+    d = 2.0 * (ax * (by - cy) + bx * (cy - ay) + cx * (ay - by))
+    if abs(d) < 1e-18:
+        dab, dac, dbc = math.hypot(ax - bx, ay - by), math.hypot(ax - cx, ay - cy), math.hypot(bx - cx, by - cy)
+        if dab >= dac and dab >= dbc:
+            return 0.5 * (ax + bx), 0.5 * (ay + by), 0.5 * dab
+        if dac >= dbc:
+            return 0.5 * (ax + cx), 0.5 * (ay + cy), 0.5 * dac
+        return 0.5 * (bx + cx), 0.5 * (by + cy), 0.5 * dbc
+    sa, sb, sc = ax * ax + ay * ay, bx * bx + by * by, cx * cx + cy * cy
+    ux = (sa * (by - cy) + sb * (cy - ay) + sc * (ay - by)) / d
+    uy = (sa * (cx - bx) + sb * (ax - cx) + sc * (bx - ax)) / d
+    return ux, uy, math.hypot(ax - ux, ay - uy)
+
+
+@njit(cache=True)
+def enclosing_circle(x, y):
+    """Smallest circle enclosing the points (x[i], y[i]), (n,) float64 each: (centre x, centre y, radius).
+
+    Welzl's algorithm, iterative; its expected time is linear when the points come in random order (the caller
+    shuffles them once). The radius returned is the exact largest distance from the centre to a point.
+    """
+    n = x.shape[0]
+    tol = 1e-12
+    cx, cy, rad = x[0], y[0], 0.0
+    for i in range(1, n):
+        if math.hypot(x[i] - cx, y[i] - cy) <= rad + tol:
+            continue
+        cx, cy, rad = x[i], y[i], 0.0
+        for j in range(i):
+            if math.hypot(x[j] - cx, y[j] - cy) <= rad + tol:
+                continue
+            cx, cy = 0.5 * (x[i] + x[j]), 0.5 * (y[i] + y[j])
+            rad = 0.5 * math.hypot(x[i] - x[j], y[i] - y[j])
+            for k in range(j):
+                if math.hypot(x[k] - cx, y[k] - cy) > rad + tol:
+                    cx, cy, rad = circumcircle(x[i], y[i], x[j], y[j], x[k], y[k])
+    rad = 0.0
+    for i in range(n):
+        rad = max(rad, math.hypot(x[i] - cx, y[i] - cy))
+    return cx, cy, rad
+
+
+@njit(cache=True)
+def _scan(t, r2, lo, hi, samples):
+    """The radius in ``samples`` evenly spaced values of [lo, hi] whose capsule (shortest segment) has the smallest
+    volume: (radius, index)."""
+    best_volume, best_radius, best_index = np.inf, lo, 0
+    for k in range(samples):
+        radius = lo + (hi - lo) * k / (samples - 1) if samples > 1 else lo
+        t_lo, t_hi = np.inf, -np.inf
+        for i in range(t.shape[0]):
+            s = math.sqrt(max(radius * radius - r2[i], 0.0))
+            t_lo = min(t_lo, t[i] + s)
+            t_hi = max(t_hi, t[i] - s)
+        volume = math.pi * radius * radius * max(t_hi - t_lo, 0.0) + 4.0 / 3.0 * math.pi * radius**3
+        if volume < best_volume:
+            best_volume, best_radius, best_index = volume, radius, k
+    return best_radius, best_index
+
+
+@njit(cache=True)
+def fit_along(points, axis, samples):
+    """The smallest capsule this fit finds around (n, 3) ``points`` with its segment parallel to the unit (3,)
+    ``axis``: (p0 (3,), p1 (3,), radius, volume). The radius is the one the volume scan chose; every point lies
+    within it of the segment (up to rounding; the caller recomputes the exact largest distance)."""
+    n = points.shape[0]
+    helper = np.zeros(3)
+    helper[np.argmin(np.abs(axis))] = 1.0
+    e1 = np.cross(axis, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    t = points @ axis
+    u = points @ e1
+    v = points @ e2
+    cu, cv, r_min = enclosing_circle(u, v)
+    r2 = (u - cu) ** 2 + (v - cv) ** 2
+    # Beyond the radius of the sphere centred mid-way along the axis, the volume only grows.
+    t_mid = 0.5 * (t.min() + t.max())
+    r_max = r_min
+    for i in range(n):
+        r_max = max(r_max, math.sqrt(r2[i] + (t[i] - t_mid) ** 2))
+    radius, k = _scan(t, r2, r_min, r_max, samples)
+    step = (r_max - r_min) / (samples - 1) if samples > 1 else 0.0
+    radius, _ = _scan(t, r2, max(r_min, r_min + (k - 1) * step), min(r_max, r_min + (k + 1) * step), samples)
+    t_lo, t_hi = np.inf, -np.inf
+    for i in range(n):
+        s = math.sqrt(max(radius * radius - r2[i], 0.0))
+        t_lo = min(t_lo, t[i] + s)
+        t_hi = max(t_hi, t[i] - s)
+    if t_lo > t_hi:  # a sphere: any centre in [t_hi, t_lo] contains every point
+        t_lo = t_hi = 0.5 * (t_lo + t_hi)
+    origin = cu * e1 + cv * e2
+    volume = math.pi * radius * radius * (t_hi - t_lo) + 4.0 / 3.0 * math.pi * radius**3
+    return origin + t_lo * axis, origin + t_hi * axis, radius, volume

@@ -1,0 +1,394 @@
+"""Reading a URDF file: its kinematic tree, joint limits and collision geometry, with errors that name the file and
+the link or joint.
+
+Kinematics itself is pinocchio's (see ``_model.py``); this module reads what pinocchio does not hand back in a usable
+form: the file order of the joints, their limits, and each link's ``<collision>`` elements, which it turns into
+:class:`trimesh.Trimesh` objects in the link frame.
+
+Mesh file names are resolved as ROS and pinocchio do: ``package://pkg/rel/path`` is looked up as ``<dir>/pkg/rel/path``
+in each of ``package_dirs`` (and as ``<dir>/rel/path`` when ``<dir>`` is itself called ``pkg``), ``file:///abs`` is an
+absolute path, and any other name is relative to the URDF's directory.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from depthguard import config
+from depthguard.errors import RobotError
+
+#: Joint types with one degree of freedom, which depthguard accepts.
+MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
+_ALL_TYPES = MOVABLE_TYPES + ("fixed", "floating", "planar")
+
+
+@dataclass(frozen=True)
+class UrdfJoint:
+    """One ``<joint>``: its name, type, parent and child links, and limits.
+
+    ``lower``/``upper`` are radians (revolute) or metres (prismatic); -inf/+inf for a continuous joint without limits
+    and for fixed joints. ``velocity`` is rad/s or m/s (NaN for fixed joints).
+    """
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    lower: float
+    upper: float
+    velocity: float
+
+
+@dataclass(frozen=True)
+class UrdfCollision:
+    """One ``<collision>`` element of a link.
+
+    ``kind`` is ``mesh``, ``box``, ``cylinder`` or ``sphere``; ``T_link_geometry`` is its (4, 4) float64 origin;
+    ``params`` holds the mesh's resolved path and (3,) scale, or the primitive's dimensions in metres.
+    """
+
+    link: str
+    kind: str
+    T_link_geometry: np.ndarray
+    params: dict
+
+
+@dataclass(frozen=True)
+class UrdfDescription:
+    """What depthguard reads from a URDF besides pinocchio's kinematic model.
+
+    Attributes:
+        path: the URDF file.
+        name: the ``<robot name=...>``.
+        links: every link's name, in file order.
+        joints: every joint, in file order.
+        root: the link that is no joint's child.
+        collisions: link name -> its collision elements (only links that have some), in file order.
+    """
+
+    path: Path
+    name: str
+    links: tuple[str, ...]
+    joints: tuple[UrdfJoint, ...]
+    root: str
+    collisions: dict[str, tuple[UrdfCollision, ...]]
+
+    @property
+    def movable_joints(self) -> tuple[UrdfJoint, ...]:
+        """The joints with one degree of freedom, in file order: the order of depthguard's joint vectors."""
+        return tuple(joint for joint in self.joints if joint.type in MOVABLE_TYPES)
+
+    def parent_joint(self, link: str) -> UrdfJoint | None:
+        """The joint whose child is ``link`` (None for the root)."""
+        for joint in self.joints:
+            if joint.child == link:
+                return joint
+        return None
+
+    def chain(self, link: str) -> list[UrdfJoint]:
+        """The joints from the root to ``link``, root first."""
+        joints = []
+        joint = self.parent_joint(link)
+        while joint is not None:
+            joints.append(joint)
+            joint = self.parent_joint(joint.parent)
+        return joints[::-1]
+
+    def moves(self, link: str) -> bool:
+        """True if a movable joint lies between the root and ``link``."""
+        return any(joint.type in MOVABLE_TYPES for joint in self.chain(link))
+
+    def tip(self) -> str:
+        """The end of the kinematic chain: the leaf link with the most joints above it; when several leaves tie
+        (a hand with two fingers and a tool frame), their deepest common ancestor."""
+        children = {joint.parent for joint in self.joints}
+        leaves = [link for link in self.links if link not in children]
+        depth = {link: len(self.chain(link)) for link in leaves}
+        deepest = max(depth.values())
+        tied = [link for link in leaves if depth[link] == deepest]
+        if len(tied) == 1:
+            return tied[0]
+        paths = [[self.root] + [joint.child for joint in self.chain(link)] for link in tied]
+        common = self.root
+        for level in zip(*paths):
+            if len(set(level)) != 1:
+                break
+            common = level[0]
+        return common
+
+
+# --------------------------------------------------------------------------------------------------------- parsing
+
+
+def _floats(text: str | None, count: int, *, what: str, source: Path, default=None) -> np.ndarray:
+    if text is None:
+        if default is None:
+            raise RobotError(f"{what} is missing", source=str(source))
+        return np.array(default, dtype=np.float64)
+    try:
+        values = np.array([float(x) for x in text.split()], dtype=np.float64)
+    except ValueError:
+        raise RobotError(f"{what} must be {count} numbers, got {text!r}", source=str(source)) from None
+    if values.shape != (count,) or not np.all(np.isfinite(values)):
+        raise RobotError(f"{what} must be {count} finite numbers, got {text!r}", source=str(source))
+    return values
+
+
+def _attr_float(element, name: str, *, what: str, source: Path, default: float | None = None) -> float:
+    text = element.get(name)
+    if text is None:
+        if default is None:
+            raise RobotError(f"{what} has no attribute {name!r}", source=str(source))
+        return default
+    try:
+        value = float(text)
+    except ValueError:
+        raise RobotError(f"{what}: attribute {name!r} must be a number, got {text!r}", source=str(source)) from None
+    if math.isnan(value):
+        raise RobotError(f"{what}: attribute {name!r} is NaN", source=str(source))
+    return value
+
+
+def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """(3, 3) rotation of URDF roll-pitch-yaw angles (radians): Rz(yaw) @ Ry(pitch) @ Rx(roll), fixed axes."""
+    cr, sr, cp, sp, cy, sy = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw), \
+        math.sin(yaw)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def _origin(element, *, what: str, source: Path) -> np.ndarray:
+    """(4, 4) float64 transform of an element's ``<origin xyz rpy>`` (identity when absent)."""
+    T = np.eye(4)
+    origin = element.find("origin")
+    if origin is None:
+        return T
+    xyz = _floats(origin.get("xyz"), 3, what=f"{what} <origin xyz>", source=source, default=(0.0, 0.0, 0.0))
+    rpy = _floats(origin.get("rpy"), 3, what=f"{what} <origin rpy>", source=source, default=(0.0, 0.0, 0.0))
+    T[:3, :3] = rpy_to_matrix(*rpy)
+    T[:3, 3] = xyz
+    return T
+
+
+def parse_urdf(path, package_dirs=None) -> UrdfDescription:
+    """Read the kinematic tree, limits and collision elements of the URDF file at ``path``.
+
+    ``package_dirs``: directories in which ``package://`` mesh names are looked up (default: the URDF's directory).
+    Raises :class:`RobotError` naming the file and the link or joint when the file is missing, is not a URDF, has a
+    joint type depthguard does not accept (floating, planar), lacks the limits of a movable joint, or names a mesh
+    file that does not exist.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise RobotError("URDF file not found", source=str(path))
+    try:
+        root_element = ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise RobotError(f"not valid XML ({exc})", source=str(path)) from None
+    if root_element.tag != "robot":
+        raise RobotError(f"not a URDF: the root element is <{root_element.tag}>, not <robot>", source=str(path))
+    dirs = _package_dirs(path, package_dirs)
+
+    links, collisions = [], {}
+    for element in root_element.findall("link"):
+        name = element.get("name")
+        if not name:
+            raise RobotError("a <link> has no name", source=str(path))
+        if name in links:
+            raise RobotError(f"link {name!r} is defined twice", source=str(path))
+        links.append(name)
+        items = tuple(_collision(c, name, path, dirs) for c in element.findall("collision"))
+        if items:
+            collisions[name] = items
+    if not links:
+        raise RobotError("the URDF has no <link>", source=str(path))
+
+    joints = []
+    for element in root_element.findall("joint"):
+        joints.append(_joint(element, path, set(links)))
+    names = [joint.name for joint in joints]
+    duplicates = sorted({name for name in names if names.count(name) > 1})
+    if duplicates:
+        raise RobotError(f"joint names defined twice: {', '.join(duplicates)}", source=str(path))
+    children = [joint.child for joint in joints]
+    twice = sorted({child for child in children if children.count(child) > 1})
+    if twice:
+        raise RobotError(f"links with more than one parent joint: {', '.join(twice)}", source=str(path))
+    roots = [link for link in links if link not in children]
+    if len(roots) != 1:
+        raise RobotError(f"the URDF must have exactly one root link, found {roots or 'none (a cycle)'}",
+                         source=str(path))
+    return UrdfDescription(path=path, name=root_element.get("name", ""), links=tuple(links), joints=tuple(joints),
+                           root=roots[0], collisions=collisions)
+
+
+def _joint(element, path: Path, links: set) -> UrdfJoint:
+    name = element.get("name")
+    if not name:
+        raise RobotError("a <joint> has no name", source=str(path))
+    what = f"joint {name!r}"
+    kind = element.get("type")
+    if kind not in _ALL_TYPES:
+        raise RobotError(f"{what}: unknown type {kind!r}", source=str(path))
+    if kind in ("floating", "planar"):
+        raise RobotError(f"{what}: joints of type {kind!r} are not supported (only fixed, revolute, continuous and "
+                         "prismatic)", source=str(path))
+    ends = {}
+    for end in ("parent", "child"):
+        tag = element.find(end)
+        link = tag.get("link") if tag is not None else None
+        if not link:
+            raise RobotError(f"{what}: <{end} link=...> is missing", source=str(path))
+        if link not in links:
+            raise RobotError(f"{what}: its {end} link {link!r} is not defined", source=str(path))
+        ends[end] = link
+    lower, upper, velocity = -math.inf, math.inf, math.nan
+    if kind in MOVABLE_TYPES:
+        axis_element = element.find("axis")
+        axis = _floats(axis_element.get("xyz") if axis_element is not None else None, 3, what=f"{what} <axis xyz>",
+                       source=path, default=(1.0, 0.0, 0.0))
+        if abs(np.linalg.norm(axis) - 1.0) > config.URDF_AXIS_TOLERANCE:
+            # pinocchio normalises the axis, pybullet moves a prismatic joint by q times it: refuse the ambiguity.
+            raise RobotError(f"{what}: <axis xyz> must be a unit vector, got {axis.tolist()} (norm "
+                             f"{np.linalg.norm(axis):.6g})", source=str(path))
+        limit = element.find("limit")
+        if limit is None:
+            raise RobotError(f"{what}: a {kind} joint needs <limit ... velocity=...> (depthguard bounds joint "
+                             "velocities with it)", source=str(path))
+        velocity = _attr_float(limit, "velocity", what=f"{what} <limit>", source=path)
+        if not (velocity > 0 and math.isfinite(velocity)):
+            raise RobotError(f"{what}: <limit velocity> must be positive and finite, got {velocity}",
+                             source=str(path))
+        if kind != "continuous":
+            lower = _attr_float(limit, "lower", what=f"{what} <limit>", source=path, default=0.0)
+            upper = _attr_float(limit, "upper", what=f"{what} <limit>", source=path, default=0.0)
+            if not (math.isfinite(lower) and math.isfinite(upper) and lower <= upper):
+                raise RobotError(f"{what}: <limit> needs finite lower <= upper, got [{lower}, {upper}]",
+                                 source=str(path))
+    return UrdfJoint(name=name, type=kind, parent=ends["parent"], child=ends["child"], lower=lower, upper=upper,
+                     velocity=velocity)
+
+
+def _collision(element, link: str, path: Path, dirs: list[Path]) -> UrdfCollision:
+    what = f"link {link!r} <collision>"
+    T = _origin(element, what=what, source=path)
+    T.setflags(write=False)
+    geometry = element.find("geometry")
+    shapes = list(geometry) if geometry is not None else []
+    if len(shapes) != 1:
+        raise RobotError(f"{what}: <geometry> must hold exactly one shape", source=str(path))
+    shape = shapes[0]
+    kind = shape.tag
+    if kind == "mesh":
+        filename = shape.get("filename")
+        if not filename:
+            raise RobotError(f"{what}: <mesh> has no filename", source=str(path))
+        scale = _floats(shape.get("scale"), 3, what=f"{what} <mesh scale>", source=path, default=(1.0, 1.0, 1.0))
+        params = {"filename": filename, "path": resolve_mesh_path(filename, path, dirs, link=link), "scale": scale}
+    elif kind == "box":
+        size = _floats(shape.get("size"), 3, what=f"{what} <box size>", source=path)
+        params = {"size": size}
+    elif kind == "cylinder":
+        params = {key: _attr_float(shape, key, what=f"{what} <cylinder>", source=path) for key in ("radius", "length")}
+    elif kind == "sphere":
+        params = {"radius": _attr_float(shape, "radius", what=f"{what} <sphere>", source=path)}
+    else:
+        raise RobotError(f"{what}: unsupported geometry <{kind}> (only mesh, box, cylinder, sphere)", source=str(path))
+    for key, value in params.items():
+        if key in ("size", "radius", "length") and not np.all(np.asarray(value) > 0):
+            raise RobotError(f"{what}: <{kind} {key}> must be positive, got {value}", source=str(path))
+    return UrdfCollision(link=link, kind=kind, T_link_geometry=T, params=params)
+
+
+def _package_dirs(path: Path, package_dirs) -> list[Path]:
+    if package_dirs is None:
+        return [path.parent]
+    if isinstance(package_dirs, (str, os.PathLike)):
+        package_dirs = [package_dirs]
+    return [Path(d) for d in package_dirs]
+
+
+def resolve_mesh_path(filename: str, urdf_path: Path, package_dirs: list[Path], *, link: str) -> Path:
+    """The file a URDF mesh name refers to; :class:`RobotError` naming the link and every place looked in."""
+    if filename.startswith("package://"):
+        rest = filename[len("package://"):]
+        package, _, relative = rest.partition("/")
+        candidates = []
+        for directory in package_dirs:
+            candidates.append(directory / rest)
+            if directory.name == package and relative:
+                candidates.append(directory / relative)
+    elif filename.startswith("file://"):
+        candidates = [Path(filename[len("file://"):])]
+    else:
+        candidates = [Path(filename) if os.path.isabs(filename) else urdf_path.parent / filename]
+    for candidate in candidates:
+        if candidate.is_file():
+            return candidate
+    raise RobotError(f"link {link!r}: collision mesh {filename!r} not found (looked for "
+                     f"{', '.join(str(c) for c in candidates)})", source=str(urdf_path))
+
+
+# ---------------------------------------------------------------------------------------------------------- meshes
+
+
+def collision_mesh(collisions: tuple[UrdfCollision, ...], source: Path) -> trimesh.Trimesh:
+    """One mesh, in the link frame (metres), of all of a link's collision elements with their origins applied.
+
+    Mesh files are read with trimesh (STL, OBJ, PLY, OFF, GLB; COLLADA needs ``pycollada``). Primitive shapes become
+    meshes that contain them (see ``config.PRIMITIVE_CYLINDER_SECTIONS``).
+    """
+    parts = []
+    for item in collisions:
+        if item.kind == "mesh":
+            mesh = _load_mesh(item.params["path"], item.link, source)
+            mesh.apply_scale(item.params["scale"])
+        elif item.kind == "box":
+            mesh = trimesh.creation.box(extents=item.params["size"])
+        elif item.kind == "cylinder":
+            mesh = _cylinder_mesh(item.params["radius"], item.params["length"])
+        else:
+            mesh = _sphere_mesh(item.params["radius"])
+        mesh.apply_transform(item.T_link_geometry)
+        parts.append(mesh)
+    return parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)
+
+
+def _load_mesh(mesh_path: Path, link: str, source: Path) -> trimesh.Trimesh:
+    try:
+        mesh = trimesh.load(str(mesh_path), force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many kinds of errors for unreadable files
+        raise RobotError(f"link {link!r}: cannot read collision mesh {str(mesh_path)!r} ({type(exc).__name__}: "
+                         f"{exc})", source=str(source)) from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.vertices) == 0:
+        raise RobotError(f"link {link!r}: collision mesh {str(mesh_path)!r} holds no triangles", source=str(source))
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise RobotError(f"link {link!r}: collision mesh {str(mesh_path)!r} has non-finite vertices",
+                         source=str(source))
+    return mesh
+
+
+def _cylinder_mesh(radius: float, length: float) -> trimesh.Trimesh:
+    """A prism along z, centred at the origin, over a regular polygon circumscribed about the circle of ``radius``."""
+    sections = config.PRIMITIVE_CYLINDER_SECTIONS
+    return trimesh.creation.cylinder(radius=radius / math.cos(math.pi / sections), height=length, sections=sections)
+
+
+def _sphere_mesh(radius: float) -> trimesh.Trimesh:
+    """An icosphere scaled so that every face plane is at least ``radius`` from the centre."""
+    mesh = trimesh.creation.icosphere(subdivisions=config.PRIMITIVE_SPHERE_SUBDIVISIONS, radius=1.0)
+    inner = np.min(np.einsum("ij,ij->i", mesh.face_normals, mesh.triangles[:, 0]))
+    mesh.apply_scale(radius / inner)
+    return mesh

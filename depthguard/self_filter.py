@@ -1,0 +1,107 @@
+"""Robot self-filtering (SPEC section 7): render the robot's padded collision geometry into each camera, so that
+frame preparation can tell the robot's pixels from obstacles.
+
+The geometry rendered must contain the robot wherever it really is (a pixel of the robot left unfiltered makes the
+robot its own obstacle) and should not be much larger (a pixel wrongly taken for the robot hides what is there).
+Three choices, all containing every link's collision mesh grown by ``padding``:
+
+- ``"hulls"`` (default): each link's convex hull grown by ``padding``, bounded by a fixed number of planes
+  (:func:`padded_hull`). Closed meshes of a few hundred triangles, so the renderer culls back faces: fast.
+- ``"capsules"``: the robot's link capsules (:attr:`RobotModel.capsules`, already padded), as circumscribed meshes.
+  Looser.
+- ``"meshes"``: the collision meshes themselves, unpadded and uncullable (open STL files): exact but slowest.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+from scipy.spatial import HalfspaceIntersection
+
+from depthguard import config
+from depthguard.cameras import PinholeCamera
+from depthguard.errors import InputError
+from depthguard.rendering import MeshInstance, Renderer, primitive_mesh
+from depthguard.robots import RobotModel
+from depthguard.scenes import Capsule
+
+GEOMETRIES = ("hulls", "capsules", "meshes")
+
+
+def padded_hull(vertices, padding: float, directions: int = config.SELF_FILTER_HULL_PLANES) -> tuple[np.ndarray,
+                                                                                                  np.ndarray]:
+    """A closed convex mesh, wound outward, that contains every point within ``padding`` metres of ``vertices``
+    (n, 3): the intersection of the half-spaces n . x <= max_v(n . v) + padding over ``directions`` unit normals n
+    spread evenly over the sphere (a Fibonacci lattice).
+
+    Containment is exact whatever the normals: a point within ``padding`` of the vertices' hull exceeds no support
+    plane of the hull by more than ``padding``. The normals' count bounds the faces (a few hundred triangles) and the
+    excess over the padded hull (the planes are at most about 12 degrees from any surface direction for 128).
+    Returns (vertices (k, 3) float64, faces (m, 3) int64).
+    """
+    points = np.asarray(vertices, dtype=np.float64)
+    normals = _fibonacci_sphere(directions)
+    support = (points @ normals.T).max(axis=0) + padding
+    halfspaces = np.concatenate([normals, -support[:, None]], axis=1)  # n . x - h <= 0
+    corners = HalfspaceIntersection(halfspaces, points.mean(axis=0)).intersections
+    # Three or more planes meet at each corner: merge the copies (to 1e-9 m) before taking the hull of the corners.
+    mesh = trimesh.convex.convex_hull(np.unique(np.round(corners, 9), axis=0))
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces)
+
+
+def _fibonacci_sphere(n: int) -> np.ndarray:
+    """(n, 3) unit vectors spread evenly over the sphere."""
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    r = np.sqrt(1.0 - z * z)
+    phi = np.pi * (1.0 + 5.0**0.5) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+class RobotSilhouette:
+    """The robot's padded collision geometry, uploaded once, rendered into any camera at any configuration.
+
+    Args:
+        robot: the robot model.
+        renderer: the renderer to draw with (one is made if None; it holds a GL context).
+        geometry: ``"hulls"``, ``"capsules"`` or ``"meshes"`` (module docstring).
+        padding: metres by which hulls grow; default: the robot's own ``padding``.
+    """
+
+    def __init__(self, robot: RobotModel, renderer: Renderer | None = None, geometry: str = "hulls",
+                 padding: float | None = None):
+        if geometry not in GEOMETRIES:
+            raise InputError(f"self-filter geometry must be one of {GEOMETRIES}, got {geometry!r}")
+        self.robot = robot
+        self.renderer = renderer if renderer is not None else Renderer()
+        self.geometry = geometry
+        self.padding = robot.padding if padding is None else float(padding)
+        self._meshes: list[tuple[str, int]] = []  # (link, mesh id) with vertices in the link frame
+        for link, capsule in zip(robot.link_names, robot.capsules):
+            mesh = robot.collision_meshes[link]
+            if geometry == "capsules":
+                vertices, faces = primitive_mesh(Capsule(tuple(capsule.p0), tuple(capsule.p1), capsule.radius),
+                                                 config.PRIMITIVE_MESH_SEGMENTS)
+                mesh_id = self.renderer.add_mesh(vertices, faces, closed=True)
+            elif geometry == "hulls":
+                vertices, faces = padded_hull(mesh.vertices, self.padding)
+                mesh_id = self.renderer.add_mesh(vertices, faces, closed=True)
+            else:
+                mesh_id = self.renderer.add_mesh(mesh.vertices, mesh.faces, closed=False)
+            self._meshes.append((link, mesh_id))
+
+    def instances(self, q) -> list[MeshInstance]:
+        """The robot's meshes placed at configuration ``q`` (label = link index)."""
+        poses = self.robot.link_poses(q)
+        return [MeshInstance(mesh_id, poses[link], label=i) for i, (link, mesh_id) in enumerate(self._meshes)]
+
+    def render(self, camera: PinholeCamera, q, far: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+        """(near, far): (h, w) float32 metres, the nearest (and, with ``far``, the farthest) robot surface per pixel
+        of ``camera``, 0 where the robot is not; far is None without ``far``."""
+        instances = self.instances(q)
+        near = self.renderer.render_depth(camera, instances)
+        return near, (self.renderer.render_depth_max(camera, instances) if far else None)
+
+    def triangles(self) -> int:
+        """Triangles drawn per camera."""
+        return sum(self.renderer._mesh(mesh_id).n_faces for _, mesh_id in self._meshes)
