@@ -138,18 +138,20 @@ def parse_joints(text: str):
     items = [item.strip() for item in text.split(",") if item.strip()]
     if not items:
         raise InputError(f"--joints: no values in {text!r}")
+    named = ["=" in item for item in items]
+    if any(named) and not all(named):
+        raise InputError(f"--joints mixes name=value and plain values: {text!r}")
+    pairs = [item.split("=", 1) if "=" in item else (None, item) for item in items]
     try:
-        if all("=" in item for item in items):
-            pairs = [item.split("=", 1) for item in items]
-            names = [name.strip() for name, _ in pairs]
-            if len(set(names)) != len(names):
-                raise InputError(f"--joints names a joint twice: {text!r}")
-            return {name: float(value) for name, value in zip(names, (v for _, v in pairs))}
-        if any("=" in item for item in items):
-            raise InputError(f"--joints mixes name=value and plain values: {text!r}")
-        return [float(item) for item in items]
+        values = [float(value) for _, value in pairs]
     except ValueError:
         raise InputError(f"--joints: not numbers: {text!r}") from None
+    if not all(named):
+        return values
+    names = [name.strip() for name, _ in pairs]
+    if len(set(names)) != len(names):
+        raise InputError(f"--joints names a joint twice: {text!r}")
+    return dict(zip(names, values))
 
 
 if __name__ == "__main__":
