@@ -140,7 +140,7 @@ EGL_LIBRARY = "libEGL.so.1"
 GL_LIBRARY = "libGL.so.1"
 
 #: Self-filtering hulls: planes bounding each link's padded convex hull (depthguard.self_filter.padded_hull).
-SELF_FILTER_HULL_PLANES = 128
+SELF_FILTER_HULL_PLANES = 64
 
 # -------------------------------------------------------------------------------------------------------- simulation
 

@@ -36,7 +36,7 @@ def padded_hull(vertices, padding: float, directions: int = config.SELF_FILTER_H
 
     Containment is exact whatever the normals: a point within ``padding`` of the vertices' hull exceeds no support
     plane of the hull by more than ``padding``. The normals' count bounds the faces (a few hundred triangles) and the
-    excess over the padded hull (the planes are at most about 12 degrees from any surface direction for 128).
+    excess over the padded hull (64 planes: about 250 triangles per link of the iiwa, 6 % more volume than 128 planes).
     Returns (vertices (k, 3) float64, faces (m, 3) int64).
     """
     points = np.asarray(vertices, dtype=np.float64)

@@ -33,18 +33,22 @@ def start_depths(raw, scale, z_min, z_max, m0, m1, m2, invalid_start, z_start, i
 
 @njit(parallel=True, cache=True, error_model="numpy")
 def block_minimum(z_start, block, out):
-    """out[i, j] = min of z_start over the block of pixels [i*block, (i+1)*block) x [j*block, (j+1)*block)."""
+    """out[i, j] = min of z_start over the block of pixels [i*block, (i+1)*block) x [j*block, (j+1)*block).
+
+    One thread per row of blocks, reading its image rows in order (memory order, not block by block)."""
     h, w = z_start.shape
     hb, wb = out.shape
     for bi in prange(hb):
+        row_out = out[bi]
         for bj in range(wb):
-            m = np.inf
-            for v in range(bi * block, min(h, (bi + 1) * block)):
-                for u in range(bj * block, min(w, (bj + 1) * block)):
-                    z = z_start[v, u]
-                    if z < m:
-                        m = z
-            out[bi, bj] = m
+            row_out[bj] = np.inf
+        for v in range(bi * block, min(h, (bi + 1) * block)):
+            row = z_start[v]
+            for u in range(w):
+                z = row[u]
+                bj = u // block
+                if z < row_out[bj]:
+                    row_out[bj] = z
 
 
 @njit(parallel=True, cache=True, error_model="numpy")

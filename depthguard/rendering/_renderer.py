@@ -131,7 +131,8 @@ class MeshInstance:
             raise InputError(f"T_world_mesh must be a finite (4, 4) matrix, got shape {T.shape}")
         if not np.array_equal(T[3], [0.0, 0.0, 0.0, 1.0]):
             raise InputError(f"T_world_mesh's last row must be [0, 0, 0, 1], got {T[3].tolist()}")
-        if abs(np.linalg.det(T[:3, :3])) < 1e-12:
+        (a, b, c), (d, e, f), (g, h, i) = T[:3, :3].tolist()
+        if abs(a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)) < 1e-12:  # det (np.linalg: slow)
             raise InputError("T_world_mesh is singular")
         T.setflags(write=False)
         object.__setattr__(self, "T_world_mesh", T)
@@ -348,7 +349,10 @@ class Renderer:
         """Whether the mesh's bounding sphere lies wholly beyond the near plane (then the camera is outside the
         mesh and nothing of it is clipped, so culling faces turned away from the camera is exact)."""
         z = T_camera_mesh[2, :3] @ mesh.centre_mesh + T_camera_mesh[2, 3]
-        scale = np.linalg.norm(T_camera_mesh[:3, :3], ord=2)  # 1 for a rigid transform
+        # An upper bound of the largest scale (spectral norm): ||A||_2^2 <= max row sum of |A^T A|; exactly 1 for a
+        # rigid transform (the SVD that computes the norm itself costs more than drawing a link).
+        A = T_camera_mesh[:3, :3]
+        scale = float(np.sqrt(np.abs(A.T @ A).sum(axis=1).max()))
         return bool(z - scale * mesh.radius > self.near)
 
     def _context(self):
