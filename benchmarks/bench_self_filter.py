@@ -44,20 +44,20 @@ def main(argv=None) -> None:
     for geometry, silhouette in silhouettes.items():
         i = iter(range(10**9))
         t = timings(lambda: silhouette.render(cameras[next(i) % 2], poses[next(i) % len(poses)]), args.repeats)
-        pixels = np.mean([(silhouette.render(c, q)[0] > 0).sum() for c in cameras for q in poses[:3]])
+        pixels = np.mean([(silhouette.render(c, q) > 0).sum() for c in cameras for q in poses[:3]])
         print(f"{geometry:10s} {silhouette.triangles():9d} {np.median(t) * 1e3:10.2f} {pixels:9.0f}")
 
     # Full self-filtering of a frame pair: render the robot (default hulls) and prepare each camera's frame.
     frames = {}
     for camera in cameras:
-        exact, _ = silhouettes["meshes"].render(camera, poses[0])
+        exact = silhouettes["meshes"].render(camera, poses[0])
         scene = render_depth(camera, room)
         depth = np.where(exact > 0, np.minimum(exact, np.where(scene > 0, scene, np.inf)), scene)
         frames[camera.name] = dg.depth_image(np.round(depth * 1000).astype(np.uint16), camera)
 
     def filter_pair():
         for camera in cameras:
-            near, _ = silhouettes["hulls"].render(camera, poses[0])
+            near = silhouettes["hulls"].render(camera, poses[0])
             dg.prepare_depth(frames[camera.name], camera, robot_near=near)
 
     def prepare_pair():

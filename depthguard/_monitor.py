@@ -92,7 +92,7 @@ class DistanceMonitor:
             if joints is None:
                 raise InputError(f"camera {name!r}: this monitor filters the robot out of its frames: pass the robot's "
                                  "joint positions at the frame's capture time (query(..., joints=...))")
-            robot_near, _ = self._silhouette.render(camera, self.robot.joint_vector(joints))
+            robot_near = self._silhouette.render(camera, self.robot.joint_vector(joints))
         occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels, robot_near=robot_near,
                                   robot_tolerance=self.self_filter_tolerance)
         if isinstance(frame, DepthImage):
@@ -143,7 +143,7 @@ class DistanceMonitor:
         if stale:
             flags = tuple(f | Flag.STALE_CAMERA for f in result.flags)
             result = DistanceResult(result.distance, result.direction, result.count, result.invalid_count, flags,
-                                    result.timestamps, result.cameras, result.invalid_pixels)
+                                    result.timestamps, result.cameras, result.invalid_pixels, result.blind_distance)
         return result
 
 

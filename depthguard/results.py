@@ -19,8 +19,9 @@ class Flag(enum.IntFlag):
     - ``INVALID_PIXELS_USED``: pixels without a valid measurement contributed (see ``DistanceResult.invalid_count``).
     - ``STALE_CAMERA``: a camera's latest frame was older than the allowed age, so it counted as blind.
     - ``MISSING_CAMERA``: a camera the query needed had no frame, so it counted as blind.
-    - ``ROBOT_BLIND_SPOT``: the surveillance region touches space hidden behind the robot, which one camera cannot
-      see (SPEC section 7); it is not counted as occupied, so the distance may miss an obstacle there.
+    - ``ROBOT_BLIND_SPOT``: space hidden behind the robot, which one camera cannot see (SPEC section 7), comes
+      closer to the point than the reported distance (see ``DistanceResult.blind_distance``): an obstacle there
+      could be nearer than the answer.
     """
 
     INSIDE_OBSTACLE = 1
@@ -56,6 +57,9 @@ class DistanceResult:
         cameras: names of the cameras whose frames were used.
         invalid_pixels: camera name -> pixels of its frame without a valid measurement (whatever the policy did
             with them): a frame that is mostly invalid shows here even under the permissive ``invalid="free"``.
+        blind_distance: (n,) float64 metres, the distance to the space hidden behind the robot (from where the
+            robot's body ends along each pixel), inf when it is farther than rho or there is no robot. The fully
+            conservative distance is ``min(distance, blind_distance)``.
     """
 
     distance: np.ndarray
@@ -66,6 +70,11 @@ class DistanceResult:
     timestamps: dict[str, float | None] = field(default_factory=dict)
     cameras: tuple[str, ...] = ()
     invalid_pixels: dict[str, int] = field(default_factory=dict)
+    blind_distance: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.blind_distance is None:
+            object.__setattr__(self, "blind_distance", np.full(len(self.distance), np.inf))
 
     def __len__(self) -> int:
         return len(self.distance)

@@ -95,12 +95,10 @@ class RobotSilhouette:
         poses = self.robot.link_poses(q)
         return [MeshInstance(mesh_id, poses[link], label=i) for i, (link, mesh_id) in enumerate(self._meshes)]
 
-    def render(self, camera: PinholeCamera, q, far: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
-        """(near, far): (h, w) float32 metres, the nearest (and, with ``far``, the farthest) robot surface per pixel
-        of ``camera``, 0 where the robot is not; far is None without ``far``."""
-        instances = self.instances(q)
-        near = self.renderer.render_depth(camera, instances)
-        return near, (self.renderer.render_depth_max(camera, instances) if far else None)
+    def render(self, camera: PinholeCamera, q) -> np.ndarray:
+        """(h, w) float32 metres: the nearest surface of the robot's padded geometry per pixel of ``camera`` at
+        configuration ``q``, 0 where the robot is not."""
+        return self.renderer.render_depth(camera, self.instances(q))
 
     def triangles(self) -> int:
         """Triangles drawn per camera."""

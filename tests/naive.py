@@ -99,7 +99,8 @@ def view_boundary(camera, P):
 def query_reference(occupancy, points_world, rho, aggregate, unseen, inside_tol=1e-12, min_direction=1e-9):
     """The whole single-camera query, scanning every pixel of the image with the piecewise twin.
 
-    Returns (distance (n,), direction (n, 3) world, count (n,), invalid_count (n,), flag bits (n,)).
+    Returns (distance (n,), direction (n, 3) world, count (n,), invalid_count (n,), flag bits (n,),
+    blind distance (n,)).
     """
     camera = occupancy.camera
     a0, a1, b0, b1 = pixel_tangents(camera)
@@ -115,6 +116,7 @@ def query_reference(occupancy, points_world, rho, aggregate, unseen, inside_tol=
     out_count = np.zeros(n, dtype=np.int64)
     out_invalid = np.zeros(n, dtype=np.int64)
     out_flags = np.zeros(n, dtype=np.int64)
+    out_blind = np.full(n, np.inf)
     for i, P in enumerate(points_camera):
         X, Y, Z = P
         s_view, normal = view_boundary(camera, P)
@@ -128,11 +130,12 @@ def query_reference(occupancy, points_world, rho, aggregate, unseen, inside_tol=
         D[finite], zs[finite] = frustum_distance_pieces(X, Y, Z, a0[finite], a1[finite], b0[finite], b1[finite],
                                                         z_start[finite], z_end[finite])
         behind_robot = np.isfinite(blind)
+        blind_d = np.inf
         if behind_robot.any():
             D_blind, _ = frustum_distance_pieces(X, Y, Z, a0[behind_robot], a1[behind_robot], b0[behind_robot],
                                                  b1[behind_robot], blind[behind_robot], np.inf)
-            if D_blind.min() < rho:
-                flags |= 32
+            blind_d = D_blind.min() if D_blind.min() < rho else np.inf
+        out_blind[i] = blind_d
         contributor = D < rho
         vs, us = np.nonzero(contributor)
         d = D[contributor]
@@ -174,7 +177,8 @@ def query_reference(occupancy, points_world, rho, aggregate, unseen, inside_tol=
             out_dir[i] = R_world_camera @ (total / norm)
         all_d = np.concatenate([d, [unseen_d] if unseen_d < np.inf else []])
         out_d[i] = all_d.mean() if aggregate == "mean" else all_d.min()
-    return out_d, out_dir, out_count, out_invalid, out_flags
+    out_flags |= np.where(out_blind < out_d, 32, 0)
+    return out_d, out_dir, out_count, out_invalid, out_flags, out_blind
 
 
 def paper_query_reference(occupancy, points_world, rho, aggregate):

@@ -25,7 +25,7 @@ def scene():
     room = render_depth(camera, [Box.from_bounds([-3, -3, -0.1], [3, 3, 0]), Box.from_bounds([-2.5, -3, 0],
                                                                                                [-2.4, 3, 3])])
     with Renderer() as renderer:
-        robot_depth, _ = RobotSilhouette(robot, renderer, geometry="meshes").render(camera, Q)
+        robot_depth = RobotSilhouette(robot, renderer, geometry="meshes").render(camera, Q)
     depth = np.where(robot_depth > 0, np.minimum(robot_depth, np.where(room > 0, room, np.inf)), room)
     return robot, camera, depth.astype(np.float32)
 

@@ -49,7 +49,7 @@ def random_points(rng, n=12):
 
 def check_against_twin(occupancy, points, rho, aggregate, unseen):
     result = dg.single_camera_distances(occupancy, points, rho, aggregate, unseen)
-    distance, direction, count, invalid_count, flags = naive.query_reference(occupancy, points, rho, aggregate,
+    distance, direction, count, invalid_count, flags, blind = naive.query_reference(occupancy, points, rho, aggregate,
                                                                              unseen)
     assert np.allclose(result.distance, distance, rtol=0, atol=1e-10), (result.distance, distance)
     assert np.array_equal(result.count, count)

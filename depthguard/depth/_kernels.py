@@ -52,15 +52,15 @@ def block_minimum(z_start, block, out):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def robot_filter(z_start, invalid, policy_start, robot_near, robot_far, tolerance, m0, m1, m2, z_end, blind):
+def robot_filter(z_start, invalid, policy_start, robot_near, tolerance, m0, m1, m2, z_end, blind):
     """Self-filtering (SPEC section 7): remove the robot from what a frame says is possibly occupied.
 
-    robot_near / robot_far: (h, w) float32 metres, the nearest / farthest rendered robot surface per pixel (0 where
-    the robot is not rendered). A pixel whose start depth could be the robot, z_start >= d_r - tolerance - m(d_r),
-    shows the robot: its ray is free up to the robot (z_start = inf) and unknown behind it (blind = robot_far). A
-    pixel clearly in front of the robot keeps its obstacle, which hides everything behind it anyway. A pixel whose
-    occupied set the invalid-pixel policy made (z_start == policy_start, invalid) is occupied only up to the robot:
-    z_end = d_r - tolerance - m(d_r), with the blind spot behind the robot.
+    robot_near: (h, w) float32 metres, the nearest rendered robot surface per pixel (0 where the robot is not
+    rendered). A pixel whose start depth could be the robot, z_start >= d_r - tolerance - m(d_r), shows the robot:
+    its ray is free up to the robot (z_start = inf) and unknown from the robot on (blind = d_r). A pixel clearly in
+    front of the robot keeps its obstacle, which hides everything behind it anyway. A pixel whose occupied set the
+    invalid-pixel policy made (z_start == policy_start, invalid) is occupied only up to the robot:
+    z_end = d_r - tolerance - m(d_r), with the blind spot from the robot on.
     Edits z_start in place; writes z_end and blind (h, w) float32 metres (inf = none).
     """
     h, w = z_start.shape
@@ -75,14 +75,13 @@ def robot_filter(z_start, invalid, policy_start, robot_near, robot_far, toleranc
             if margin < 0.0:
                 margin = 0.0
             front = d_r - tolerance - margin  # nearest depth at which a measurement could still be the robot
-            far = max(np.float64(robot_far[v, u]), d_r)
             zs = np.float64(z_start[v, u])
             if invalid[v, u] and zs == policy_start:
                 if front > zs:
                     z_end[v, u] = front
                 else:
                     z_start[v, u] = np.inf
-                blind[v, u] = far
+                blind[v, u] = d_r
             elif zs >= front:
                 z_start[v, u] = np.inf
-                blind[v, u] = far
+                blind[v, u] = d_r

@@ -36,8 +36,8 @@ class OccupancyImage:
             for z_start[v, u] <= z <= z_end[v, u]; ``inf`` where it says nothing.
         z_end: (height, width) float32 metres: where that occupied segment ends; ``inf`` except in front of the
             robot on pixels without a measurement.
-        blind: (height, width) float32 metres: where the space hidden behind the robot starts along the pixel
-            (``inf``: no robot there). Queries flag regions that touch it.
+        blind: (height, width) float32 metres: where the space hidden behind the robot starts along the pixel, the
+            front of the rendered robot (``inf``: no robot there). Queries report how close it comes.
         invalid: (height, width) uint8, 1 where the pixel had no valid measurement (whatever the policy made of it).
         block_min: (ceil(h/B), ceil(w/B)) float32, the minimum of z_start over blocks of B x B pixels
             (B = ``config.BLOCK_SIZE``); kernels use it to skip whole blocks.
@@ -63,17 +63,16 @@ class OccupancyImage:
 
 def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = config.DEFAULT_INVALID,
                   hole_pixels: int = config.DEFAULT_NEIGHBOR_HOLE_PIXELS, robot_near: np.ndarray | None = None,
-                  robot_far: np.ndarray | None = None,
                   robot_tolerance: float = config.SELF_FILTER_TOLERANCE) -> OccupancyImage:
     """Turn a checked :class:`DepthImage` of ``camera`` into an :class:`OccupancyImage` (one pass, numba).
 
     Args:
         depth: the frame. invalid, hole_pixels: the invalid-pixel policy (module docstring).
-        robot_near: optional (height, width) float32 metres, the robot's collision geometry rendered into this
-            camera at the frame's joint positions (nearest surface; 0 where the robot is not). Enables
-            self-filtering.
-        robot_far: optional, the same for the farthest surface (where the robot's body ends along each pixel);
-            the blind spot starts there. Without it, it starts at ``robot_near``.
+        robot_near: optional (height, width) float32 metres, the robot's padded collision geometry rendered into
+            this camera at the frame's joint positions (nearest surface; 0 where the robot is not). Enables
+            self-filtering. The space behind it is the robot's blind spot: it starts at the rendered surface, not
+            where the robot's body ends, because the padded geometry is larger than the robot and an obstacle may
+            sit in the difference.
         robot_tolerance: metres by which a measurement may lie in front of the rendered robot and still be the
             robot (calibration, joint-state timing), on top of the noise margin.
     """
@@ -101,11 +100,10 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
         blind.fill(np.inf)
     else:
         near = _robot_image(robot_near, camera, "robot_near")
-        far = near if robot_far is None else _robot_image(robot_far, camera, "robot_far")
         if not (np.isfinite(robot_tolerance) and robot_tolerance >= 0):
             raise InputError(f"robot_tolerance must be a non-negative number of metres, got {robot_tolerance!r}")
-        _kernels.robot_filter(z_start, invalid_mask, np.float32(invalid_start), near, far, float(robot_tolerance),
-                              m0, m1, m2, z_end, blind)
+        _kernels.robot_filter(z_start, invalid_mask, np.float32(invalid_start), near, float(robot_tolerance), m0, m1,
+                              m2, z_end, blind)
         robot_pixels = int(np.count_nonzero(np.isfinite(blind)))
     block = config.BLOCK_SIZE
     shape = ((h + block - 1) // block, (w + block - 1) // block)

@@ -70,13 +70,14 @@ def single_camera_distances(occupancy: OccupancyImage, points_world, rho: float 
     count = np.empty(n, dtype=np.int64)
     invalid_count = np.empty(n, dtype=np.int64)
     flags = np.empty(n, dtype=np.int64)
+    blind_distance = np.full(n, np.inf)
     if n:
         z_min, z_max = camera.depth_range
         args = (points_camera, float(rho), occupancy.z_start, occupancy.z_end, occupancy.invalid, occupancy.block_min,
                 occupancy.blind, occupancy.blind_block_min, occupancy.robot_pixels > 0, config.BLOCK_SIZE, camera.fx, camera.fy, camera.cx, camera.cy, z_min, z_max,
                 config.AGGREGATES.index(aggregate), unseen == "occupied", method == "paper", config.NEAR_PLANE_EPSILON,
                 config.INSIDE_TOLERANCE, config.MIN_DIRECTION_NORM, distance, direction_camera, count, invalid_count,
-                flags)
+                flags, blind_distance)
         if n == 1:
             _kernels.query_points_serial(*args)
         else:
@@ -92,4 +93,5 @@ def single_camera_distances(occupancy: OccupancyImage, points_world, rho: float 
         timestamps={camera.name: occupancy.timestamp},
         cameras=(camera.name,),
         invalid_pixels={camera.name: occupancy.invalid_pixels},
+        blind_distance=blind_distance,
     )

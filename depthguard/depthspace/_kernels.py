@@ -250,11 +250,12 @@ def ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, 
 
 
 @njit(cache=True, error_model="numpy")
-def _nearest_in_blocks(X, Y, Z, rho, z_start, z_end, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi, v_lo,
-                       v_hi, near_eps, spans):
+def _nearest_in_blocks(X, Y, Z, rho, z_start, z_end, bounded, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi,
+                       v_lo, v_hi, near_eps, spans):
     """The nearest contributing pixel for ``min``: visit blocks of pixels in rings around P's pixel, skipping a
     block whose minimum start depth lies behind the region or whose bounding frustum is farther than the best
-    distance so far. Ties go to the smallest (v, u), as in a full scan.
+    distance so far. Ties go to the smallest (v, u), as in a full scan. Pixel segments are [z_start, z_end] if
+    ``bounded``, else [z_start, inf).
 
     Returns (best d^2 (inf if none below rho^2), v, u, z*, invalid flag of that pixel).
     """
@@ -315,7 +316,8 @@ def _nearest_in_blocks(X, Y, Z, rho, z_start, z_end, invalid, block_min, block, 
                         if zs > z_far:
                             continue
                         d2, z_star = frustum_nearest(X, Y, Z, (u - 0.5 - cx) * inv_fx, (u + 0.5 - cx) * inv_fx, b0,
-                                                     b1, np.float64(zs), np.float64(z_end[v, u]))
+                                                     b1, np.float64(zs),
+                                                     np.float64(z_end[v, u]) if bounded else np.inf)
                         if d2 < rho2 and (d2 < best2 or (d2 == best2 and (v < best_v or (v == best_v
                                                                                          and u < best_u)))):
                             best2 = d2
@@ -405,36 +407,9 @@ def _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, v_lo, v_
 
 
 @njit(cache=True, error_model="numpy")
-def _touches_blind(X, Y, Z, rho, blind, blind_block_min, block, fx, fy, cx, cy, v_lo, v_hi, spans):
-    """Whether some pixel's blind segment (from blind[v, u] on, behind the robot) comes closer than rho to P, over
-    the rows' silhouette spans; blocks whose blind spot starts behind the region are skipped."""
-    rho2 = rho * rho
-    z_far = Z + rho
-    inv_fx = 1.0 / fx
-    inv_fy = 1.0 / fy
-    for v in range(v_lo, v_hi + 1):
-        b0 = (v - 0.5 - cy) * inv_fy
-        b1 = (v + 0.5 - cy) * inv_fy
-        row_blocks = blind_block_min[v // block]
-        u = spans[v, 0]
-        while u <= spans[v, 1]:
-            if row_blocks[u // block] > z_far:
-                u = (u // block + 1) * block
-                continue
-            zb = blind[v, u]
-            if zb <= z_far:
-                d2, _ = frustum_nearest(X, Y, Z, (u - 0.5 - cx) * inv_fx, (u + 0.5 - cx) * inv_fx, b0, b1,
-                                        np.float64(zb), np.inf)
-                if d2 < rho2:
-                    return True
-            u += 1
-    return False
-
-
-@njit(cache=True, error_model="numpy")
 def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block, fx, fy, cx,
                 cy, z_min, z_max, aggregate, unseen_occupied, near_eps, inside_tol, min_direction, spans, scratch,
-                out_direction):
+                out_direction, out_blind):
     """Distance from one control point P = (X, Y, Z) (metres, optical frame) to what one camera says is possibly
     occupied, aggregated as ``aggregate``.
 
@@ -444,8 +419,9 @@ def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_b
 
     Returns (distance, count, invalid_count, flags); writes the unit direction (from the obstacle towards P, optical
     frame) into out_direction (3,). ``spans`` (height, 2) int64 and ``scratch`` (5, width) float64 are scratch space.
-    With ``has_blind``, the flag ROBOT_BLIND_SPOT tells whether the region touches the space hidden behind the robot
-    (``blind``: where it starts along each pixel, inf for none; ``blind_block_min``: its block minima).
+    With ``has_blind``, writes into out_blind[0] the distance to the space hidden behind the robot (``blind``: where
+    it starts along each pixel, inf for none; ``blind_block_min``: its block minima), inf beyond rho; the caller
+    flags a result that this blind space comes closer than.
     """
     height, width = z_start.shape
     flags = 0
@@ -456,6 +432,7 @@ def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_b
     out_direction[0] = 0.0
     out_direction[1] = 0.0
     out_direction[2] = 0.0
+    out_blind[0] = np.inf
     if unseen_occupied and s_view <= inside_tol:  # P itself is unseen
         return 0.0, 1, 0, flags
     # The boundary of the observed volume is one more contributor when unseen space counts as occupied.
@@ -473,16 +450,17 @@ def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_b
     else:
         v_lo = 0
         v_hi = -1
-    if has_blind and v_lo <= v_hi and _touches_blind(X, Y, Z, rho, blind, blind_block_min, block, fx, fy, cx, cy, v_lo,
-                                                     v_hi, spans):
-        flags |= FLAG_ROBOT_BLIND_SPOT
+    if has_blind and v_lo <= v_hi:
+        blind2 = _nearest_in_blocks(X, Y, Z, rho, blind, blind, False, invalid, blind_block_min, block, fx, fy, cx, cy,
+                                    u_lo, u_hi, v_lo, v_hi, near_eps, spans)[0]
+        out_blind[0] = np.sqrt(blind2)
 
     if aggregate == AGG_MIN:
         best2 = np.inf
         best_invalid = 0
         if v_lo <= v_hi:
             best2, best_v, best_u, best_z, best_invalid = _nearest_in_blocks(
-                X, Y, Z, rho, z_start, z_end, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi,
+                X, Y, Z, rho, z_start, z_end, True, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi,
                 near_eps, spans)
         if best_invalid:
             flags |= FLAG_INVALID_PIXELS_USED
@@ -655,17 +633,20 @@ def query_point_paper(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, z_m
 @njit(cache=True, error_model="numpy")
 def _query_one(i, points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block, fx,
                fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol, min_direction, spans,
-               scratch, distance, direction, count, invalid_count, flags):
+               scratch, distance, direction, count, invalid_count, flags, blind_distance):
     X = points_camera[i, 0]
     Y = points_camera[i, 1]
     Z = points_camera[i, 2]
+    blind_distance[i] = np.inf
     if paper:
         d, c, k, f = query_point_paper(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, z_min, z_max,
                                        aggregate, unseen_occupied, inside_tol, min_direction, direction[i])
     else:
         d, c, k, f = query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind,
                                  block, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, near_eps, inside_tol,
-                                 min_direction, spans, scratch, direction[i])
+                                 min_direction, spans, scratch, direction[i], blind_distance[i:i + 1])
+        if blind_distance[i] < d:  # something hidden behind the robot could be nearer than the answer
+            f |= FLAG_ROBOT_BLIND_SPOT
     distance[i] = d
     count[i] = c
     invalid_count[i] = k
@@ -675,11 +656,11 @@ def _query_one(i, points_camera, rho, z_start, z_end, invalid, block_min, blind,
 @njit(parallel=True, cache=True, error_model="numpy")
 def query_points(points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block,
                  fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol, min_direction,
-                 distance, direction, count, invalid_count, flags):
+                 distance, direction, count, invalid_count, flags, blind_distance):
     """:func:`query_point` (or the paper's variant) for each of the (n, 3) optical-frame points, in parallel.
 
     Writes distance (n,) float64, direction (n, 3) float64 (optical frame), count (n,) int64, invalid_count (n,)
-    int64 and flags (n,) int64.
+    int64, flags (n,) int64 and blind_distance (n,) float64.
     """
     n = points_camera.shape[0]
     spans = np.empty((n, z_start.shape[0], 2), dtype=np.int64)
@@ -687,13 +668,14 @@ def query_points(points_camera, rho, z_start, z_end, invalid, block_min, blind, 
     for i in prange(n):
         _query_one(i, points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block,
                    fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol,
-                   min_direction, spans[i], scratch[i], distance, direction, count, invalid_count, flags)
+                   min_direction, spans[i], scratch[i], distance, direction, count, invalid_count, flags,
+                   blind_distance)
 
 
 @njit(cache=True, error_model="numpy")
 def query_points_serial(points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind,
                         block, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol,
-                        min_direction, distance, direction, count, invalid_count, flags):
+                        min_direction, distance, direction, count, invalid_count, flags, blind_distance):
     """:func:`query_points` on the calling thread: for one point, a parallel region only adds a barrier that a busy
     machine can hold up for milliseconds."""
     spans = np.empty((z_start.shape[0], 2), dtype=np.int64)
@@ -701,4 +683,4 @@ def query_points_serial(points_camera, rho, z_start, z_end, invalid, block_min, 
     for i in range(points_camera.shape[0]):
         _query_one(i, points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block,
                    fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol,
-                   min_direction, spans, scratch, distance, direction, count, invalid_count, flags)
+                   min_direction, spans, scratch, distance, direction, count, invalid_count, flags, blind_distance)
