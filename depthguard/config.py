@@ -164,6 +164,10 @@ SIM_PRIMITIVE_SEGMENTS = 24
 #: Frame rate of the simulated cameras and of the episode's time steps, Hz.
 SIM_RATE = 30.0
 
+#: zlib level of the PNGs write_episode writes (0-9): 1 writes a noisy 640x480 depth image about 3.5 times as fast
+#: as the default 6, and only about 5 % bigger.
+SIM_PNG_COMPRESSION = 1
+
 #: Albedo (reflectance in [0, 1]) of the robot in simulated intensity images, and the defaults of people's clothes
 #: and skin (hands, head) and of static objects.
 SIM_ROBOT_ALBEDO = 0.8
