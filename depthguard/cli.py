@@ -1,8 +1,9 @@
 """The ``depthguard`` command line.
 
     depthguard distance --rig RIG.yaml --depth NAME=PATH --points POINTS [--rho 0.4] [--aggregate hybrid] ...
+    depthguard simulate [SCENE.yaml] --out DIR [--seed N] [--duration S]
+    depthguard demo [--out DIR] [--duration S]
     depthguard scenario-a [--out DIR]
-    depthguard demo [--out DIR]
 
 Bad input ends with exit status 2 and one line on standard error that says what is wrong.
 """
@@ -52,11 +53,22 @@ def _build_parser() -> argparse.ArgumentParser:
                                "the movable joints' values in URDF order, comma-separated")
     distance.add_argument("--json", action="store_true", help="print one JSON array, one object per point")
 
-    for name, text in (("scenario-a", "reference scenario A of the 2015 paper: plots and a timing table"),
-                       ("demo", "the Quick start's main job on a built-in simulated workcell")):
-        sub = commands.add_parser(name, help=text)
-        sub.add_argument("--out", default=f"out/{name}", help="output folder for plots and tables")
-        sub.add_argument("--repeats", type=int, default=20, help="timing repetitions per control point position")
+    simulate = commands.add_parser("simulate", help="simulate a workcell and write its frames, rig, joint states "
+                                                     "and ground truth")
+    simulate.add_argument("scene", nargs="?", help="scene YAML (default: reference scenario B)")
+    simulate.add_argument("--out", required=True, help="output folder")
+    simulate.add_argument("--seed", type=int, default=None, help="sensor-noise seed (default: the scene's)")
+    simulate.add_argument("--duration", type=float, default=None, help="simulate only the first S seconds")
+
+    demo = commands.add_parser("demo", help="the Quick start's main job: the simulated workcell of reference "
+                                            "scenario B, each camera's distances against the truth")
+    demo.add_argument("--out", default="out/demo", help="output folder for plots and summary.json")
+    demo.add_argument("--duration", type=float, default=None, help="only the first S seconds (default: all 12)")
+
+    scenario_a = commands.add_parser("scenario-a", help="reference scenario A of the 2015 paper: plots and a "
+                                                        "timing table")
+    scenario_a.add_argument("--out", default="out/scenario-a", help="output folder for plots and tables")
+    scenario_a.add_argument("--repeats", type=int, default=20, help="timing repetitions per control point position")
     return parser
 
 
@@ -65,6 +77,12 @@ def main(argv=None) -> int:
     try:
         if args.command == "distance":
             return _distance(args)
+        if args.command == "simulate":
+            return _simulate(args)
+        if args.command == "demo":
+            from depthguard.experiments import workcell
+
+            return workcell.main(out=args.out, duration=_positive(args.duration, "--duration"))
         from depthguard.experiments import scenario_a
 
         return scenario_a.main(out=args.out, repeats=args.repeats)
@@ -112,6 +130,27 @@ def _distance(args) -> int:
         print(f"{r['point'][0]:8.3f} {r['point'][1]:8.3f} {r['point'][2]:8.3f} {d:>9s} {direction:>26s} "
               f"{r['count']:6d}  {','.join(r['flags']) or '-'}")
     return 0
+
+
+def _simulate(args) -> int:
+    from depthguard.simulation import default_workcell, load_workcell, write_episode
+
+    workcell = load_workcell(args.scene) if args.scene else default_workcell()
+    duration = _positive(args.duration, "--duration")
+    frames = None if duration is None else range(min(workcell.n_frames, int(round(duration * workcell.rate))))
+    n = workcell.n_frames if frames is None else len(frames)
+    print(f"simulating {n} frames of {', '.join(workcell.rig.cameras)} at {workcell.rate:g} Hz into {args.out}")
+    out = write_episode(workcell, args.out, seed=args.seed, progress=True, frames=frames)
+    print(f"wrote {out}: rig.yaml, depth/, intensity/, joint_states.csv, ground_truth.csv, scene.yaml")
+    return 0
+
+
+def _positive(value, name):
+    from depthguard.errors import InputError
+
+    if value is not None and not value > 0:
+        raise InputError(f"{name} must be a positive number of seconds, got {value}")
+    return value
 
 
 def _robot_and_joints(args):

@@ -31,7 +31,9 @@ DEFAULT_METHOD = "exact"
 METHODS = ("exact", "paper")
 
 #: ``invalid="neighbors"``: a hole of at most this many 8-connected pixels takes the smallest valid depth around it.
-DEFAULT_NEIGHBOR_HOLE_PIXELS = 16
+#: Depth cameras drop pixels along depth edges in thin lines (a few dozen pixels along a robot's silhouette); 64
+#: pixels is about 3 x 3 cm at 2 m, too small to hide a hand.
+DEFAULT_NEIGHBOR_HOLE_PIXELS = 64
 
 #: Depth noise model sigma(d) = a + b*d + c*d**2 (metres) times k gives the noise margin m(d) (SPEC section 3).
 #: The default is the axial noise of a Kinect v1 measured by Nguyen, Izadi and Lovell (3DIMPVT 2012),

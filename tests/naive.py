@@ -221,3 +221,39 @@ def paper_query_reference(occupancy, points_world, rho, aggregate):
             out_dir[i] = R @ (total / np.linalg.norm(total))
             out_d[i] = d.mean() if aggregate == "mean" else d.min()
     return out_d, out_dir
+
+
+def fill_small_holes_reference(raw, scale, invalid, hole_pixels, margin, z_start, z_end, blind):
+    """The ``invalid="neighbors"`` hole filling with scipy.ndimage, whole-image operations only: label the holes,
+    find each one's size, thickness (a pixel whose 3x3 neighbourhood is all hole) and the smallest valid depth around
+    it, from robot and from other pixels. Edits z_start, z_end, blind in place. ``margin``: depth -> metres."""
+    from scipy import ndimage
+
+    holes = invalid.astype(bool)
+    labels, n = ndimage.label(holes, structure=np.ones((3, 3), dtype=bool))
+    if n == 0:
+        return
+    index = np.arange(1, n + 1)
+    sizes = np.bincount(labels.ravel(), minlength=n + 1)[1:]
+    interior = ndimage.binary_erosion(holes, structure=np.ones((3, 3), dtype=bool), border_value=0)
+    thick = np.bincount(labels[interior], minlength=n + 1)[1:] > 0
+    measured = np.where(holes, np.inf, raw.astype(np.float64) * scale)
+    robot = ~holes & np.isfinite(blind)
+
+    def nearest(values):
+        around = ndimage.minimum_filter(values, size=3, mode="constant", cval=np.inf)
+        return np.asarray(ndimage.minimum(around, labels, index), dtype=np.float64).reshape(-1)
+
+    near_robot = nearest(np.where(robot, measured, np.inf))
+    near_other = nearest(np.where(robot, np.inf, measured))
+    fillable = (sizes <= hole_pixels) | ~thick
+    for k in np.flatnonzero(fillable):
+        pixels = labels == k + 1
+        if near_robot[k] <= near_other[k] and np.isfinite(near_robot[k]):
+            z_start[pixels] = np.inf
+            z_end[pixels] = np.inf
+            blind[pixels] = np.minimum(blind[pixels], near_robot[k])
+        elif np.isfinite(near_other[k]):
+            z_start[pixels] = max(near_other[k] - margin(near_other[k]), 0.0)
+            z_end[pixels] = np.inf
+            blind[pixels] = np.inf

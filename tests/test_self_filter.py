@@ -117,3 +117,30 @@ def test_robot_images_are_checked():
         dg.prepare_depth(image, cam, robot_near=np.zeros((10, 10), np.float32))
     with pytest.raises(dg.InputError, match="robot_near"):
         dg.prepare_depth(image, cam, robot_near=np.full(cam.shape, np.nan, np.float32))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_hole_filling_kernel_equals_its_twin(seed):
+    """invalid="neighbors": the numba flood fill against the scipy whole-image twin, with and without the robot, on
+    scattered holes, thin lines along depth edges and larger blobs."""
+    rng = np.random.default_rng(seed)
+    cam = camera(160, 120, noise=dg.NoiseModel())
+    depth = render_depth(cam, ROOM + ARM)
+    edges = np.abs(np.diff(depth, axis=1, prepend=depth[:, :1])) > 0.05
+    holes = (rng.random(cam.shape) < 0.03) | (edges & (rng.random(cam.shape) < 0.7))
+    holes[50:56, 20:31] = True  # a thick hole of 66 pixels
+    holes[80:84, 100:103] = True  # a small thick one
+    raw = np.where(holes, 0, np.round(depth * 1000)).astype(np.uint16)
+    image = dg.depth_image(raw, cam)
+    padded = [Capsule(c.p0, c.p1, c.radius + 0.01) for c in ARM]
+    for robot_near in (None, render_depth(cam, padded)):
+        for hole_pixels in (0, 16, 64):
+            occupancy = dg.prepare_depth(image, cam, "neighbors", hole_pixels=hole_pixels, robot_near=robot_near)
+            # The twin starts from the same state before hole filling: the "occupied" preparation.
+            base = dg.prepare_depth(image, cam, "occupied", robot_near=robot_near)
+            z_start, z_end, blind = (np.array(a) for a in (base.z_start, base.z_end, base.blind))
+            naive.fill_small_holes_reference(raw, 0.001, base.invalid, hole_pixels, cam.noise.margin, z_start, z_end,
+                                             blind)
+            assert np.array_equal(occupancy.z_start, z_start.astype(np.float32))
+            assert np.array_equal(occupancy.z_end, z_end.astype(np.float32))
+            assert np.array_equal(occupancy.blind, blind.astype(np.float32))

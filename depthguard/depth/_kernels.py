@@ -56,8 +56,10 @@ def robot_filter(z_start, invalid, policy_start, robot_near, tolerance, m0, m1, 
     """Self-filtering (SPEC section 7): remove the robot from what a frame says is possibly occupied.
 
     robot_near: (h, w) float32 metres, the nearest rendered robot surface per pixel (0 where the robot is not
-    rendered). A pixel whose start depth could be the robot, z_start >= d_r - tolerance - m(d_r), shows the robot:
-    its ray is free up to the robot (z_start = inf) and unknown from the robot on (blind = d_r). A pixel clearly in
+    rendered). A pixel whose start depth could be the robot shows the robot: z_start >= d_r' - tolerance - m(d_r'),
+    with d_r' the nearest rendered robot surface in the pixel's 3x3 neighbourhood (one pixel of slack for
+    calibration and for silhouettes, where the rendered depth changes fast). Its ray is free up to the robot
+    (z_start = inf) and unknown from the robot on (blind = d_r). A pixel clearly in
     front of the robot keeps its obstacle, which hides everything behind it anyway. A pixel whose occupied set the
     invalid-pixel policy made (z_start == policy_start, invalid) is occupied only up to the robot:
     z_end = d_r - tolerance - m(d_r), with the blind spot from the robot on.
@@ -71,10 +73,16 @@ def robot_filter(z_start, invalid, policy_start, robot_near, tolerance, m0, m1, 
             d_r = np.float64(robot_near[v, u])
             if d_r <= 0.0:
                 continue
-            margin = m0 + (m1 + m2 * d_r) * d_r
+            d_near = d_r
+            for vv in range(max(v - 1, 0), min(v + 2, h)):
+                for uu in range(max(u - 1, 0), min(u + 2, w)):
+                    d = np.float64(robot_near[vv, uu])
+                    if 0.0 < d < d_near:
+                        d_near = d
+            margin = m0 + (m1 + m2 * d_near) * d_near
             if margin < 0.0:
                 margin = 0.0
-            front = d_r - tolerance - margin  # nearest depth at which a measurement could still be the robot
+            front = d_near - tolerance - margin  # nearest depth at which a measurement could still be the robot
             zs = np.float64(z_start[v, u])
             if invalid[v, u] and zs == policy_start:
                 if front > zs:
@@ -85,3 +93,79 @@ def robot_filter(z_start, invalid, policy_start, robot_near, tolerance, m0, m1, 
             elif zs >= front:
                 z_start[v, u] = np.inf
                 blind[v, u] = d_r
+
+
+@njit(cache=True, error_model="numpy")
+def fill_small_holes(raw, scale, invalid, hole_pixels, m0, m1, m2, z_start, z_end, blind, visited, stack):
+    """``invalid="neighbors"``: fill holes (8-connected pixels without a measurement) that are small — at most
+    ``hole_pixels`` pixels, or nowhere more than 2 pixels thick (no pixel of the hole has all 8 neighbours in it:
+    the thin lines depth cameras drop along depth edges) — from the smallest valid depth around them.
+
+    If that nearest surface around the hole is the robot (a valid pixel that self-filtering marked: ``blind``
+    finite), the hole shows the robot: free in front (z_start = inf) and blind from that depth on. Otherwise it
+    takes that depth minus its noise margin. Work is proportional to the pixels without a measurement.
+
+    raw: (h, w) uint16 or float32 measurements, ``scale`` metres per unit. invalid: (h, w) uint8. Edits z_start,
+    z_end, blind in place. visited: (h, w) uint8 scratch; stack: (h*w,) int64 scratch.
+    """
+    h, w = invalid.shape
+    for v0 in range(h):
+        for u0 in range(w):
+            visited[v0, u0] = 0
+    for v0 in range(h):
+        for u0 in range(w):
+            if invalid[v0, u0] == 0 or visited[v0, u0]:
+                continue
+            visited[v0, u0] = 1
+            stack[0] = v0 * w + u0
+            n = 1
+            head = 0
+            thick = False
+            near_robot = np.inf
+            near_other = np.inf
+            while head < n:
+                v = stack[head] // w
+                u = stack[head] % w
+                head += 1
+                interior = True
+                for dv in range(-1, 2):
+                    for du in range(-1, 2):
+                        if dv == 0 and du == 0:
+                            continue
+                        vv = v + dv
+                        uu = u + du
+                        if vv < 0 or vv >= h or uu < 0 or uu >= w:
+                            interior = False
+                            continue
+                        if invalid[vv, uu]:
+                            if not visited[vv, uu]:
+                                visited[vv, uu] = 1
+                                stack[n] = vv * w + uu
+                                n += 1
+                        else:
+                            interior = False
+                            d = np.float64(raw[vv, uu]) * scale
+                            if np.isfinite(blind[vv, uu]):
+                                near_robot = min(near_robot, d)
+                            else:
+                                near_other = min(near_other, d)
+                if interior:
+                    thick = True
+            if n > hole_pixels and thick:
+                continue
+            if near_robot <= near_other and near_robot < np.inf:
+                for k in range(n):
+                    v = stack[k] // w
+                    u = stack[k] % w
+                    z_start[v, u] = np.inf
+                    z_end[v, u] = np.inf
+                    blind[v, u] = min(np.float64(blind[v, u]), near_robot)
+            elif near_other < np.inf:
+                margin = max(m0 + (m1 + m2 * near_other) * near_other, 0.0)
+                start = max(near_other - margin, 0.0)
+                for k in range(n):
+                    v = stack[k] // w
+                    u = stack[k] % w
+                    z_start[v, u] = start
+                    z_end[v, u] = np.inf
+                    blind[v, u] = np.inf

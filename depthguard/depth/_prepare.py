@@ -4,8 +4,9 @@ Pixel (u, v) is possibly occupied along its frustum from ``z_start[v, u]`` on: t
 margin m(d) for a valid pixel; for a pixel without a valid measurement, what the invalid-pixel policy says:
 
 - ``"occupied"`` (fail-safe default): from the camera's minimum range on;
-- ``"neighbors"``: a hole of at most ``hole_pixels`` 8-connected pixels takes the smallest valid depth around it
-  (minus its margin); larger holes stay occupied;
+- ``"neighbors"``: a hole of at most ``hole_pixels`` 8-connected pixels, or one nowhere more than 2 pixels thick
+  (the lines depth cameras drop along depth edges), takes the smallest valid depth around it (minus its margin);
+  larger holes stay occupied;
 - ``"free"``: nothing (``inf``), what the papers do.
 
 With the robot rendered into the camera (SPEC section 7, :func:`prepare_depth`'s ``robot_near``), pixels that show
@@ -17,7 +18,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from depthguard import config
 from depthguard.cameras import PinholeCamera
@@ -90,11 +90,8 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
     _kernels.start_depths(depth.data, float(depth.depth_scale), z_min, z_max, m0, m1, m2, invalid_start, z_start,
                           invalid_mask)
     n_invalid = int(np.count_nonzero(invalid_mask))
-    if invalid == "neighbors" and n_invalid:
-        _fill_small_holes(z_start, invalid_mask, depth, camera, hole_pixels)
     z_end = np.empty((h, w), dtype=np.float32)
     blind = np.empty((h, w), dtype=np.float32)
-    robot_pixels = 0
     if robot_near is None:
         z_end.fill(np.inf)
         blind.fill(np.inf)
@@ -104,7 +101,11 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
             raise InputError(f"robot_tolerance must be a non-negative number of metres, got {robot_tolerance!r}")
         _kernels.robot_filter(z_start, invalid_mask, np.float32(invalid_start), near, float(robot_tolerance), m0, m1,
                               m2, z_end, blind)
-        robot_pixels = int(np.count_nonzero(np.isfinite(blind)))
+    if invalid == "neighbors" and n_invalid:
+        _kernels.fill_small_holes(depth.data, float(depth.depth_scale), invalid_mask, int(hole_pixels), m0, m1, m2,
+                                  z_start, z_end, blind, np.empty((h, w), dtype=np.uint8),
+                                  np.empty(h * w, dtype=np.int64))
+    robot_pixels = 0 if robot_near is None else int(np.count_nonzero(np.isfinite(blind)))
     block = config.BLOCK_SIZE
     shape = ((h + block - 1) // block, (w + block - 1) // block)
     block_min = np.empty(shape, dtype=np.float32)
@@ -129,18 +130,3 @@ def _robot_image(image, camera: PinholeCamera, field: str) -> np.ndarray:
     return array
 
 
-def _fill_small_holes(z_start, invalid_mask, depth: DepthImage, camera: PinholeCamera, hole_pixels: int) -> None:
-    """``invalid="neighbors"``: holes of at most ``hole_pixels`` pixels take the smallest valid depth around them."""
-    holes = invalid_mask.astype(bool)
-    labels, n = ndimage.label(holes, structure=np.ones((3, 3), dtype=bool))
-    sizes = np.bincount(labels.ravel(), minlength=n + 1)
-    measured = np.where(holes, np.inf, depth.data.astype(np.float64) * depth.depth_scale)
-    around = ndimage.minimum_filter(measured, size=3, mode="constant", cval=np.inf)
-    index = np.arange(1, n + 1)
-    nearest = np.asarray(ndimage.minimum(around, labels, index), dtype=np.float64).reshape(-1)
-    fill = np.full(n + 1, np.nan)
-    small = (sizes[1:] <= hole_pixels) & np.isfinite(nearest)
-    fill[1:][small] = nearest[small] - camera.noise.margin(nearest[small])
-    values = fill[labels]
-    take = holes & np.isfinite(values)
-    z_start[take] = np.maximum(values[take], 0.0).astype(np.float32)
