@@ -5,17 +5,20 @@ from numba import njit, prange
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def start_depths(raw, scale, z_min, z_max, m0, m1, m2, invalid_start, z_start, invalid):
+def start_depths(raw, scale, z_min, z_max, m0, m1, m2, invalid_start, z_start, invalid, z_end, blind):
     """Per pixel, the depth from which its frustum is possibly occupied.
 
     raw: (h, w) uint16 units or float32 metres. scale: metres per unit. [z_min, z_max]: valid range, metres.
     m0 + m1*d + m2*d**2: the noise margin at depth d (metres), clamped at 0. invalid_start: where a pixel without a
     valid measurement starts (z_min for "occupied", inf for "free").
-    Writes z_start (h, w) float32 metres (inf = nothing) and invalid (h, w) uint8 (1 = no valid measurement).
+    Writes z_start (h, w) float32 metres (inf = nothing) and invalid (h, w) uint8 (1 = no valid measurement), and
+    sets z_end and blind (h, w) float32 to inf (no segment end, no robot blind spot).
     """
     h, w = raw.shape
     for v in prange(h):
         for u in range(w):
+            z_end[v, u] = np.inf
+            blind[v, u] = np.inf
             d = np.float64(raw[v, u]) * scale
             if np.isfinite(d) and d > 0.0 and d >= z_min and d <= z_max:
                 margin = m0 + (m1 + m2 * d) * d
@@ -35,20 +38,21 @@ def start_depths(raw, scale, z_min, z_max, m0, m1, m2, invalid_start, z_start, i
 def block_minimum(z_start, block, out):
     """out[i, j] = min of z_start over the block of pixels [i*block, (i+1)*block) x [j*block, (j+1)*block).
 
-    One thread per row of blocks, reading its image rows in order (memory order, not block by block)."""
+    One thread per row of blocks: the minimum over its image rows column by column (a loop that vectorises), then
+    over each block's columns."""
     h, w = z_start.shape
     hb, wb = out.shape
     for bi in prange(hb):
-        row_out = out[bi]
-        for bj in range(wb):
-            row_out[bj] = np.inf
+        columns = np.full(w, np.inf, dtype=np.float32)
         for v in range(bi * block, min(h, (bi + 1) * block)):
             row = z_start[v]
             for u in range(w):
-                z = row[u]
-                bj = u // block
-                if z < row_out[bj]:
-                    row_out[bj] = z
+                columns[u] = min(columns[u], row[u])
+        for bj in range(wb):
+            m = np.float32(np.inf)
+            for u in range(bj * block, min(w, (bj + 1) * block)):
+                m = min(m, columns[u])
+            out[bi, bj] = m
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -63,36 +67,41 @@ def robot_filter(z_start, invalid, policy_start, robot_near, tolerance, m0, m1, 
     front of the robot keeps its obstacle, which hides everything behind it anyway. A pixel whose occupied set the
     invalid-pixel policy made (z_start == policy_start, invalid) is occupied only up to the robot:
     z_end = d_r - tolerance - m(d_r), with the blind spot from the robot on.
-    Edits z_start in place; writes z_end and blind (h, w) float32 metres (inf = none).
+    Edits z_start, and z_end and blind (h, w) float32 metres (inf = none), in place on the robot's pixels.
     """
     h, w = z_start.shape
     for v in prange(h):
+        row = robot_near[v]
         for u in range(w):
-            z_end[v, u] = np.inf
-            blind[v, u] = np.inf
-            d_r = np.float64(robot_near[v, u])
-            if d_r <= 0.0:
-                continue
-            d_near = d_r
-            for vv in range(max(v - 1, 0), min(v + 2, h)):
-                for uu in range(max(u - 1, 0), min(u + 2, w)):
-                    d = np.float64(robot_near[vv, uu])
-                    if 0.0 < d < d_near:
-                        d_near = d
-            margin = m0 + (m1 + m2 * d_near) * d_near
-            if margin < 0.0:
-                margin = 0.0
-            front = d_near - tolerance - margin  # nearest depth at which a measurement could still be the robot
-            zs = np.float64(z_start[v, u])
-            if invalid[v, u] and zs == policy_start:
-                if front > zs:
-                    z_end[v, u] = front
-                else:
-                    z_start[v, u] = np.inf
-                blind[v, u] = d_r
-            elif zs >= front:
-                z_start[v, u] = np.inf
-                blind[v, u] = d_r
+            if row[u] > 0.0:
+                _filter_robot_pixel(v, u, z_start, invalid, policy_start, robot_near, tolerance, m0, m1, m2, z_end,
+                                    blind)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _filter_robot_pixel(v, u, z_start, invalid, policy_start, robot_near, tolerance, m0, m1, m2, z_end, blind):
+    """:func:`robot_filter` on one pixel where the robot is rendered."""
+    h, w = z_start.shape
+    d_r = np.float64(robot_near[v, u])
+    d_near = d_r
+    for dv in range(-1, 2):
+        vv = min(max(v + dv, 0), h - 1)  # clamped: a border pixel counts itself again
+        for du in range(-1, 2):
+            d = np.float64(robot_near[vv, min(max(u + du, 0), w - 1)])
+            if d > 0.0:
+                d_near = min(d_near, d)
+    margin = max(m0 + (m1 + m2 * d_near) * d_near, 0.0)
+    front = d_near - tolerance - margin  # nearest depth at which a measurement could still be the robot
+    zs = np.float64(z_start[v, u])
+    if invalid[v, u] and zs == policy_start:
+        if front > zs:
+            z_end[v, u] = front
+        else:
+            z_start[v, u] = np.inf
+        blind[v, u] = d_r
+    elif zs >= front:
+        z_start[v, u] = np.inf
+        blind[v, u] = d_r
 
 
 @njit(cache=True, error_model="numpy")

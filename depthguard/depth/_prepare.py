@@ -85,17 +85,14 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
     z_min, z_max = camera.depth_range
     m0, m1, m2 = camera.noise.coefficients()
     z_start = np.empty((h, w), dtype=np.float32)
+    z_end = np.empty((h, w), dtype=np.float32)
+    blind = np.empty((h, w), dtype=np.float32)
     invalid_mask = np.empty((h, w), dtype=np.uint8)
     invalid_start = np.inf if invalid == "free" else z_min
     _kernels.start_depths(depth.data, float(depth.depth_scale), z_min, z_max, m0, m1, m2, invalid_start, z_start,
-                          invalid_mask)
+                          invalid_mask, z_end, blind)
     n_invalid = int(np.count_nonzero(invalid_mask))
-    z_end = np.empty((h, w), dtype=np.float32)
-    blind = np.empty((h, w), dtype=np.float32)
-    if robot_near is None:
-        z_end.fill(np.inf)
-        blind.fill(np.inf)
-    else:
+    if robot_near is not None:
         near = _robot_image(robot_near, camera, "robot_near")
         if not (np.isfinite(robot_tolerance) and robot_tolerance >= 0):
             raise InputError(f"robot_tolerance must be a non-negative number of metres, got {robot_tolerance!r}")
@@ -125,7 +122,7 @@ def _robot_image(image, camera: PinholeCamera, field: str) -> np.ndarray:
     if array.shape != camera.shape:
         raise InputError(f"{field} of camera {camera.name!r} is {array.shape}, the camera is {camera.shape}")
     array = np.ascontiguousarray(array, dtype=np.float32)
-    if not np.all(np.isfinite(array)) or np.any(array < 0):
+    if array.size and not (array.min() >= 0 and np.isfinite(array.max())):  # min is NaN if any element is
         raise InputError(f"{field} of camera {camera.name!r} must be finite depths >= 0 (0 = no robot)")
     return array
 
