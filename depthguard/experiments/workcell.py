@@ -121,7 +121,8 @@ def summary(episode: Episode) -> dict:
             }
         out["cameras"][camera] = {
             "unflagged_misses": int(np.count_nonzero(above & ~flagged)),
-            "largest_unflagged_excess_m": float(np.max(np.where(~flagged, reported - episode.truth, -np.inf))),
+            "largest_unflagged_excess_m": float(np.max(np.where(~flagged, reported - episode.truth, -np.inf),
+                                                           initial=-np.inf)),
             "blind_spot_flagged_fraction": float(flagged.mean()),
             "conservative_misses": int(np.count_nonzero(conservative > episode.truth + tol[k])),
             "false_alarm_fraction": float(np.mean(reported[episode.truth >= RHO + tol[k]] < RHO)),
@@ -218,8 +219,10 @@ def main(out="out/demo", duration: float | None = None, progress: bool = True) -
         for action, row in figures["by_action"].items():
             print(f"  {action:26s} {row['min_truth']:10.3f} {row['min_reported']:13.3f} "
                   f"{row['false_alarm_fraction']:13.1%}")
-        print(f"  above truth + tolerance without the blind-spot flag: {figures['unflagged_misses']} "
-              f"(largest unflagged excess {figures['largest_unflagged_excess_m'] * 1e3:+.1f} mm); "
+        excess = figures["largest_unflagged_excess_m"]
+        largest = "every result flagged" if excess == -np.inf else f"largest unflagged distance - truth " \
+                                                                     f"{excess * 1e3:+.1f} mm"
+        print(f"  above truth + tolerance without the blind-spot flag: {figures['unflagged_misses']} ({largest}); "
               f"min(distance, blind distance) above it: {figures['conservative_misses']}")
         print(f"  blind spot flagged on {figures['blind_spot_flagged_fraction']:.0%} of control-point frames\n")
     print("Plots: " + ", ".join(str(p) for p in plots) + f"; numbers: {out / 'summary.json'}")
