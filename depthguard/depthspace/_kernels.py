@@ -462,24 +462,13 @@ def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_b
             best2, best_v, best_u, best_z, best_invalid = _nearest_in_blocks(
                 X, Y, Z, rho, z_start, z_end, True, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi,
                 near_eps, spans)
-        if best_invalid:
-            flags |= FLAG_INVALID_PIXELS_USED
-        if best2 <= inside_tol * inside_tol:
-            return 0.0, 1, best_invalid, flags | FLAG_INSIDE_OBSTACLE
-        if unseen_d * unseen_d < best2:
-            out_direction[0] = nx
-            out_direction[1] = ny
-            out_direction[2] = nz
-            return unseen_d, 1, 0, flags & ~FLAG_INVALID_PIXELS_USED
-        if best2 == np.inf:
-            return np.inf, 0, 0, flags
-        d = np.sqrt(best2)
-        ox = min(max(X, (best_u - 0.5 - cx) / fx * best_z), (best_u + 0.5 - cx) / fx * best_z)
-        oy = min(max(Y, (best_v - 0.5 - cy) / fy * best_z), (best_v + 0.5 - cy) / fy * best_z)
-        out_direction[0] = (X - ox) / d
-        out_direction[1] = (Y - oy) / d
-        out_direction[2] = (Z - best_z) / d
-        return d, 1, best_invalid, flags
+        ex = ey = ez = 0.0
+        if inside_tol * inside_tol < best2 < np.inf:
+            d = np.sqrt(best2)
+            ex = (X - min(max(X, (best_u - 0.5 - cx) / fx * best_z), (best_u + 0.5 - cx) / fx * best_z)) / d
+            ey = (Y - min(max(Y, (best_v - 0.5 - cy) / fy * best_z), (best_v + 0.5 - cy) / fy * best_z)) / d
+            ez = (Z - best_z) / d
+        return _finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, inside_tol, out_direction)
 
     count = 0
     n_invalid = 0
@@ -492,6 +481,38 @@ def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_b
     if v_lo <= v_hi:
         count, n_invalid, inside, sum_d, sx, sy, sz, best2 = _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx,
                                                                           fy, cx, cy, v_lo, v_hi, spans, scratch)
+    return _finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, unseen_d, nx, ny, nz, flags,
+                       inside_tol, min_direction, out_direction)
+
+
+@njit(cache=True, error_model="numpy")
+def _finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, inside_tol, out_direction):
+    """``min``'s answer from the nearest pixel (squared distance best2, its unit direction (ex, ey, ez), whether it
+    had no measurement) and the observed volume's boundary (distance unseen_d, inward normal). Returns (distance,
+    count, invalid_count, flags) and writes the direction."""
+    if best_invalid:
+        flags |= FLAG_INVALID_PIXELS_USED
+    if best2 <= inside_tol * inside_tol:
+        return 0.0, 1, best_invalid, flags | FLAG_INSIDE_OBSTACLE
+    if unseen_d * unseen_d < best2:
+        out_direction[0] = nx
+        out_direction[1] = ny
+        out_direction[2] = nz
+        return unseen_d, 1, 0, flags & ~FLAG_INVALID_PIXELS_USED
+    if best2 == np.inf:
+        return np.inf, 0, 0, flags
+    out_direction[0] = ex
+    out_direction[1] = ey
+    out_direction[2] = ez
+    return np.sqrt(best2), 1, best_invalid, flags
+
+
+@njit(cache=True, error_model="numpy")
+def _finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, unseen_d, nx, ny, nz, flags, inside_tol,
+                min_direction, out_direction):
+    """``mean``'s and ``hybrid``'s answer from the sums over the contributing pixels and the observed volume's
+    boundary (distance unseen_d, inward normal, one more contributor when finite). Returns (distance, count,
+    invalid_count, flags) and writes the normalised mean direction."""
     if n_invalid:
         flags |= FLAG_INVALID_PIXELS_USED
     if unseen_d < np.inf:
@@ -590,44 +611,12 @@ def query_point_paper(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, z_m
             sx += ex
             sy += ey
             sz += ez
-    if aggregate == AGG_MIN:
-        n_invalid = best_invalid
-        count = 1 if (best2 < np.inf or inside) else 0
-    if n_invalid:
-        flags |= FLAG_INVALID_PIXELS_USED
-    if inside:
-        return 0.0, count, n_invalid, flags | FLAG_INSIDE_OBSTACLE
     unseen_d = s_view if (unseen_occupied and s_view < rho) else np.inf
     if aggregate == AGG_MIN:
-        if unseen_d * unseen_d < best2:
-            out_direction[0] = nx
-            out_direction[1] = ny
-            out_direction[2] = nz
-            return unseen_d, 1, 0, flags
-        if best2 == np.inf:
-            return np.inf, 0, 0, flags
-        out_direction[0] = best_dx
-        out_direction[1] = best_dy
-        out_direction[2] = best_dz
-        return np.sqrt(best2), 1, n_invalid, flags
-    d_min = np.sqrt(best2)
-    if unseen_d < np.inf:
-        count += 1
-        sum_d += unseen_d
-        sx += nx
-        sy += ny
-        sz += nz
-        d_min = min(d_min, unseen_d)
-    if count == 0:
-        return np.inf, 0, 0, flags
-    norm = np.sqrt(sx * sx + sy * sy + sz * sz)
-    if norm > min_direction * count:
-        out_direction[0] = sx / norm
-        out_direction[1] = sy / norm
-        out_direction[2] = sz / norm
-    if aggregate == AGG_MEAN:
-        return sum_d / count, count, n_invalid, flags
-    return d_min, count, n_invalid, flags
+        return _finish_min(0.0 if inside else best2, best_invalid, best_dx, best_dy, best_dz, unseen_d, nx, ny, nz,
+                           flags, inside_tol, out_direction)
+    return _finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, unseen_d, nx, ny, nz, flags,
+                       inside_tol, min_direction, out_direction)
 
 
 @njit(cache=True, error_model="numpy")
