@@ -197,3 +197,19 @@ SIM_PERSON_BLEND = 0.3
 
 #: People: default time (s) an arm takes to move into or out of a reaching pose.
 SIM_REACH_RAMP = 0.5
+
+# ------------------------------------------------------------------------------------------------ the depth grid
+
+#: The depth grid of SPEC section 12's scenario B: cells of DEPTH_GRID_DELTA_D metres from DEPTH_GRID_D_MIN, 343 along
+#: each principal pixel (to 3.7182 m).
+DEPTH_GRID_D_MIN = 0.2882
+DEPTH_GRID_DELTA_D = 0.01
+DEPTH_GRID_CELLS = 343
+
+#: Fusion: metres by which a secondary camera's measured surface must lie beyond a cell (on top of its noise margin)
+#: for it to declare the cell free. It covers the rig's calibration error: a camera whose pose is off by this much
+#: must not clear a surface that another camera sees.
+DEFAULT_FUSION_MARGIN = 0.02
+
+#: Fusion: a cell's footprint in a secondary camera is grown by this many pixels on every side (calibration error).
+DEFAULT_FUSION_PIXELS = 1

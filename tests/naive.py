@@ -257,3 +257,119 @@ def fill_small_holes_reference(raw, scale, invalid, hole_pixels, margin, z_start
             z_start[pixels] = max(near_other[k] - margin(near_other[k]), 0.0)
             z_end[pixels] = np.inf
             blind[pixels] = np.inf
+
+
+def camera_clears_reference(corners_j, offset_j, free_j, z_near_j, z0, z1, u, v, margin, pad):
+    """Whether secondary camera j saw through the whole cell [z0, z1] of principal pixel (u, v), written plainly:
+    project the cell's 8 corners, take every pixel whose footprint meets their bounding box (grown by pad)."""
+    points = []
+    for dv in (0, 1):
+        for du in (0, 1):
+            for z in (z0, z1):
+                points.append(corners_j[v + dv, u + du] * z + offset_j)
+    points = np.array(points)
+    if np.any(points[:, 2] <= z_near_j):
+        return False
+    x = points[:, 0] / points[:, 2]
+    y = points[:, 1] / points[:, 2]
+    q = np.arange(int(np.ceil(x.min() - 0.5)) - pad, int(np.floor(x.max() + 0.5)) + pad + 1)
+    r = np.arange(int(np.ceil(y.min() - 0.5)) - pad, int(np.floor(y.max() + 0.5)) + pad + 1)
+    h, w = free_j.shape
+    if q.min() < 0 or r.min() < 0 or q.max() > w - 1 or r.max() > h - 1:
+        return False
+    return bool(np.all(free_j[np.ix_(r, q)] >= points[:, 2].max() + margin))
+
+
+def fused_query_reference(grid, principal, frees, z_nears, points_world, rho, unseen, robot_far=None, margin=0.02,
+                          pad=1, inside_tol=1e-12):
+    """The fused query of SPEC section 8 by brute force: for every principal pixel, every grid cell that comes
+    within rho is classified (certain, candidate confirmed by all secondaries, or cleared) and the pixel's distance
+    is the smallest over its occupied pieces.
+
+    Returns {aggregate: (distance (n,), count (n,))} for "min", "mean" and "hybrid".
+    """
+    camera = principal.camera
+    a0, a1, b0, b1 = pixel_tangents(camera)
+    z_min = camera.depth_range[0]
+    d_min, dd, n_cells = grid.d_min, grid.delta_d, grid.n_cells
+    d_max = d_min + n_cells * dd
+    zs_img = principal.z_start.astype(np.float64)
+    ze_img = principal.z_end.astype(np.float64)
+    certain_img = (principal.invalid == 0) | (principal.z_start != np.float32(z_min))
+    if principal.robot_pixels:
+        blind_img = np.where(np.isfinite(principal.blind), np.maximum(principal.blind, robot_far), np.inf)
+    else:
+        blind_img = np.full(camera.shape, np.inf)
+    out = {a: (np.full(len(points_world), np.inf), np.zeros(len(points_world), dtype=np.int64))
+           for a in ("min", "mean", "hybrid")}
+    for i, P in enumerate(camera.world_to_camera(points_world)):
+        X, Y, Z = P
+        s_view, _ = view_boundary(camera, P)
+        if unseen == "occupied" and s_view <= inside_tol:
+            for a in out:
+                out[a][0][i], out[a][1][i] = 0.0, 1
+            continue
+        z_far = Z + rho
+        per_pixel = []
+        for v in range(camera.height):
+            for u in range(camera.width):
+                tang = (a0[v, u], a1[v, u], b0[v, u], b1[v, u])
+
+                def dist(lo, hi):
+                    lo, hi = np.broadcast_arrays(np.asarray(lo, float), np.asarray(hi, float))
+                    d = np.full(lo.shape, np.inf)
+                    ok = lo <= hi
+                    if ok.any():
+                        d[ok] = frustum_distance_pieces(X, Y, Z, *tang, lo[ok], hi[ok])[0]
+                    return d
+
+                def occupied(k):
+                    return not any(camera_clears_reference(grid.corners[j], grid.offsets[j], frees[j], z_nears[j],
+                                                           d_min + k * dd, d_min + (k + 1) * dd, u, v, margin, pad)
+                                   for j in range(len(frees)))
+
+                def candidates(lo, hi):
+                    best = np.inf
+                    if lo > hi:
+                        return best
+                    if lo < d_min:
+                        best = min(best, float(dist(lo, min(hi, d_min))))
+                    if hi > d_max:
+                        best = min(best, float(dist(max(lo, d_max), hi)))
+                    k = np.arange(max(int((max(lo, d_min) - d_min) // dd) - 1, 0),
+                                  min(int((min(hi, d_max) - d_min) // dd) + 2, n_cells))
+                    d = dist(np.maximum(lo, d_min + k * dd), np.minimum(hi, d_min + (k + 1) * dd))
+                    for kk, dk in zip(k, d):
+                        if dk < min(best, rho) and occupied(kk):
+                            best = dk
+                    return best
+
+                zs, ze, bf = zs_img[v, u], ze_img[v, u], blind_img[v, u]
+                first = min(zs, bf)
+                if first > z_far or float(dist(first, np.inf)) >= rho:
+                    continue
+                d = np.inf
+                if zs <= z_far:
+                    if certain_img[v, u]:
+                        if zs >= Z:
+                            d = float(dist(zs, ze))
+                        else:
+                            cell_end = d_min + (np.floor((zs - d_min) / dd) + 1) * dd if zs >= d_min else d_min
+                            d = float(dist(zs, min(cell_end, ze)))
+                            if cell_end < ze:
+                                d = min(d, candidates(cell_end, min(ze, z_far)))
+                    else:
+                        d = candidates(zs, min(ze, z_far))
+                if bf <= z_far:
+                    d = min(d, candidates(bf, z_far))
+                if d < rho:
+                    per_pixel.append(d)
+        unseen_d = s_view if (unseen == "occupied" and s_view < rho) else np.inf
+        all_d = np.array(per_pixel + ([unseen_d] if unseen_d < np.inf else []))
+        if len(all_d) == 0:
+            continue
+        inside = all_d.min() <= inside_tol
+        for a in out:
+            out[a][1][i] = 1 if a == "min" else len(all_d)
+            out[a][0][i] = 0.0 if inside else (all_d.mean() if a == "mean" else all_d.min())
+    return out

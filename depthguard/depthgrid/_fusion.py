@@ -1,0 +1,114 @@
+"""Online fusion of several depth cameras through the depth grid (SPEC section 8)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import parallel_chunksize
+
+from depthguard import config
+from depthguard.cameras import PinholeCamera, Rig
+from depthguard.depth import DepthImage, OccupancyImage
+from depthguard.depthgrid import _kernels
+from depthguard.depthgrid._map import DepthGridMap
+from depthguard.depthspace._distance import check_options, check_points
+from depthguard.errors import InputError
+from depthguard.results import DistanceResult, Flag
+
+
+def free_image(depth: DepthImage, camera: PinholeCamera) -> np.ndarray:
+    """(h, w) float32 metres: how far ``camera`` saw along each pixel, its measured depth minus its noise margin;
+    0 where it measured nothing. A secondary camera clears a cell only with this."""
+    free = np.empty(camera.shape, dtype=np.float32)
+    z_min, z_max = camera.depth_range
+    m0, m1, m2 = camera.noise.coefficients()
+    _kernels.free_depths(depth.data, float(depth.depth_scale), z_min, z_max, m0, m1, m2, free)
+    return free
+
+
+def fused_distances(grid: DepthGridMap, rig: Rig, principal: OccupancyImage, secondaries: dict,
+                    points_world, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
+                    unseen: str = config.DEFAULT_UNSEEN, robot_far: np.ndarray | None = None,
+                    margin: float = config.DEFAULT_FUSION_MARGIN, pad: int = config.DEFAULT_FUSION_PIXELS,
+                    check: bool = True) -> DistanceResult:
+    """Distances from control points to what the principal camera says is possibly occupied and no other camera
+    clears (SPEC section 8, cases i-iv, with the corrected confirmation rule).
+
+    Args:
+        grid: the depth grid map of ``rig`` for the principal camera (:func:`build_map`).
+        rig: the cameras.
+        principal: the principal camera's prepared frame (:func:`depthguard.prepare_depth`, robot filtered out
+            if there is one).
+        secondaries: secondary camera name -> its :func:`free_image`, or None for a camera that is blind (stale or
+            missing): a blind camera clears nothing.
+        points_world: (n, 3) float64, metres, world frame.
+        rho, aggregate, unseen: as for :func:`depthguard.single_camera_distances`.
+        robot_far: (h, w) float32 metres, the principal's rendered robot: where its body ends along each pixel
+            (0 where it is not). The space behind the robot (case iv) starts there; the robot's own volume is
+            not an obstacle. Needed when ``principal`` was self-filtered.
+        margin: metres a secondary camera must have seen beyond a cell (calibration error; on top of its noise
+            margin). pad: pixels by which a cell's footprint grows in a secondary camera.
+    """
+    if check:
+        check_options(rho, aggregate, unseen, "exact")
+        points_world = check_points(points_world)
+        grid.check_rig(rig)
+        if principal.camera.name != grid.principal:
+            raise InputError(f"the map's principal camera is {grid.principal!r}, the frame is camera "
+                             f"{principal.camera.name!r}")
+        unknown = set(secondaries) - set(grid.secondaries)
+        if unknown:
+            raise InputError(f"cameras {sorted(unknown)} are not secondary cameras of this map "
+                             f"({', '.join(grid.secondaries)})")
+        if not (np.isfinite(margin) and margin >= 0) or int(pad) != pad or pad < 0:
+            raise InputError(f"margin must be >= 0 metres and pad a whole number of pixels >= 0, got {margin}, {pad}")
+        if principal.robot_pixels and robot_far is None:
+            raise InputError("the principal frame was self-filtered: pass robot_far, where the robot's body ends")
+    camera = principal.camera
+    used = [i for i, name in enumerate(grid.secondaries) if secondaries.get(name) is not None]
+    cams = [rig.cameras[grid.secondaries[i]] for i in used]
+    h_max = max([c.height for c in cams], default=1)
+    w_max = max([c.width for c in cams], default=1)
+    free = np.zeros((len(used), h_max, w_max), dtype=np.float32)
+    for k, (i, cam) in enumerate(zip(used, cams)):
+        image = secondaries[grid.secondaries[i]]
+        if image.shape != cam.shape:
+            raise InputError(f"the free image of camera {cam.name!r} is {image.shape}, the camera is {cam.shape}")
+        free[k, : cam.height, : cam.width] = image
+    sizes = np.array([[c.width, c.height] for c in cams], dtype=np.int64).reshape(-1, 2)
+    z_near = np.array([max(c.depth_range[0], 1e-6) for c in cams], dtype=np.float64)
+    certain = ((principal.invalid == 0) | (principal.z_start != np.float32(camera.depth_range[0]))).astype(np.uint8)
+    if principal.robot_pixels:
+        far = np.asarray(robot_far, dtype=np.float32)
+        blind_from = np.where(np.isfinite(principal.blind), np.maximum(principal.blind, far), np.inf)
+    else:
+        blind_from = np.full(camera.shape, np.inf)
+    blind_from = blind_from.astype(np.float32)
+
+    n = len(points_world)
+    points_camera = np.ascontiguousarray(camera.world_to_camera(points_world)) if n else np.zeros((0, 3))
+    distance = np.empty(n)
+    direction_camera = np.zeros((n, 3))
+    count = np.empty(n, dtype=np.int64)
+    invalid_count = np.empty(n, dtype=np.int64)
+    flags = np.empty(n, dtype=np.int64)
+    if n:
+        z_min, z_max = camera.depth_range
+        with parallel_chunksize(1):
+            _kernels.fused_query_points(
+                points_camera, float(rho), principal.z_start, principal.z_end, certain, blind_from, camera.fx,
+                camera.fy, camera.cx, camera.cy, z_min, z_max, config.AGGREGATES.index(aggregate),
+                unseen == "occupied", config.NEAR_PLANE_EPSILON, config.INSIDE_TOLERANCE, config.MIN_DIRECTION_NORM,
+                grid.d_min, grid.delta_d, grid.n_cells, np.ascontiguousarray(grid.corners[used]),
+                np.ascontiguousarray(grid.offsets[used]), free, sizes, z_near, float(margin), int(pad), distance,
+                direction_camera, count, invalid_count, flags)
+    stale = Flag.STALE_CAMERA if len(used) < len(grid.secondaries) else Flag(0)
+    return DistanceResult(
+        distance=distance,
+        direction=direction_camera @ camera.T_world_camera[:3, :3].T,
+        count=count,
+        invalid_count=invalid_count,
+        flags=tuple(Flag(int(f)) | stale for f in flags),
+        timestamps={camera.name: principal.timestamp},
+        cameras=(camera.name,) + tuple(grid.secondaries[i] for i in used),
+        invalid_pixels={camera.name: principal.invalid_pixels},
+    )

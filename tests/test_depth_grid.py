@@ -1,0 +1,184 @@
+"""The depth grid (SPEC section 8): the map, the fused query against its brute-force twin, the corrected
+confirmation rule, and fusion's bounds (never above the truth, never below the principal camera alone)."""
+
+import numpy as np
+import pytest
+
+import depthguard as dg
+import naive
+from depthguard.depthgrid import MapError, build_map, free_image, fused_distances, load_map, save_map
+from depthguard.rendering import Renderer, primitive_mesh, MeshInstance
+from depthguard.scenes import Box, Capsule, Sphere, render_depth, scene_distance
+from depthguard.transforms import look_at
+
+ROOM = [Box.from_bounds([-4, -4, -0.1], [4, 4, 0]), Box.from_bounds([-3, -4, 0], [-2.9, 4, 3]),
+        Box.from_bounds([-4, -3, 0], [4, -2.9, 3])]
+
+
+def rig(width=160, height=120, noise=None, second=(0.0, 2.5, 1.4)):
+    f = 131.25 * width / 160
+    cams = {n: dg.PinholeCamera(n, width, height, f, f, (width - 1) / 2, (height - 1) / 2,
+                                look_at(eye, [0, 0, 0.6]), depth_range=(0.3, 6.0),
+                                noise=noise or dg.NoiseModel.none())
+            for n, eye in (("p", [2.5, 0.0, 1.4]), ("s", second))}
+    return dg.Rig(cams, principal="p")
+
+
+def frames(r, scene, holes=None):
+    depth = render_depth(r.cameras["p"], scene)
+    if holes is not None:
+        depth[holes] = 0
+    principal = dg.prepare_depth(dg.depth_image(depth, r.cameras["p"]), r.cameras["p"])
+    second = free_image(dg.depth_image(render_depth(r.cameras["s"], scene), r.cameras["s"]), r.cameras["s"])
+    return principal, {"s": second}
+
+
+def test_map_round_trip_refusal_and_no_code(tmp_path):
+    r = rig()
+    grid = build_map(r)
+    assert grid.principal == "p" and grid.secondaries == ("s",) and grid.n_cells == 343
+    assert grid.corners.shape == (1, 121, 161, 3)
+    save_map(grid, tmp_path / "map.npz")
+    again = load_map(tmp_path / "map.npz", r)
+    assert np.array_equal(again.corners, grid.corners) and again.d_min == grid.d_min
+    moved = dg.Rig({"p": r.cameras["p"], "s": r.cameras["s"].replace(T_world_camera=look_at([0.1, 2.5, 1.4],
+                                                                                                  [0, 0, 0.6]))},
+                   principal="p")
+    with pytest.raises(MapError, match="another rig"):
+        load_map(tmp_path / "map.npz", moved)
+    # A file holding a pickled object is refused without unpickling it.
+    np.savez(tmp_path / "evil.npz", header=np.array([object()], dtype=object), corners=grid.corners,
+             offsets=grid.offsets)
+    with pytest.raises(MapError):
+        load_map(tmp_path / "evil.npz", r)
+    (tmp_path / "junk.npz").write_bytes(b"not a map")
+    with pytest.raises(MapError):
+        load_map(tmp_path / "junk.npz")
+    with pytest.raises(dg.InputError, match="secondary"):
+        build_map(dg.Rig({"p": r.cameras["p"]}))
+
+
+def test_map_corners_project_like_the_cameras():
+    r = rig()
+    grid = build_map(r)
+    p, s = r.cameras["p"], r.cameras["s"]
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        u, v = rng.integers(0, 160), rng.integers(0, 120)
+        z = rng.uniform(0.5, 4.0)
+        corner = p.back_project(u - 0.5, v - 0.5, z)
+        h = grid.corners[0, v, u] * z + grid.offsets[0]
+        us, vs, zs = s.project(s.world_to_camera(p.camera_to_world(corner[None])))
+        assert np.allclose([h[0] / h[2], h[1] / h[2], h[2]], [us[0], vs[0], zs[0]], atol=1e-9)
+
+
+def scenes():
+    rng = np.random.default_rng(3)
+    yield ROOM + [Capsule((1.4, 0.0, 0.2), (1.4, 0.0, 1.5), 0.2)]  # a person between p and the origin
+    for _ in range(3):
+        prims = list(ROOM)
+        for _ in range(4):
+            c = rng.uniform([-0.8, -0.8, 0.2], [1.6, 0.8, 1.2])
+            prims.append(Sphere(tuple(c), rng.uniform(0.05, 0.2)) if rng.random() < 0.5 else
+                         Box(tuple(c), tuple(rng.uniform(0.05, 0.25, 3))))
+        yield prims
+
+
+@pytest.mark.parametrize("index", range(4))
+def test_fused_kernel_equals_brute_force_twin(index):
+    scene = list(scenes())[index]
+    r = rig(40, 30)
+    grid = build_map(r)
+    rng = np.random.default_rng(index)
+    holes = rng.random((30, 40)) < 0.05
+    principal, frees = frames(r, scene, holes)
+    points = rng.uniform([-0.5, -0.6, 0.1], [1.3, 0.6, 1.3], (6, 3))
+    reference = naive.fused_query_reference(grid, principal, [frees["s"]], [0.3], points, 0.4, "occupied")
+    for aggregate in ("min", "hybrid", "mean"):
+        result = fused_distances(grid, r, principal, frees, points, 0.4, aggregate)
+        distance, count = reference[aggregate]
+        assert np.allclose(result.distance, distance, atol=1e-10), (aggregate, result.distance, distance)
+        assert np.array_equal(result.count, count)
+
+
+@pytest.mark.parametrize("index", range(4))
+def test_fusion_is_bounded_by_the_truth_and_by_the_principal_alone(index):
+    """Fused distances are at most the true distance (plus the pixel tolerance) and at least the principal's own
+    single-camera distance: fusion only removes false occupancy."""
+    scene = list(scenes())[index]
+    r = rig()
+    grid = build_map(r)
+    principal, frees = frames(r, scene)
+    rng = np.random.default_rng(10 + index)
+    points = rng.uniform([-0.6, -0.8, 0.1], [1.6, 0.8, 1.4], (60, 3))
+    points = points[scene_distance(scene, points) > 0]
+    truth = scene_distance(scene, points)
+    fused = fused_distances(grid, r, principal, frees, points, 0.4, "min")
+    single = dg.single_camera_distances(principal, points, 0.4, "min")
+    depth = r.cameras["p"].world_to_camera(points)[:, 2]
+    tolerance = 2.5 * (depth + 0.4) / r.cameras["p"].fx
+    near = truth < 0.4
+    assert np.all(fused.distance[near] <= truth[near] + tolerance[near])
+    assert np.all(fused.distance >= single.distance - 1e-12)
+
+
+def test_shadow_is_removed_and_the_hidden_side_found():
+    scene = ROOM + [Capsule((1.4, 0.0, 0.2), (1.4, 0.0, 1.5), 0.2)]
+    r = rig()
+    principal, frees = frames(r, scene)
+    grid = build_map(r)
+    points = np.array([[0.0, 0.0, 0.6], [0.3, 0.1, 0.8], [0.9, 0.0, 0.8]])  # behind the person as p sees it
+    single = dg.single_camera_distances(principal, points, 0.4, "min")
+    fused = fused_distances(grid, r, principal, frees, points, 0.4, "min")
+    truth = scene_distance(scene, points)
+    assert np.all(single.distance[:2] == 0)  # the shadow
+    assert np.all(np.isinf(fused.distance[:2]))  # the truth is beyond rho: 0.6 and 0.8
+    assert truth[2] - 0.06 < fused.distance[2] <= truth[2]  # the person's back, which p cannot see
+
+
+def test_corrected_rule_confirms_a_cell_the_papers_rule_clears():
+    """A small ball hidden from the principal camera sits in one of its gray cells; the second camera sees the ball,
+    its measured surface inside the cell. The papers' rule (j confirms only if its depth < the cell's near depth)
+    declares the cell free and misses the ball; the corrected rule (j must see beyond the cell's far depth)
+    confirms it, and the fused distance does not exceed the true one."""
+    r = rig()
+    grid = build_map(r)
+    p, s = r.cameras["p"], r.cameras["s"]
+    plate = Box.from_bounds([1.45, -0.3, 0.3], [1.5, 0.3, 1.3])  # hides the region behind it from p
+    u, v = 80, 60
+    k = int((2.0 - grid.d_min) / grid.delta_d)
+    # A ball whose surface, as s sees it, lies inside cell k of pixel (u, v): 3 mm before the cell's centre.
+    z_centre = grid.d_min + (k + 0.5) * grid.delta_d
+    centre_world = p.camera_to_world(p.back_project(u, v, z_centre)[None])[0]
+    away_from_s = centre_world - s.T_world_camera[:3, 3]
+    away_from_s /= np.linalg.norm(away_from_s)
+    ball = Sphere(tuple(centre_world + (0.03 - 0.003) * away_from_s), 0.03)
+    scene = ROOM + [plate, ball]
+    principal, frees = frames(r, scene)
+    assert principal.z_start[v, u] < 1.5  # p sees the plate, not the ball
+    z0, z1 = grid.d_min + k * grid.delta_d, grid.d_min + (k + 1) * grid.delta_d
+    # The papers' rule: j confirms iff its depth at the cell's pixel < the cell's near depth in j.
+    centre = p.camera_to_world(p.back_project(u, v, (z0 + z1) / 2)[None])
+    us, vs, _ = s.project(s.world_to_camera(centre))
+    near_depth_j = min(s.world_to_camera(p.camera_to_world(p.back_project(u + du, v + dv, z0)[None]))[0, 2]
+                       for du in (-0.5, 0.5) for dv in (-0.5, 0.5))
+    measured = frees["s"][int(round(vs[0])), int(round(us[0]))]
+    papers_confirm = measured < near_depth_j
+    ours_clears = naive.camera_clears_reference(grid.corners[0], grid.offsets[0], frees["s"], 0.3, z0, z1, u, v,
+                                                0.02, 1)
+    assert not papers_confirm and not ours_clears
+    P = centre_world + np.array([0.0, 0.0, 0.15])
+    fused = fused_distances(grid, r, principal, frees, P[None], 0.4, "min")
+    assert fused.distance[0] <= scene_distance([ball], P[None])[0] + 0.01
+
+
+def test_a_blind_secondary_clears_nothing():
+    scene = ROOM + [Capsule((1.4, 0.0, 0.2), (1.4, 0.0, 1.5), 0.2)]
+    r = rig()
+    principal, frees = frames(r, scene)
+    grid = build_map(r)
+    points = np.array([[0.0, 0.0, 0.6], [0.9, 0.0, 0.8]])
+    blind = fused_distances(grid, r, principal, {"s": None}, points, 0.4, "min")
+    single = dg.single_camera_distances(principal, points, 0.4, "min")
+    assert np.allclose(blind.distance, single.distance)
+    assert all(dg.Flag.STALE_CAMERA in f for f in blind.flags)
