@@ -35,16 +35,28 @@ class DistanceMonitor:
             ``"meshes"`` (:mod:`depthguard.self_filter`).
         self_filter_tolerance: metres by which a measurement may lie in front of the rendered robot and still be the
             robot (on top of the noise margin).
+        principals: with frames of several cameras, the principal cameras of the depth grid (SPEC section 8), names;
+            default: the rig's principal, else its first camera. Each point gets the largest of the principals'
+            fused distances among those whose view holds its whole surveillance region (each is a lower bound).
+        maps: principal name -> :class:`depthguard.depthgrid.DepthGridMap` (checked against the rig); maps not
+            given are built from the rig when first needed (milliseconds).
+        fusion_margin: metres a secondary camera must have seen beyond a cell to clear it (the rig's calibration
+            error, on top of the noise margin). fusion_pixels: pixels by which a cell's footprint grows in a
+            secondary camera.
 
     A frame passed as a :class:`DepthImage` is prepared once (and filtered with the joints given with it) and reused
     while the same object is passed again; a plain array is checked and prepared on every query.
+
+    With frames of one camera, queries use the single-camera method (SPEC sections 3-7); with frames of several,
+    the depth grid fuses them (SPEC section 8).
     """
 
     def __init__(self, rig: Rig, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
                  invalid: str = config.DEFAULT_INVALID, unseen: str = config.DEFAULT_UNSEEN,
                  method: str = config.DEFAULT_METHOD, max_age: float | None = None,
                  hole_pixels: int = config.DEFAULT_NEIGHBOR_HOLE_PIXELS, robot=None, self_filter: str = "hulls",
-                 self_filter_tolerance: float = config.SELF_FILTER_TOLERANCE):
+                 self_filter_tolerance: float = config.SELF_FILTER_TOLERANCE, principals=None, maps=None,
+                 fusion_margin: float = config.DEFAULT_FUSION_MARGIN, fusion_pixels: int = config.DEFAULT_FUSION_PIXELS):
         if not isinstance(rig, Rig):
             raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}")
         check_options(rho, aggregate, unseen, method)
@@ -69,7 +81,25 @@ class DistanceMonitor:
             from depthguard.self_filter import RobotSilhouette  # needs OpenGL: only with a robot
 
             self._silhouette = RobotSilhouette(robot, geometry=self_filter)
-        self._prepared: dict[str, tuple[DepthImage, OccupancyImage]] = {}
+        self._prepared: dict[str, tuple[object, _CameraFrame]] = {}
+        names = list(rig.cameras)
+        if principals is None:
+            principals = [rig.principal or names[0]]
+        for name in principals:
+            rig.camera(name)
+        if not principals:
+            raise InputError("principals must name at least one camera")
+        self.principals = tuple(principals)
+        self.maps = {}
+        for name, grid in (maps or {}).items():
+            grid.check_rig(rig)
+            self.maps[name] = grid
+        if not (np.isfinite(fusion_margin) and fusion_margin >= 0):
+            raise InputError(f"fusion_margin must be a non-negative number of metres, got {fusion_margin!r}")
+        if isinstance(fusion_pixels, bool) or not isinstance(fusion_pixels, (int, np.integer)) or fusion_pixels < 0:
+            raise InputError(f"fusion_pixels must be a non-negative integer, got {fusion_pixels!r}")
+        self.fusion_margin = float(fusion_margin)
+        self.fusion_pixels = int(fusion_pixels)
 
     def prepare(self, name: str, frame, joints=None) -> OccupancyImage:
         """Check a frame of camera ``name`` and prepare it (cached while the same :class:`DepthImage` comes back).
@@ -77,6 +107,9 @@ class DistanceMonitor:
         ``joints``: with a robot, its joint positions at the frame's capture time (by name or in
         ``robot.joint_names`` order), for self-filtering.
         """
+        return self._camera_frame(name, frame, joints).occupancy
+
+    def _camera_frame(self, name: str, frame, joints) -> "_CameraFrame":
         camera = self.rig.camera(name)
         cached = self._prepared.get(name)
         if cached is not None and cached[0] is frame:
@@ -92,12 +125,14 @@ class DistanceMonitor:
             if joints is None:
                 raise InputError(f"camera {name!r}: this monitor filters the robot out of its frames: pass the robot's "
                                  "joint positions at the frame's capture time (query(..., joints=...))")
-            robot_near = self._silhouette.render(camera, self.robot.joint_vector(joints))
+            joints = self.robot.joint_vector(joints)
+            robot_near = self._silhouette.render(camera, joints)
         occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels, robot_near=robot_near,
                                   robot_tolerance=self.self_filter_tolerance)
+        state = _CameraFrame(self, camera, image, occupancy, joints)
         if isinstance(frame, DepthImage):
-            self._prepared[name] = (frame, occupancy)
-        return occupancy
+            self._prepared[name] = (frame, state)
+        return state
 
     def query(self, frames: Mapping[str, object], points_world, *, joints=None, now: float | None = None,
               check: bool = True) -> DistanceResult:
@@ -120,31 +155,91 @@ class DistanceMonitor:
             raise InputError(f"frames must map camera names to depth images, got {type(frames).__name__}")
         if self.max_age is not None and now is None:
             raise InputError("this monitor has max_age set: pass now= (seconds, the frames' clock) to query()")
-        usable: dict[str, OccupancyImage] = {}
+        usable: dict[str, _CameraFrame] = {}
         stale: list[str] = []
         for name, frame in frames.items():
-            occupancy = self.prepare(name, frame, _joints_for(name, joints, frames))
-            if self.max_age is not None and (occupancy.timestamp is None or now - occupancy.timestamp > self.max_age):
+            state = self._camera_frame(name, frame, _joints_for(name, joints, frames))
+            timestamp = state.occupancy.timestamp
+            if self.max_age is not None and (timestamp is None or now - timestamp > self.max_age):
                 stale.append(name)
                 continue
-            usable[name] = occupancy
+            usable[name] = state
         if not usable:
             flag = Flag.STALE_CAMERA if stale else Flag.MISSING_CAMERA
-            return _blind_result(len(points), flag, {n: self._prepared[n][1].timestamp for n in stale
+            return _blind_result(len(points), flag, {n: self._prepared[n][1].occupancy.timestamp for n in stale
                                                      if n in self._prepared})
-        if len(usable) > 1:
-            raise InputError(
-                f"frames of {len(usable)} cameras given ({', '.join(usable)}); fusing several cameras needs the depth "
-                "grid, which this version does not have yet: pass one camera's frame"
-            )
-        (occupancy,) = usable.values()
-        result = single_camera_distances(occupancy, points, self.rho, self.aggregate, self.unseen, self.method,
-                                         check=False)
-        if stale:
-            flags = tuple(f | Flag.STALE_CAMERA for f in result.flags)
-            result = DistanceResult(result.distance, result.direction, result.count, result.invalid_count, flags,
-                                    result.timestamps, result.cameras, result.invalid_pixels, result.blind_distance)
-        return result
+        if len(usable) == 1 and not stale:
+            (state,) = usable.values()
+            return single_camera_distances(state.occupancy, points, self.rho, self.aggregate, self.unseen,
+                                           self.method, check=False)
+        return self._fused(usable, points, stale)
+
+    def _fused(self, usable: dict, points: np.ndarray, stale: list) -> DistanceResult:
+        """The depth grid of every usable principal; per point, the largest answer among the principals whose view
+        holds its whole surveillance region (else the first usable principal's, flagged)."""
+        from depthguard.depthgrid import build_map, fused_distances
+
+        if self.method != "exact":
+            raise InputError("fusing several cameras uses the exact method only")
+        results = []
+        for name in self.principals:
+            if name not in usable:
+                continue
+            grid = self.maps.get(name)
+            if grid is None:
+                grid = self.maps[name] = build_map(self.rig, name)
+            secondaries = {other: (usable[other].free if other in usable else None) for other in grid.secondaries}
+            state = usable[name]
+            results.append(fused_distances(grid, self.rig, state.occupancy, secondaries, points, self.rho,
+                                           self.aggregate, self.unseen, robot_far=state.robot_far,
+                                           margin=self.fusion_margin, pad=self.fusion_pixels, check=False))
+        if not results:
+            flag = Flag.STALE_CAMERA if any(n in stale for n in self.principals) else Flag.MISSING_CAMERA
+            return _blind_result(len(points), flag, {})
+        chosen = np.zeros(len(points), dtype=np.int64)
+        if len(results) > 1:
+            holds = np.array([[Flag.REGION_OUTSIDE_VIEW not in f for f in r.flags] for r in results])
+            distances = np.array([r.distance for r in results])
+            candidates = np.where(holds, distances, -np.inf)
+            chosen = np.where(holds.any(axis=0), np.argmax(candidates, axis=0), 0)
+        pick = lambda attr: np.array([getattr(results[c], attr)[i] for i, c in enumerate(chosen)])  # noqa: E731
+        flags = tuple(results[c].flags[i] | (Flag.STALE_CAMERA if stale else Flag(0)) for i, c in enumerate(chosen))
+        timestamps = {name: state.occupancy.timestamp for name, state in usable.items()}
+        return DistanceResult(distance=pick("distance"), direction=pick("direction").reshape(-1, 3),
+                              count=pick("count"), invalid_count=pick("invalid_count"), flags=flags,
+                              timestamps=timestamps, cameras=tuple(usable),
+                              invalid_pixels={n: s.occupancy.invalid_pixels for n, s in usable.items()},
+                              principal=tuple(results[c].cameras[0] for c in chosen))
+
+
+class _CameraFrame:
+    """One camera's latest frame as the monitor prepared it: its occupancy, and, when the depth grid needs them,
+    where the robot's body ends along each pixel (for a principal) and how far it saw (for a secondary)."""
+
+    def __init__(self, monitor: DistanceMonitor, camera, image: DepthImage, occupancy: OccupancyImage, joints):
+        self._monitor = monitor
+        self.camera = camera
+        self.image = image
+        self.occupancy = occupancy
+        self._joints = joints
+        self._robot_far = None
+        self._free = None
+
+    @property
+    def robot_far(self):
+        if self._monitor._silhouette is None:
+            return None
+        if self._robot_far is None:
+            self._robot_far = self._monitor._silhouette.render_far(self.camera, self._joints)
+        return self._robot_far
+
+    @property
+    def free(self) -> np.ndarray:
+        if self._free is None:
+            from depthguard.depthgrid import free_image
+
+            self._free = free_image(self.image, self.camera)
+        return self._free
 
 
 def _joints_for(name: str, joints, frames):

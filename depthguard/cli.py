@@ -1,6 +1,7 @@
 """The ``depthguard`` command line.
 
     depthguard distance --rig RIG.yaml --depth NAME=PATH --points POINTS [--rho 0.4] [--aggregate hybrid] ...
+    depthguard build-map --rig RIG.yaml [--principal NAME] [--d-min M --d-max M --delta-d M] --out MAP
     depthguard simulate [SCENE.yaml] --out DIR [--seed N] [--duration S]
     depthguard demo [--out DIR] [--duration S]
     depthguard scenario-a [--out DIR]
@@ -51,7 +52,22 @@ def _build_parser() -> argparse.ArgumentParser:
     distance.add_argument("--joints", metavar="VALUES",
                           help="the robot's joint positions when the images were taken, radians: name=value,... or "
                                "the movable joints' values in URDF order, comma-separated")
+    distance.add_argument("--principal", action="append", metavar="NAME",
+                          help="with several --depth: a principal camera of the depth grid (repeatable; default: "
+                               "the rig's principal, else its first camera)")
+    distance.add_argument("--map", action="append", metavar="MAP",
+                          help="a depth grid map written by build-map (repeatable); maps not given are built from "
+                               "the rig")
     distance.add_argument("--json", action="store_true", help="print one JSON array, one object per point")
+
+    build = commands.add_parser("build-map", help="build the depth grid map of a rig's principal camera (SPEC "
+                                                  "section 8) and save it")
+    build.add_argument("--rig", required=True, help="rig YAML file")
+    build.add_argument("--principal", help="principal camera (default: the rig's principal, else its first camera)")
+    build.add_argument("--d-min", type=float, default=config.DEPTH_GRID_D_MIN, help="grid start, metres")
+    build.add_argument("--d-max", type=float, default=None, help="grid end, metres (default: 343 cells)")
+    build.add_argument("--delta-d", type=float, default=config.DEPTH_GRID_DELTA_D, help="cell depth, metres")
+    build.add_argument("--out", required=True, help="map file to write (.npz)")
 
     simulate = commands.add_parser("simulate", help="simulate a workcell and write its frames, rig, joint states "
                                                      "and ground truth")
@@ -79,6 +95,8 @@ def main(argv=None) -> int:
             return _distance(args)
         if args.command == "simulate":
             return _simulate(args)
+        if args.command == "build-map":
+            return _build_map(args)
         if args.command == "demo":
             from depthguard.experiments import workcell
 
@@ -116,8 +134,15 @@ def _distance(args) -> int:
         frames[name] = load_depth(path, rig.camera(name))
     points = load_points(args.points)
     robot, joints = _robot_and_joints(args)
+    from depthguard.depthgrid import load_map
+
+    maps = {}
+    for path in args.map or []:
+        grid = load_map(path, rig)
+        maps[grid.principal] = grid
+    principals = args.principal or (list(maps) if maps else None)
     monitor = DistanceMonitor(rig, rho=args.rho, aggregate=args.aggregate, invalid=args.invalid, unseen=args.unseen,
-                              method=args.method, robot=robot)
+                              method=args.method, robot=robot, principals=principals, maps=maps)
     result = monitor.query(frames, points, joints=joints)
     records = result.records(points)
     if args.json:
@@ -129,6 +154,23 @@ def _distance(args) -> int:
         direction = "[" + ", ".join(f"{c:+.3f}" for c in r["direction"]) + "]"
         print(f"{r['point'][0]:8.3f} {r['point'][1]:8.3f} {r['point'][2]:8.3f} {d:>9s} {direction:>26s} "
               f"{r['count']:6d}  {','.join(r['flags']) or '-'}")
+    return 0
+
+
+def _build_map(args) -> int:
+    import time
+
+    from depthguard import load_rig
+    from depthguard.depthgrid import build_map, save_map
+
+    rig = load_rig(args.rig)
+    start = time.perf_counter()
+    grid = build_map(rig, args.principal, d_min=args.d_min, d_max=args.d_max, delta_d=args.delta_d)
+    save_map(grid, args.out)
+    camera = rig.cameras[grid.principal]
+    print(f"depth grid of {grid.principal!r} ({camera.width}x{camera.height}x{grid.n_cells} cells, "
+          f"{grid.d_min:g}-{grid.d_max:g} m) to {', '.join(grid.secondaries)}: {grid.nbytes / 1e6:.1f} MB, built in "
+          f"{time.perf_counter() - start:.2f} s, written to {args.out}")
     return 0
 
 

@@ -57,9 +57,12 @@ class DistanceResult:
         cameras: names of the cameras whose frames were used.
         invalid_pixels: camera name -> pixels of its frame without a valid measurement (whatever the policy did
             with them): a frame that is mostly invalid shows here even under the permissive ``invalid="free"``.
-        blind_distance: (n,) float64 metres, the distance to the space hidden behind the robot (from where the
-            robot's body ends along each pixel), inf when it is farther than rho or there is no robot. The fully
-            conservative distance is ``min(distance, blind_distance)``.
+        blind_distance: (n,) float64 metres, the distance to the space hidden behind the robot (single camera:
+            from the robot's rendered surface on), inf when it is farther than rho or there is no robot. The fully
+            conservative distance is ``min(distance, blind_distance)``. With several cameras the depth grid checks
+            that space with the other cameras, and this stays inf.
+        principal: with several cameras, per point the principal camera whose fused answer is reported; empty for
+            a single camera.
     """
 
     distance: np.ndarray
@@ -71,6 +74,7 @@ class DistanceResult:
     cameras: tuple[str, ...] = ()
     invalid_pixels: dict[str, int] = field(default_factory=dict)
     blind_distance: np.ndarray | None = None
+    principal: tuple[str, ...] = ()
 
     def __post_init__(self):
         if self.blind_distance is None:

@@ -100,6 +100,11 @@ class RobotSilhouette:
         configuration ``q``, 0 where the robot is not."""
         return self.renderer.render_depth(camera, self.instances(q))
 
+    def render_far(self, camera: PinholeCamera, q) -> np.ndarray:
+        """(h, w) float32 metres: where the robot's padded geometry ends along each pixel of ``camera`` (its farthest
+        surface), 0 where the robot is not. The depth grid checks the space behind it (SPEC section 8, case iv)."""
+        return self.renderer.render_depth_max(camera, self.instances(q))
+
     def triangles(self) -> int:
         """Triangles drawn per camera."""
         return sum(self.renderer._mesh(mesh_id).n_faces for _, mesh_id in self._meshes)

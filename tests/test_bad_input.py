@@ -283,13 +283,21 @@ def test_frame_for_unknown_camera_is_named(rig, clean):
     assert "'ceiling'" in str(exc_info.value)
 
 
-def test_frames_of_two_cameras_are_refused_clearly(camera, clean):
+def test_frames_of_two_cameras_are_fused_and_a_stale_one_flagged(camera, clean):
     side = camera.replace(name="side", T_world_camera=look_at([2, 0, 1], [0, 0, 0.3]))
-    rig2 = dg.Rig({"top": camera, "side": side})
-    with pytest.raises(dg.InputError) as exc_info:
-        dg.DistanceMonitor(rig2).query({"top": clean, "side": render_depth(side, SCENE)}, IN_VIEW)
-    message = str(exc_info.value)
-    assert "top" in message and "side" in message
+    rig2 = dg.Rig({"top": camera, "side": side}, principal="top")
+    monitor = dg.DistanceMonitor(rig2, max_age=0.1)
+    top = dg.depth_image(clean, camera, timestamp=1.0)
+    fresh = monitor.query({"top": top, "side": dg.depth_image(render_depth(side, SCENE), side, timestamp=1.0)},
+                          IN_VIEW, now=1.05)
+    assert fresh.cameras == ("top", "side") and fresh.principal == ("top",) * len(IN_VIEW)
+    assert not any(dg.Flag.STALE_CAMERA in f for f in fresh.flags)
+    stale = monitor.query({"top": top, "side": dg.depth_image(render_depth(side, SCENE), side, timestamp=0.5)},
+                          IN_VIEW, now=1.05)
+    assert all(dg.Flag.STALE_CAMERA in f for f in stale.flags)
+    single = dg.DistanceMonitor(dg.Rig({"top": camera})).query({"top": clean}, IN_VIEW)
+    assert np.all(stale.distance <= single.distance + 1e-12)  # a stale camera clears nothing
+    assert np.all(fresh.distance >= stale.distance - 1e-12)
 
 
 def test_frame_taken_by_another_camera_is_refused(camera, clean):

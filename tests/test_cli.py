@@ -274,7 +274,8 @@ def _bad_cases(work, tmp):
         "depth without name": (args(depth=(f"={png}",)), "NAME=PATH"),
         "depth without path": (args(depth=("front=",)), "NAME=PATH"),
         "camera twice": (args(depth=(f"front={png}", f"front={png}")), "twice"),
-        "two cameras": (args(rig=work["rig2"], depth=(f"front={png}", f"side={work['side']}")), "2 cameras"),
+        "map of another rig": (args(rig=work["rig2"], depth=(f"front={png}", f"side={work['side']}"),
+                                    extra=("--map", str(_other_rig_map(tmp, work)))), "another rig"),
         "unknown option": (args(extra=("--frobnicate",)), "--frobnicate"),
         "bad aggregate": (args(extra=("--aggregate", "max")), "--aggregate"),
         "bad invalid": (args(extra=("--invalid", "ignore")), "--invalid"),
@@ -294,7 +295,7 @@ BAD_CASE_NAMES = [
     "json not a list", "json pair", "json strings", "binary points", "unknown camera", "wrong image size",
     "8-bit image", "truncated png", "int npy", "wrong suffix", "malformed rig", "rig not orthonormal", "binary rig",
     "rig with python tag", "depth without =", "depth without name", "depth without path", "camera twice",
-    "two cameras", "unknown option", "bad aggregate", "bad invalid", "negative rho", "nan rho", "text rho",
+    "map of another rig", "unknown option", "bad aggregate", "bad invalid", "negative rho", "nan rho", "text rho",
     "missing --points", "missing --depth", "no command", "unknown command",
 ]
 
@@ -339,3 +340,37 @@ def test_help_exits_zero(capsys):
     status, out, _ = run(["distance", "--help"], capsys)
     assert status == 0
     assert "--rig" in out and "--points" in out
+
+
+def _other_rig_map(tmp, work):
+    """A depth grid map built for a rig whose side camera sits 5 cm off."""
+    from depthguard.depthgrid import build_map, save_map
+
+    rig = dg.load_rig(work["rig2"])
+    moved = dg.Rig({"front": rig.cameras["front"],
+                    "side": rig.cameras["side"].replace(T_world_camera=look_at([2, 0.05, 1], [0, 0, 0.3]))})
+    path = tmp / "other.npz"
+    save_map(build_map(moved, "front"), path)
+    return path
+
+
+def test_several_cameras_fuse_through_the_depth_grid(work, tmp_path, capsys):
+    """Two --depth give the fused result, the same as the Python API; build-map writes a map that --map uses."""
+    base = ["distance", "--rig", str(work["rig2"]), "--depth", f"front={work['png']}", "--depth",
+            f"side={work['side']}", "--points", str(work["csv"]), "--json"]
+    assert main(base) == 0
+    built = json.loads(capsys.readouterr().out)
+    assert main(["build-map", "--rig", str(work["rig2"]), "--principal", "front", "--out",
+                 str(tmp_path / "map.npz")]) == 0
+    assert "front" in capsys.readouterr().out
+    assert main(base + ["--map", str(tmp_path / "map.npz")]) == 0
+    assert json.loads(capsys.readouterr().out) == built
+    rig = dg.load_rig(work["rig2"])
+    frames = {"front": dg.load_depth(work["png"], rig.cameras["front"]),
+              "side": dg.load_depth(work["side"], rig.cameras["side"])}
+    points = np.loadtxt(work["csv"], delimiter=",", skiprows=1, ndmin=2)
+    expected = dg.DistanceMonitor(rig).query(frames, points).records(points)
+    assert built == expected
+    single = dg.DistanceMonitor(rig).query({"front": frames["front"]}, points)
+    fused = np.array([np.inf if r["distance"] is None else r["distance"] for r in built])
+    assert np.all(fused >= single.distance - 1e-12)
