@@ -208,8 +208,8 @@ DEPTH_GRID_CELLS = 343
 
 #: Fusion: metres by which a secondary camera's measured surface must lie beyond a cell (on top of its noise margin)
 #: for it to declare the cell free. It covers the rig's calibration error: a camera whose pose is off by this much
-#: must not clear a surface that another camera sees.
-DEFAULT_FUSION_MARGIN = 0.02
+#: must not clear a surface that another camera sees. Measure it for a real rig (see the slambook experiment).
+DEFAULT_FUSION_MARGIN = 0.01
 
 #: Fusion: a cell's footprint in a secondary camera is grown by this many pixels on every side (calibration error).
 DEFAULT_FUSION_PIXELS = 1

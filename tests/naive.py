@@ -280,8 +280,8 @@ def camera_clears_reference(corners_j, offset_j, free_j, z_near_j, z0, z1, u, v,
     return bool(np.all(free_j[np.ix_(r, q)] >= points[:, 2].max() + margin))
 
 
-def fused_query_reference(grid, principal, frees, z_nears, points_world, rho, unseen, robot_far=None, margin=0.02,
-                          pad=1, inside_tol=1e-12):
+def fused_query_reference(grid, principal, frees, z_nears, points_world, rho, unseen, robot_far=None, margin=0.01,
+                          pad=1, inside_tol=1e-12, robot_slack=0.0):
     """The fused query of SPEC section 8 by brute force: for every principal pixel, every grid cell that comes
     within rho is classified (certain, candidate confirmed by all secondaries, or cleared) and the pixel's distance
     is the smallest over its occupied pieces.
@@ -297,7 +297,8 @@ def fused_query_reference(grid, principal, frees, z_nears, points_world, rho, un
     ze_img = principal.z_end.astype(np.float64)
     certain_img = (principal.invalid == 0) | (principal.z_start != np.float32(z_min))
     if principal.robot_pixels:
-        blind_img = np.where(np.isfinite(principal.blind), np.maximum(principal.blind, robot_far), np.inf)
+        blind_img = np.where(np.isfinite(principal.blind), np.maximum(principal.blind, robot_far + robot_slack),
+                             np.inf)
     else:
         blind_img = np.full(camera.shape, np.inf)
     out = {a: (np.full(len(points_world), np.inf), np.zeros(len(points_world), dtype=np.int64))

@@ -182,3 +182,34 @@ def test_a_blind_secondary_clears_nothing():
     single = dg.single_camera_distances(principal, points, 0.4, "min")
     assert np.allclose(blind.distance, single.distance)
     assert all(dg.Flag.STALE_CAMERA in f for f in blind.flags)
+
+
+def test_fused_kernel_equals_twin_behind_a_robot():
+    """Case (iv): a capsule arm filtered out of the principal frame; the space behind it (from where its body ends,
+    plus the self-filter's slack) is checked with the second camera."""
+    arm = [Capsule((0.0, 0.0, 0.0), (0.0, 0.0, 0.7), 0.08), Capsule((0.0, 0.0, 0.7), (0.3, 0.3, 0.9), 0.06)]
+    hand = Sphere((-0.25, 0.05, 0.6), 0.05)  # behind the arm as p sees it
+    r = rig(40, 30)
+    grid = build_map(r)
+    p, s = r.cameras["p"], r.cameras["s"]
+    padded = [Capsule(c.p0, c.p1, c.radius + 0.02) for c in arm]
+    with Renderer() as renderer:
+        meshes = [renderer.add_mesh(*primitive_mesh(c, 32), closed=True) for c in padded]
+        instances = [MeshInstance(m, np.eye(4)) for m in meshes]
+        robot_near = renderer.render_depth(p, instances)
+        robot_far = renderer.render_depth_max(p, instances)
+    scene = ROOM + arm + [hand]
+    principal = dg.prepare_depth(dg.depth_image(render_depth(p, scene), p), p, robot_near=robot_near)
+    assert principal.robot_pixels > 20
+    frees = {"s": free_image(dg.depth_image(render_depth(s, scene), s), s)}
+    points = np.array([[0.0, 0.0, 0.35], [0.0, 0.0, 0.6], [0.15, 0.15, 0.8], [-0.1, 0.0, 0.5]])
+    slack = 0.02 + p.noise.margin(robot_far.astype(np.float64))
+    reference = naive.fused_query_reference(grid, principal, [frees["s"]], [0.3], points, 0.4, "occupied",
+                                            robot_far=robot_far, robot_slack=slack)
+    for aggregate in ("min", "hybrid"):
+        result = fused_distances(grid, r, principal, frees, points, 0.4, aggregate, robot_far=robot_far)
+        assert np.allclose(result.distance, reference[aggregate][0], atol=1e-10), aggregate
+    # The hand hidden from p but seen by s counts; the single camera could only flag it.
+    truth = scene_distance([hand], points)
+    fused = fused_distances(grid, r, principal, frees, points, 0.4, "min", robot_far=robot_far)
+    assert fused.distance[3] <= truth[3] + 0.02

@@ -29,7 +29,7 @@ def fused_distances(grid: DepthGridMap, rig: Rig, principal: OccupancyImage, sec
                     points_world, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
                     unseen: str = config.DEFAULT_UNSEEN, robot_far: np.ndarray | None = None,
                     margin: float = config.DEFAULT_FUSION_MARGIN, pad: int = config.DEFAULT_FUSION_PIXELS,
-                    check: bool = True) -> DistanceResult:
+                    robot_tolerance: float = config.SELF_FILTER_TOLERANCE, check: bool = True) -> DistanceResult:
     """Distances from control points to what the principal camera says is possibly occupied and no other camera
     clears (SPEC section 8, cases i-iv, with the corrected confirmation rule).
 
@@ -47,6 +47,11 @@ def fused_distances(grid: DepthGridMap, rig: Rig, principal: OccupancyImage, sec
             not an obstacle. Needed when ``principal`` was self-filtered.
         margin: metres a secondary camera must have seen beyond a cell (calibration error; on top of its noise
             margin). pad: pixels by which a cell's footprint grows in a secondary camera.
+        robot_tolerance: the self-filter's tolerance. Self-filtering counts a measurement up to this (plus the noise
+            margin) in front of the rendered robot as the robot; fusion counts the same depth behind where the
+            robot's body ends as the robot too. No camera can clear space that near a surface it sees (its noise
+            margin forbids it), so without this every point on the robot would find "occupied" cells at its own
+            surface.
     """
     if check:
         check_options(rho, aggregate, unseen, "exact")
@@ -78,8 +83,9 @@ def fused_distances(grid: DepthGridMap, rig: Rig, principal: OccupancyImage, sec
     z_near = np.array([max(c.depth_range[0], 1e-6) for c in cams], dtype=np.float64)
     certain = ((principal.invalid == 0) | (principal.z_start != np.float32(camera.depth_range[0]))).astype(np.uint8)
     if principal.robot_pixels:
-        far = np.asarray(robot_far, dtype=np.float32)
-        blind_from = np.where(np.isfinite(principal.blind), np.maximum(principal.blind, far), np.inf)
+        far = np.asarray(robot_far, dtype=np.float64)
+        slack = robot_tolerance + camera.noise.margin(far)
+        blind_from = np.where(np.isfinite(principal.blind), np.maximum(principal.blind, far + slack), np.inf)
     else:
         blind_from = np.full(camera.shape, np.inf)
     blind_from = blind_from.astype(np.float32)
