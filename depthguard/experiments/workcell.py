@@ -9,7 +9,7 @@ covers everything the robot could hit: the person, the box, the table and shelf,
 What it shows: single-camera distances are never above the truth plus the pixel tolerance unless flagged
 ``robot_blind_spot``; a person between a camera and the robot makes that camera's distances small (false alarms,
 the shadow case); the principal camera cannot see the hidden hand. Fusing both cameras is the depth grid's job
-(next issue).
+(``depthguard.depthgrid``).
 
     depthguard demo [--out DIR] [--duration SECONDS]
 """
