@@ -5,6 +5,7 @@
     depthguard simulate [SCENE.yaml] --out DIR [--seed N] [--duration S]
     depthguard demo [--out DIR] [--duration S]
     depthguard scenario-a [--out DIR]
+    depthguard real-room [--out DIR] [--data FOLDER]
 
 Bad input ends with exit status 2 and one line on standard error that says what is wrong.
 """
@@ -81,6 +82,11 @@ def _build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="out/demo", help="output folder for plots and summary.json")
     demo.add_argument("--duration", type=float, default=None, help="only the first S seconds (default: all 12)")
 
+    room = commands.add_parser("real-room", help="real data: three calibrated views of a room fused through the "
+                                                 "depth grid; the calibration error and the fusion margin it needs")
+    room.add_argument("--out", default="out/real-room", help="output folder for plots and summary.json")
+    room.add_argument("--data", default=None, help="the slambook2-room folder (default: ../shared/data/real/...)")
+
     scenario_a = commands.add_parser("scenario-a", help="reference scenario A of the 2015 paper: plots and a "
                                                         "timing table")
     scenario_a.add_argument("--out", default="out/scenario-a", help="output folder for plots and tables")
@@ -97,6 +103,10 @@ def main(argv=None) -> int:
             return _simulate(args)
         if args.command == "build-map":
             return _build_map(args)
+        if args.command == "real-room":
+            from depthguard.experiments import real_room
+
+            return real_room.main(args.out, folder=args.data)
         if args.command == "demo":
             from depthguard.experiments import workcell
 
