@@ -20,7 +20,6 @@ from numba import njit, prange
 
 from depthguard.depthspace._kernels import (
     AGG_MIN,
-    FLAG_INVALID_PIXELS_USED,
     FLAG_REGION_OUTSIDE_VIEW,
     SILHOUETTE_PAD,
     _finish_min,
