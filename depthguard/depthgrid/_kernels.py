@@ -18,17 +18,7 @@ free[j][q] is j's measured depth minus its noise margin (0 where j measured noth
 import numpy as np
 from numba import njit, prange
 
-from depthguard.depthspace._kernels import (
-    AGG_MIN,
-    FLAG_REGION_OUTSIDE_VIEW,
-    SILHOUETTE_PAD,
-    _finish_min,
-    _finish_sum,
-    ball_silhouette_rows,
-    cube_window,
-    frustum_nearest,
-    view_boundary,
-)
+from depthguard.depthspace._kernels import AGG_MIN, _finish_min, _finish_sum, frustum_nearest, surveillance_region
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -218,28 +208,11 @@ def fused_query_point(X, Y, Z, rho, z_start, z_end, certain, blind_from, fx, fy,
     flags); writes the unit direction (from the obstacle towards P, principal optical frame) into out_direction."""
     height, width = z_start.shape
     rho2 = rho * rho
-    flags = 0
-    s_view, nx, ny, nz = view_boundary(X, Y, Z, (-0.5 - cx) / fx, (width - 0.5 - cx) / fx, (-0.5 - cy) / fy,
-                                       (height - 0.5 - cy) / fy, z_min, z_max)
-    if s_view < rho:
-        flags |= FLAG_REGION_OUTSIDE_VIEW
-    out_direction[0] = 0.0
-    out_direction[1] = 0.0
-    out_direction[2] = 0.0
-    if unseen_occupied and s_view <= inside_tol:
+    flags, unseen_here, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi = surveillance_region(
+        X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_max, unseen_occupied, near_eps, inside_tol, spans,
+        out_direction)
+    if unseen_here:
         return 0.0, 1, 0, flags
-    unseen_d = s_view if (unseen_occupied and s_view < rho) else np.inf
-    u_lo, u_hi, v_lo, v_hi = cube_window(X, Y, Z, rho, fx, fy, cx, cy, width, height, near_eps)
-    if u_lo <= u_hi and v_lo <= v_hi:
-        if Z - rho > near_eps:
-            ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, u_hi, SILHOUETTE_PAD, spans)
-        else:
-            for v in range(v_lo, v_hi + 1):
-                spans[v, 0] = u_lo
-                spans[v, 1] = u_hi
-    else:
-        v_lo = 0
-        v_hi = -1
     prune_min = aggregate == AGG_MIN
     z_far = Z + rho
     best2 = np.inf

@@ -407,6 +407,44 @@ def _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, v_lo, v_
 
 
 @njit(cache=True, error_model="numpy")
+def surveillance_region(X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_max, unseen_occupied, near_eps,
+                        inside_tol, spans, out_direction):
+    """What every query of one point P starts with (single camera and fused): the observed volume's boundary and the
+    pixels to visit.
+
+    Clears out_direction (3,). Returns (flags, P unseen?, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi): the
+    REGION_OUTSIDE_VIEW flag; whether P itself lies in unseen space under ``unseen_occupied`` (the answer is then
+    0); the observed volume's boundary as a contributor (distance unseen_d, inf when it does not count, and inward
+    normal); the cube window, v_lo > v_hi when it is empty. Fills spans[v] for the window's rows with the columns
+    that meet the silhouette of the ball B(P, rho).
+    """
+    flags = 0
+    s_view, nx, ny, nz = view_boundary(X, Y, Z, (-0.5 - cx) / fx, (width - 0.5 - cx) / fx, (-0.5 - cy) / fy,
+                                       (height - 0.5 - cy) / fy, z_min, z_max)
+    if s_view < rho:
+        flags |= FLAG_REGION_OUTSIDE_VIEW
+    out_direction[0] = 0.0
+    out_direction[1] = 0.0
+    out_direction[2] = 0.0
+    unseen_here = unseen_occupied and s_view <= inside_tol
+    # The boundary of the observed volume is one more contributor when unseen space counts as occupied.
+    unseen_d = s_view if (unseen_occupied and s_view < rho) else np.inf
+    u_lo, u_hi, v_lo, v_hi = cube_window(X, Y, Z, rho, fx, fy, cx, cy, width, height, near_eps)
+    if u_lo <= u_hi and v_lo <= v_hi and not unseen_here:
+        if Z - rho > near_eps:
+            ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, u_hi, SILHOUETTE_PAD,
+                                 spans)
+        else:
+            for v in range(v_lo, v_hi + 1):
+                spans[v, 0] = u_lo
+                spans[v, 1] = u_hi
+    else:
+        v_lo = 0
+        v_hi = -1
+    return flags, unseen_here, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi
+
+
+@njit(cache=True, error_model="numpy")
 def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block, fx, fy, cx,
                 cy, z_min, z_max, aggregate, unseen_occupied, near_eps, inside_tol, min_direction, spans, scratch,
                 out_direction, out_blind):
@@ -424,32 +462,12 @@ def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_b
     flags a result that this blind space comes closer than.
     """
     height, width = z_start.shape
-    flags = 0
-    s_view, nx, ny, nz = view_boundary(X, Y, Z, (-0.5 - cx) / fx, (width - 0.5 - cx) / fx, (-0.5 - cy) / fy,
-                                       (height - 0.5 - cy) / fy, z_min, z_max)
-    if s_view < rho:
-        flags |= FLAG_REGION_OUTSIDE_VIEW
-    out_direction[0] = 0.0
-    out_direction[1] = 0.0
-    out_direction[2] = 0.0
     out_blind[0] = np.inf
-    if unseen_occupied and s_view <= inside_tol:  # P itself is unseen
+    flags, unseen_here, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi = surveillance_region(
+        X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_max, unseen_occupied, near_eps, inside_tol, spans,
+        out_direction)
+    if unseen_here:
         return 0.0, 1, 0, flags
-    # The boundary of the observed volume is one more contributor when unseen space counts as occupied.
-    unseen_d = s_view if (unseen_occupied and s_view < rho) else np.inf
-
-    u_lo, u_hi, v_lo, v_hi = cube_window(X, Y, Z, rho, fx, fy, cx, cy, width, height, near_eps)
-    if u_lo <= u_hi and v_lo <= v_hi:
-        if Z - rho > near_eps:
-            ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, u_hi, SILHOUETTE_PAD,
-                                 spans)
-        else:
-            for v in range(v_lo, v_hi + 1):
-                spans[v, 0] = u_lo
-                spans[v, 1] = u_hi
-    else:
-        v_lo = 0
-        v_hi = -1
     if has_blind and v_lo <= v_hi:
         blind2 = _nearest_in_blocks(X, Y, Z, rho, blind, blind, False, invalid, blind_block_min, block, fx, fy, cx, cy,
                                     u_lo, u_hi, v_lo, v_hi, near_eps, spans)[0]
