@@ -374,3 +374,20 @@ def fused_query_reference(grid, principal, frees, z_nears, points_world, rho, un
             out[a][1][i] = 1 if a == "min" else len(all_d)
             out[a][0][i] = 0.0 if inside else (all_d.mean() if a == "mean" else all_d.min())
     return out
+
+
+def random_rotation(rng) -> np.ndarray:
+    """A uniformly random proper rotation (det +1) from the QR decomposition of a Gaussian matrix."""
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q = q * np.sign(np.diag(r))
+    if np.linalg.det(q) < 0:
+        q[:, 0] = -q[:, 0]
+    return q
+
+
+def random_pose(rng, spread: float) -> np.ndarray:
+    """A random rigid transform (4, 4): random_rotation and a translation uniform in [-spread, spread]^3 metres."""
+    T = np.eye(4)
+    T[:3, :3] = random_rotation(rng)
+    T[:3, 3] = rng.uniform(-spread, spread, size=3)
+    return T

@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 import yaml
 
+import naive
+
 import depthguard as dg
 from depthguard.transforms import look_at
 
@@ -19,20 +21,8 @@ from depthguard.transforms import look_at
 # helpers
 
 
-def random_rotation(rng) -> np.ndarray:
-    """A uniformly random proper rotation (det +1) from the QR decomposition of a Gaussian matrix."""
-    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
-    q = q * np.sign(np.diag(r))
-    if np.linalg.det(q) < 0:
-        q[:, 0] = -q[:, 0]
-    return q
-
-
 def random_pose(rng) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3] = random_rotation(rng)
-    T[:3, 3] = rng.uniform(-3.0, 3.0, size=3)
-    return T
+    return naive.random_pose(rng, 3.0)
 
 
 def make_camera(name="cam", **changes) -> dg.PinholeCamera:

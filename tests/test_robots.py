@@ -25,6 +25,8 @@ import numpy as np
 import pytest
 import trimesh
 
+import naive
+
 from depthguard import config
 from depthguard.errors import DepthguardError, InputError, RobotError
 from depthguard.robots import ControlPoint, LinkCapsule, RobotModel, default_robot_path, fit_capsule
@@ -76,19 +78,8 @@ def bullet():
     pybullet.disconnect(client)
 
 
-def random_rotation(rng) -> np.ndarray:
-    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
-    q = q * np.sign(np.diag(r))
-    if np.linalg.det(q) < 0:
-        q[:, 0] = -q[:, 0]
-    return q
-
-
 def random_pose(rng) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3] = random_rotation(rng)
-    T[:3, 3] = rng.uniform(-2.0, 2.0, size=3)
-    return T
+    return naive.random_pose(rng, 2.0)
 
 
 def random_configurations(robot, rng, count=N_CONFIGS) -> np.ndarray:

@@ -10,7 +10,7 @@ from depthguard.cameras import PinholeCamera, Rig
 from depthguard.depth import DepthImage, OccupancyImage
 from depthguard.depthgrid import _kernels
 from depthguard.depthgrid._map import DepthGridMap
-from depthguard.depthspace._distance import check_options, check_points
+from depthguard.depthspace._distance import check_options, check_points, query_arrays
 from depthguard.errors import InputError
 from depthguard.results import DistanceResult, Flag
 
@@ -91,12 +91,7 @@ def fused_distances(grid: DepthGridMap, rig: Rig, principal: OccupancyImage, sec
     blind_from = blind_from.astype(np.float32)
 
     n = len(points_world)
-    points_camera = np.ascontiguousarray(camera.world_to_camera(points_world)) if n else np.zeros((0, 3))
-    distance = np.empty(n)
-    direction_camera = np.zeros((n, 3))
-    count = np.empty(n, dtype=np.int64)
-    invalid_count = np.empty(n, dtype=np.int64)
-    flags = np.empty(n, dtype=np.int64)
+    points_camera, distance, direction_camera, count, invalid_count, flags = query_arrays(camera, points_world)
     if n:
         z_min, z_max = camera.depth_range
         with parallel_chunksize(1):

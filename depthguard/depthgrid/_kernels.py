@@ -18,7 +18,13 @@ free[j][q] is j's measured depth minus its noise margin (0 where j measured noth
 import numpy as np
 from numba import njit, prange
 
-from depthguard.depthspace._kernels import AGG_MIN, _finish_min, _finish_sum, frustum_nearest, surveillance_region
+from depthguard.depthspace._kernels import (
+    AGG_MIN,
+    _finish_min_at_pixel,
+    _finish_sum,
+    frustum_nearest,
+    surveillance_region,
+)
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -266,13 +272,8 @@ def fused_query_point(X, Y, Z, rho, z_start, z_end, certain, blind_from, fx, fy,
             sy += (Y - min(max(Y, b0 * z), b1 * z)) / d
             sz += (Z - z) / d
     if prune_min:
-        ex = ey = ez = 0.0
-        if inside_tol * inside_tol < best2 < np.inf:
-            d = np.sqrt(best2)
-            ex = (X - min(max(X, (best_u - 0.5 - cx) / fx * best_z), (best_u + 0.5 - cx) / fx * best_z)) / d
-            ey = (Y - min(max(Y, (best_v - 0.5 - cy) / fy * best_z), (best_v + 0.5 - cy) / fy * best_z)) / d
-            ez = (Z - best_z) / d
-        return _finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, inside_tol, out_direction)
+        return _finish_min_at_pixel(X, Y, Z, best2, best_u, best_v, best_z, best_invalid, fx, fy, cx, cy, unseen_d, nx,
+                                    ny, nz, flags, inside_tol, out_direction)
     return _finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, unseen_d, nx, ny, nz, flags,
                        inside_tol, min_direction, out_direction)
 

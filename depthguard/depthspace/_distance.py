@@ -45,6 +45,15 @@ def check_options(rho: float, aggregate: str, unseen: str, method: str) -> None:
         raise InputError(f"method must be one of {config.METHODS}, got {method!r}")
 
 
+def query_arrays(camera, points_world: np.ndarray):
+    """The kernels' inputs and outputs for n checked points: (points in ``camera``'s optical frame (n, 3),
+    distance (n,), direction (n, 3) zeros, count (n,), invalid_count (n,), flags (n,) int64)."""
+    n = points_world.shape[0]
+    points_camera = np.ascontiguousarray(camera.world_to_camera(points_world)) if n else np.zeros((0, 3))
+    return (points_camera, np.empty(n), np.zeros((n, 3)), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64),
+            np.empty(n, dtype=np.int64))
+
+
 def single_camera_distances(occupancy: OccupancyImage, points_world, rho: float = config.DEFAULT_RHO,
                             aggregate: str = config.DEFAULT_AGGREGATE, unseen: str = config.DEFAULT_UNSEEN,
                             method: str = config.DEFAULT_METHOD, check: bool = True) -> DistanceResult:
@@ -64,12 +73,7 @@ def single_camera_distances(occupancy: OccupancyImage, points_world, rho: float 
         points_world = check_points(points_world)
     camera = occupancy.camera
     n = points_world.shape[0]
-    points_camera = np.ascontiguousarray(camera.world_to_camera(points_world)) if n else np.zeros((0, 3))
-    distance = np.empty(n)
-    direction_camera = np.zeros((n, 3))
-    count = np.empty(n, dtype=np.int64)
-    invalid_count = np.empty(n, dtype=np.int64)
-    flags = np.empty(n, dtype=np.int64)
+    points_camera, distance, direction_camera, count, invalid_count, flags = query_arrays(camera, points_world)
     blind_distance = np.full(n, np.inf)
     if n:
         z_min, z_max = camera.depth_range

@@ -480,13 +480,8 @@ def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_b
             best2, best_v, best_u, best_z, best_invalid = _nearest_in_blocks(
                 X, Y, Z, rho, z_start, z_end, True, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi,
                 near_eps, spans)
-        ex = ey = ez = 0.0
-        if inside_tol * inside_tol < best2 < np.inf:
-            d = np.sqrt(best2)
-            ex = (X - min(max(X, (best_u - 0.5 - cx) / fx * best_z), (best_u + 0.5 - cx) / fx * best_z)) / d
-            ey = (Y - min(max(Y, (best_v - 0.5 - cy) / fy * best_z), (best_v + 0.5 - cy) / fy * best_z)) / d
-            ez = (Z - best_z) / d
-        return _finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, inside_tol, out_direction)
+        return _finish_min_at_pixel(X, Y, Z, best2, best_u, best_v, best_z, best_invalid, fx, fy, cx, cy, unseen_d, nx,
+                                    ny, nz, flags, inside_tol, out_direction)
 
     count = 0
     n_invalid = 0
@@ -523,6 +518,20 @@ def _finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, in
     out_direction[1] = ey
     out_direction[2] = ez
     return np.sqrt(best2), 1, best_invalid, flags
+
+
+@njit(cache=True, error_model="numpy")
+def _finish_min_at_pixel(X, Y, Z, best2, best_u, best_v, best_z, best_invalid, fx, fy, cx, cy, unseen_d, nx, ny, nz,
+                         flags, inside_tol, out_direction):
+    """:func:`_finish_min` when the nearest point lies on pixel (best_u, best_v)'s frustum at depth best_z: its unit
+    direction towards P is derived here."""
+    ex = ey = ez = 0.0
+    if inside_tol * inside_tol < best2 < np.inf:
+        d = np.sqrt(best2)
+        ex = (X - min(max(X, (best_u - 0.5 - cx) / fx * best_z), (best_u + 0.5 - cx) / fx * best_z)) / d
+        ey = (Y - min(max(Y, (best_v - 0.5 - cy) / fy * best_z), (best_v + 0.5 - cy) / fy * best_z)) / d
+        ez = (Z - best_z) / d
+    return _finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, inside_tol, out_direction)
 
 
 @njit(cache=True, error_model="numpy")
