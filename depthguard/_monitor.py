@@ -82,6 +82,7 @@ class DistanceMonitor:
 
             self._silhouette = RobotSilhouette(robot, geometry=self_filter)
         self._prepared: dict[str, tuple[object, _CameraFrame]] = {}
+        self._fused_frames: dict[str, tuple[tuple, object]] = {}  # principal -> (its frames, their FusedFrames)
         names = list(rig.cameras)
         if principals is None:
             principals = [rig.principal or names[0]]
@@ -177,7 +178,7 @@ class DistanceMonitor:
     def _fused(self, usable: dict, points: np.ndarray, stale: list) -> DistanceResult:
         """The depth grid of every usable principal; per point, the largest answer among the principals whose view
         holds its whole surveillance region (else the first usable principal's, flagged)."""
-        from depthguard.depthgrid import build_map, fused_distances
+        from depthguard.depthgrid import FusedFrames, build_map
 
         if self.method != "exact":
             raise InputError("fusing several cameras uses the exact method only")
@@ -188,11 +189,16 @@ class DistanceMonitor:
             grid = self.maps.get(name)
             if grid is None:
                 grid = self.maps[name] = build_map(self.rig, name)
-            secondaries = {other: (usable[other].free if other in usable else None) for other in grid.secondaries}
-            state = usable[name]
-            results.append(fused_distances(grid, self.rig, state.occupancy, secondaries, points, self.rho,
-                                           self.aggregate, self.unseen, robot_far=state.robot_far,
-                                           margin=self.fusion_margin, pad=self.fusion_pixels, check=False))
+            # The same frames as the last query: their fusion, with the cells it has classified so far.
+            key = tuple(usable.get(other) for other in (name,) + grid.secondaries)
+            cached = self._fused_frames.get(name)
+            if cached is None or len(cached[0]) != len(key) or any(a is not b for a, b in zip(cached[0], key)):
+                secondaries = {other: (usable[other].free if other in usable else None) for other in grid.secondaries}
+                state = usable[name]
+                cached = self._fused_frames[name] = (key, FusedFrames(
+                    grid, self.rig, state.occupancy, secondaries, robot_far=state.robot_far,
+                    margin=self.fusion_margin, pad=self.fusion_pixels, check=False))
+            results.append(cached[1].distances(points, self.rho, self.aggregate, self.unseen, check=False))
         if not results:
             flag = Flag.STALE_CAMERA if any(n in stale for n in self.principals) else Flag.MISSING_CAMERA
             return _blind_result(len(points), flag, {})

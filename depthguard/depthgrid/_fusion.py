@@ -31,7 +31,18 @@ def fused_distances(grid: DepthGridMap, rig: Rig, principal: OccupancyImage, sec
                     margin: float = config.DEFAULT_FUSION_MARGIN, pad: int = config.DEFAULT_FUSION_PIXELS,
                     robot_tolerance: float = config.SELF_FILTER_TOLERANCE, check: bool = True) -> DistanceResult:
     """Distances from control points to what the principal camera says is possibly occupied and no other camera
-    clears (SPEC section 8, cases i-iv, with the corrected confirmation rule).
+    clears (SPEC section 8, cases i-iv, with the corrected confirmation rule): one query of a :class:`FusedFrames`.
+    To query the same frames again (a controller faster than its cameras), keep the :class:`FusedFrames`."""
+    frames = FusedFrames(grid, rig, principal, secondaries, robot_far, margin, pad, robot_tolerance, check)
+    return frames.distances(points_world, rho, aggregate, unseen, check)
+
+
+class FusedFrames:
+    """The frames of one moment fused through the principal camera's depth grid (SPEC section 8), for any number of
+    queries.
+
+    Each query classifies the grid cells its control points may look at (in parallel, rows shared among threads) and
+    keeps their classes for the later queries on the same frames: a cell is classified at most once per frame.
 
     Args:
         grid: the depth grid map of ``rig`` for the principal camera (:func:`build_map`).
@@ -40,8 +51,6 @@ def fused_distances(grid: DepthGridMap, rig: Rig, principal: OccupancyImage, sec
             if there is one).
         secondaries: secondary camera name -> its :func:`free_image`, or None for a camera that is blind (stale or
             missing): a blind camera clears nothing.
-        points_world: (n, 3) float64, metres, world frame.
-        rho, aggregate, unseen: as for :func:`depthguard.single_camera_distances`.
         robot_far: (h, w) float32 metres, the principal's rendered robot: where its body ends along each pixel
             (0 where it is not). The space behind the robot (case iv) starts there; the robot's own volume is
             not an obstacle. Needed when ``principal`` was self-filtered.
@@ -53,63 +62,94 @@ def fused_distances(grid: DepthGridMap, rig: Rig, principal: OccupancyImage, sec
             margin forbids it), so without this every point on the robot would find "occupied" cells at its own
             surface.
     """
-    if check:
-        check_options(rho, aggregate, unseen, "exact")
-        points_world = check_points(points_world)
-        grid.check_rig(rig)
-        if principal.camera.name != grid.principal:
-            raise InputError(f"the map's principal camera is {grid.principal!r}, the frame is camera "
-                             f"{principal.camera.name!r}")
-        unknown = set(secondaries) - set(grid.secondaries)
-        if unknown:
-            raise InputError(f"cameras {sorted(unknown)} are not secondary cameras of this map "
-                             f"({', '.join(grid.secondaries)})")
-        if not (np.isfinite(margin) and margin >= 0) or int(pad) != pad or pad < 0:
-            raise InputError(f"margin must be >= 0 metres and pad a whole number of pixels >= 0, got {margin}, {pad}")
-        if principal.robot_pixels and robot_far is None:
-            raise InputError("the principal frame was self-filtered: pass robot_far, where the robot's body ends")
-    camera = principal.camera
-    used = [i for i, name in enumerate(grid.secondaries) if secondaries.get(name) is not None]
-    cams = [rig.cameras[grid.secondaries[i]] for i in used]
-    h_max = max([c.height for c in cams], default=1)
-    w_max = max([c.width for c in cams], default=1)
-    free = np.zeros((len(used), h_max, w_max), dtype=np.float32)
-    for k, (i, cam) in enumerate(zip(used, cams)):
-        image = secondaries[grid.secondaries[i]]
-        if image.shape != cam.shape:
-            raise InputError(f"the free image of camera {cam.name!r} is {image.shape}, the camera is {cam.shape}")
-        free[k, : cam.height, : cam.width] = image
-    sizes = np.array([[c.width, c.height] for c in cams], dtype=np.int64).reshape(-1, 2)
-    z_near = np.array([max(c.depth_range[0], 1e-6) for c in cams], dtype=np.float64)
-    certain = ((principal.invalid == 0) | (principal.z_start != np.float32(camera.depth_range[0]))).astype(np.uint8)
-    if principal.robot_pixels:
-        far = np.asarray(robot_far, dtype=np.float64)
-        slack = robot_tolerance + camera.noise.margin(far)
-        blind_from = np.where(np.isfinite(principal.blind), np.maximum(principal.blind, far + slack), np.inf)
-    else:
-        blind_from = np.full(camera.shape, np.inf)
-    blind_from = blind_from.astype(np.float32)
 
-    n = len(points_world)
-    points_camera, distance, direction_camera, count, invalid_count, flags = query_arrays(camera, points_world)
-    if n:
-        z_min, z_max = camera.depth_range
-        with parallel_chunksize(1):
-            _kernels.fused_query_points(
-                points_camera, float(rho), principal.z_start, principal.z_end, certain, blind_from, camera.fx,
-                camera.fy, camera.cx, camera.cy, z_min, z_max, config.AGGREGATES.index(aggregate),
-                unseen == "occupied", config.NEAR_PLANE_EPSILON, config.INSIDE_TOLERANCE, config.MIN_DIRECTION_NORM,
-                grid.d_min, grid.delta_d, grid.n_cells, np.ascontiguousarray(grid.corners[used]),
-                np.ascontiguousarray(grid.offsets[used]), free, sizes, z_near, float(margin), int(pad), distance,
-                direction_camera, count, invalid_count, flags)
-    stale = Flag.STALE_CAMERA if len(used) < len(grid.secondaries) else Flag(0)
-    return DistanceResult(
-        distance=distance,
-        direction=direction_camera @ camera.T_world_camera[:3, :3].T,
-        count=count,
-        invalid_count=invalid_count,
-        flags=tuple(Flag(int(f)) | stale for f in flags),
-        timestamps={camera.name: principal.timestamp},
-        cameras=(camera.name,) + tuple(grid.secondaries[i] for i in used),
-        invalid_pixels={camera.name: principal.invalid_pixels},
-    )
+    def __init__(self, grid: DepthGridMap, rig: Rig, principal: OccupancyImage, secondaries: dict,
+                 robot_far: np.ndarray | None = None, margin: float = config.DEFAULT_FUSION_MARGIN,
+                 pad: int = config.DEFAULT_FUSION_PIXELS, robot_tolerance: float = config.SELF_FILTER_TOLERANCE,
+                 check: bool = True):
+        if check:
+            grid.check_rig(rig)
+            if principal.camera.name != grid.principal:
+                raise InputError(f"the map's principal camera is {grid.principal!r}, the frame is camera "
+                                 f"{principal.camera.name!r}")
+            unknown = set(secondaries) - set(grid.secondaries)
+            if unknown:
+                raise InputError(f"cameras {sorted(unknown)} are not secondary cameras of this map "
+                                 f"({', '.join(grid.secondaries)})")
+            if not (np.isfinite(margin) and margin >= 0) or int(pad) != pad or pad < 0:
+                raise InputError(f"margin must be >= 0 metres and pad a whole number of pixels >= 0, got {margin}, "
+                                 f"{pad}")
+            if principal.robot_pixels and robot_far is None:
+                raise InputError("the principal frame was self-filtered: pass robot_far, where the robot's body ends")
+        self.grid = grid
+        self.principal = principal
+        camera = principal.camera
+        used = [i for i, name in enumerate(grid.secondaries) if secondaries.get(name) is not None]
+        cams = [rig.cameras[grid.secondaries[i]] for i in used]
+        h_max = max([c.height for c in cams], default=1)
+        w_max = max([c.width for c in cams], default=1)
+        self._free = np.zeros((len(used), h_max, w_max), dtype=np.float32)
+        for k, (i, cam) in enumerate(zip(used, cams)):
+            image = secondaries[grid.secondaries[i]]
+            if image.shape != cam.shape:
+                raise InputError(f"the free image of camera {cam.name!r} is {image.shape}, the camera is {cam.shape}")
+            self._free[k, : cam.height, : cam.width] = image
+        self.secondaries = tuple(grid.secondaries[i] for i in used)
+        self._stale = len(used) < len(grid.secondaries)
+        self._sizes = np.array([[c.width, c.height] for c in cams], dtype=np.int64).reshape(-1, 2)
+        self._z_near = np.array([max(c.depth_range[0], 1e-6) for c in cams], dtype=np.float64)
+        self._corners = np.ascontiguousarray(grid.corners[used])
+        self._offsets = np.ascontiguousarray(grid.offsets[used])
+        self._margin = float(margin)
+        self._pad = int(pad)
+        self._certain = ((principal.invalid == 0) | (principal.z_start != np.float32(camera.depth_range[0]))).astype(
+            np.uint8)
+        if principal.robot_pixels:
+            far = np.asarray(robot_far, dtype=np.float64)
+            slack = robot_tolerance + camera.noise.margin(far)
+            blind_from = np.where(np.isfinite(principal.blind), np.maximum(principal.blind, far + slack), np.inf)
+        else:
+            blind_from = np.full(camera.shape, np.inf)
+        self._blind_from = blind_from.astype(np.float32)
+        # The cells classified so far: bit k of _bits[v, u] for cells _c_lo[v, u].._c_hi[v, u].
+        self._bits = np.empty(camera.shape + ((grid.n_cells + 63) // 64,), dtype=np.uint64)
+        self._c_lo = np.zeros(camera.shape, dtype=np.int32)
+        self._c_hi = np.full(camera.shape, -1, dtype=np.int32)
+
+    def distances(self, points_world, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
+                  unseen: str = config.DEFAULT_UNSEEN, check: bool = True) -> DistanceResult:
+        """Distances of control points, as :func:`depthguard.single_camera_distances` gives them for one camera.
+
+        points_world: (n, 3) float64, metres, world frame. rho, aggregate, unseen: as there.
+        """
+        if check:
+            check_options(rho, aggregate, unseen, "exact")
+            points_world = check_points(points_world)
+        principal = self.principal
+        camera = principal.camera
+        grid = self.grid
+        points_camera, distance, direction_camera, count, invalid_count, flags = query_arrays(camera, points_world)
+        if len(points_world):
+            z_min, z_max = camera.depth_range
+            common = (principal.z_start, principal.z_end, self._certain, self._blind_from, camera.fx, camera.fy,
+                      camera.cx, camera.cy, z_min, z_max)
+            near_inside = (config.NEAR_PLANE_EPSILON, config.INSIDE_TOLERANCE)
+            cells = (grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets, self._free, self._sizes,
+                     self._z_near, self._margin, self._pad, self._bits, self._c_lo, self._c_hi)
+            with parallel_chunksize(1):
+                _kernels.classify_cells(points_camera, float(rho), *common, unseen == "occupied", *near_inside,
+                                        *cells)
+                _kernels.fused_query_points(points_camera, float(rho), *common, config.AGGREGATES.index(aggregate),
+                                            unseen == "occupied", *near_inside, config.MIN_DIRECTION_NORM, *cells,
+                                            distance, direction_camera, count, invalid_count, flags)
+        stale = Flag.STALE_CAMERA if self._stale else Flag(0)
+        return DistanceResult(
+            distance=distance,
+            direction=direction_camera @ camera.T_world_camera[:3, :3].T,
+            count=count,
+            invalid_count=invalid_count,
+            flags=tuple(Flag(int(f)) | stale for f in flags),
+            timestamps={camera.name: principal.timestamp},
+            cameras=(camera.name,) + self.secondaries,
+            invalid_pixels={camera.name: principal.invalid_pixels},
+        )

@@ -95,76 +95,239 @@ def cell_occupied(u, v, k, d_min, delta_d, corners, offsets, free, sizes, z_near
 
 
 @njit(cache=True, error_model="numpy")
-def nearest_confirmed(X, Y, Z, a0, a1, b0, b1, lo, hi, bound2, u, v, d_min, delta_d, n_cells, corners, offsets, free,
-                      sizes, z_near, margin, pad):
-    """The nearest occupied part of the candidate range [lo, hi] along pixel (u, v)'s frustum, visiting its cells in
-    order of distance from P (the distance to consecutive pieces of one convex frustum is unimodal) and stopping at
-    the first occupied one or at ``bound2``. Parts outside the grid [d_min, d_max] cannot be checked and count as
-    occupied. Returns (squared distance, z*), (inf, 0) if nothing occupied comes nearer than bound2."""
+def surface_cell_end(zs, d_min, delta_d):
+    """Where the grid cell holding a measured surface at depth zs ends (d_min for a surface before the grid)."""
+    if zs < d_min:
+        return d_min
+    return d_min + (np.floor((zs - d_min) / delta_d) + 1.0) * delta_d
+
+
+@njit(cache=True, error_model="numpy")
+def candidate_start(zs, ze, certain, bf, Z, rho, d_min, delta_d):
+    """Where the first candidate piece along one principal pixel starts for a control point at depth Z (inf for
+    none before Z + rho)."""
+    z_far = Z + rho
+    s = np.inf
+    if zs <= z_far:
+        if certain:
+            if zs < Z:
+                cell_end = surface_cell_end(zs, d_min, delta_d)
+                if cell_end < ze:
+                    s = cell_end
+        else:
+            s = zs
+    if bf <= z_far:
+        s = min(s, bf)
+    return s
+
+
+@njit(cache=True, error_model="numpy")
+def candidate_cells(zs, ze, certain, bf, Z, rho, d_min, delta_d, n_cells):
+    """The grid cells (k_a, k_b) that fusion may have to classify along one principal pixel for a control point at
+    depth Z: those of the pixel's candidate pieces (see module docstring) that lie within [Z - rho, Z + rho]; a cell
+    outside that depth span is farther than rho from the point. k_a > k_b for none."""
+    z_far = Z + rho
+    lo = max(candidate_start(zs, ze, certain, bf, Z, rho, d_min, delta_d), Z - rho, d_min)
+    hi = min(z_far, d_min + n_cells * delta_d)
+    if lo > hi:
+        return 1, 0
+    return min(int((lo - d_min) / delta_d), n_cells - 1), min(int((hi - d_min) / delta_d), n_cells - 1)
+
+
+@njit(cache=True, error_model="numpy")
+def classify_run(u, v, k_a, k_b, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad, bits):
+    """Classify cells k_a..k_b of principal pixel (u, v) with the secondary cameras: bit k of bits[v, u] set when
+    cell k is occupied (no camera clears it), cleared when it is free."""
+    for k in range(k_a, k_b + 1):
+        word = k >> 6
+        bit = np.uint64(1) << np.uint64(k & 63)
+        if cell_occupied(u, v, k, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad):
+            bits[v, u, word] |= bit
+        else:
+            bits[v, u, word] &= ~bit
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def classify_cells(points_camera, rho, z_start, z_end, certain, blind_from, fx, fy, cx, cy, z_min, z_max,
+                   unseen_occupied, near_eps, inside_tol, d_min, delta_d, n_cells, corners, offsets, free, sizes,
+                   z_near, margin, pad, bits, c_lo, c_hi):
+    """Classify, once per frame, every grid cell that the queries of these control points may look at, and extend the
+    per-pixel cache: bits[v, u] holds the classes of cells c_lo[v, u]..c_hi[v, u] (none while c_lo > c_hi).
+
+    Rows are shared out among threads, so each pixel's cache has one writer. The queries read the cache and classify
+    any cell outside it themselves, so the cache only saves time: it never changes a result.
+    """
+    n = points_camera.shape[0]
+    height, width = z_start.shape
+    spans = np.empty((n, height, 2), dtype=np.int64)
+    rows = np.empty((n, 2), dtype=np.int64)
+    scratch = np.empty(3)
+    for i in range(n):
+        X, Y, Z = points_camera[i, 0], points_camera[i, 1], points_camera[i, 2]
+        _, unseen_here, _, _, _, _, _, _, v_lo, v_hi = surveillance_region(
+            X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_max, unseen_occupied, near_eps, inside_tol,
+            spans[i], scratch)
+        rows[i, 0] = v_lo if not unseen_here else 0
+        rows[i, 1] = v_hi if not unseen_here else -1
+    first = height
+    last = -1
+    for i in range(n):
+        if rows[i, 0] <= rows[i, 1]:
+            first = min(first, rows[i, 0])
+            last = max(last, rows[i, 1])
+    for v in prange(first, last + 1):
+        for i in range(n):
+            if v < rows[i, 0] or v > rows[i, 1]:
+                continue
+            Z = points_camera[i, 2]
+            for u in range(spans[i, v, 0], spans[i, v, 1] + 1):
+                k_a, k_b = candidate_cells(np.float64(z_start[v, u]), np.float64(z_end[v, u]), certain[v, u],
+                                           np.float64(blind_from[v, u]), Z, rho, d_min, delta_d, n_cells)
+                if k_a > k_b:
+                    continue
+                lo = c_lo[v, u]
+                hi = c_hi[v, u]
+                if lo > hi:
+                    classify_run(u, v, k_a, k_b, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad,
+                                 bits)
+                    c_lo[v, u] = k_a
+                    c_hi[v, u] = k_b
+                    continue
+                if k_a < lo:
+                    classify_run(u, v, k_a, lo - 1, d_min, delta_d, corners, offsets, free, sizes, z_near, margin,
+                                 pad, bits)
+                    c_lo[v, u] = k_a
+                if k_b > hi:
+                    classify_run(u, v, hi + 1, k_b, d_min, delta_d, corners, offsets, free, sizes, z_near, margin,
+                                 pad, bits)
+                    c_hi[v, u] = k_b
+
+
+@njit(cache=True, error_model="numpy")
+def cell_is_occupied(u, v, k, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad, bits, c_lo, c_hi):
+    """Cell k of principal pixel (u, v): from the cache when it holds it, else classified here."""
+    if c_lo[v, u] <= k and k <= c_hi[v, u]:
+        return (bits[v, u, k >> 6] >> np.uint64(k & 63)) & np.uint64(1) != 0
+    return cell_occupied(u, v, k, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad)
+
+
+_ONE = np.uint64(1)
+_ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
+
+
+@njit(cache=True, error_model="numpy")
+def _bit_index(word, highest):
+    """The index (0-63) of the highest or the lowest set bit of a non-zero uint64, by halving."""
+    index = 0
+    width = 32
+    while width > 0:
+        shift = np.uint64(width)
+        if highest:
+            if word >> shift != np.uint64(0):
+                word >>= shift
+                index += width
+        else:
+            if word & ((_ONE << shift) - _ONE) == np.uint64(0):
+                word >>= shift
+                index += width
+        width //= 2
+    return index
+
+
+@njit(cache=True, error_model="numpy")
+def set_bit_in(row, k_lo, k_hi, highest):
+    """The highest (or lowest) k in [k_lo, k_hi] whose bit is set in row (words of 64 cells), -1 for none."""
+    w_lo = k_lo >> 6
+    w_hi = k_hi >> 6
+    w = w_hi if highest else w_lo
+    while w_lo <= w <= w_hi:
+        word = row[w]
+        if w == w_hi and (k_hi & 63) < 63:
+            word &= (_ONE << np.uint64((k_hi & 63) + 1)) - _ONE
+        if w == w_lo:
+            word &= _ALL << np.uint64(k_lo & 63)
+        if word != np.uint64(0):
+            return w * 64 + _bit_index(word, highest)
+        w += -1 if highest else 1
+    return -1
+
+
+@njit(cache=True, error_model="numpy")
+def occupied_in(u, v, k_lo, k_hi, highest, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad, bits,
+                c_lo, c_hi):
+    """The highest (or lowest) occupied cell in k_lo..k_hi of principal pixel (u, v), -1 for none: 64 cells a step
+    where the cache holds them, one by one otherwise."""
+    if k_lo > k_hi:
+        return -1
+    if c_lo[v, u] <= k_lo and k_hi <= c_hi[v, u]:
+        return set_bit_in(bits[v, u], k_lo, k_hi, highest)
+    for i in range(k_hi - k_lo + 1):
+        k = k_hi - i if highest else k_lo + i
+        if cell_is_occupied(u, v, k, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad, bits, c_lo,
+                            c_hi):
+            return k
+    return -1
+
+
+@njit(cache=True, error_model="numpy")
+def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, u, v, d_min, delta_d, n_cells,
+                      corners, offsets, free, sizes, z_near, margin, pad, bits, c_lo, c_hi):
+    """The nearest occupied part of [lo, hi] along principal pixel (u, v)'s frustum, nearer than ``bound2``: the
+    part [lo, certain_to] is occupied as it stands (a measured surface's own cell; certain_to <= lo for none), and so
+    are the parts outside the grid [d_min, d_max], which no camera can check; the rest is candidate cells.
+
+    The distance from P along one convex frustum is unimodal in depth, so the nearest occupied part is the one
+    holding the nearest point z* of [lo, hi] if that part is occupied, else the first occupied part met walking
+    down from z*, or the first walking up. Cells shallower than Z - rho or deeper than Z + rho are farther than rho
+    and are never looked at. Returns (squared distance, z*), (inf, 0) if nothing occupied comes nearer than bound2.
+    """
     if lo > hi:
         return np.inf, 0.0
+    d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, lo, hi)
+    if d2 >= bound2:
+        return np.inf, 0.0
     d_max = d_min + n_cells * delta_d
+    # Occupied as they stand: [lo, below] when below > lo, and [above, hi] (beyond the grid) when hi > above.
+    below = max(certain_to, min(d_min, hi)) if lo < d_min else certain_to
+    above = max(d_max, below)
+    if (below > lo and z <= below) or (hi > above and z >= above):
+        return d2, z
+    k_lo = max(int((max(below, lo) - d_min) / delta_d), int((max(Z - rho, d_min) - d_min) / delta_d))
+    k_hi = min(int((min(hi, d_max) - d_min) / delta_d), n_cells - 1)
+    k_star = min(max(int((z - d_min) / delta_d), k_lo), k_hi)
+    if cell_is_occupied(u, v, k_star, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad, bits, c_lo,
+                        c_hi):
+        return d2, z
     best2 = np.inf
     best_z = 0.0
-    # Outside the grid: occupied as it stands.
-    if lo < d_min:
-        d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, lo, min(hi, d_min))
-        if d2 < best2:
-            best2, best_z = d2, z
-    if hi > d_max:
-        d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, max(lo, d_max), hi)
-        if d2 < best2:
-            best2, best_z = d2, z
-    g_lo = max(lo, d_min)
-    g_hi = min(hi, d_max)
-    if g_lo > g_hi:
-        return best2, best_z
-    bound2 = min(bound2, best2)
-    k_lo = min(int((g_lo - d_min) / delta_d), n_cells - 1)
-    k_hi = min(int((g_hi - d_min) / delta_d), n_cells - 1)
-    _, z_star = frustum_nearest(X, Y, Z, a0, a1, b0, b1, g_lo, g_hi)
-    k_star = min(max(int((z_star - d_min) / delta_d), k_lo), k_hi)
-    left = k_star
-    right = k_star + 1
-    left2 = np.inf
-    left_z = 0.0
-    right2 = np.inf
-    right_z = 0.0
-    if left >= k_lo:
-        left2, left_z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, max(g_lo, d_min + left * delta_d),
-                                        min(g_hi, d_min + (left + 1) * delta_d))
-    if right <= k_hi:
-        right2, right_z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, max(g_lo, d_min + right * delta_d),
-                                          min(g_hi, d_min + (right + 1) * delta_d))
-    while True:
-        if left2 <= right2:
-            if left2 >= bound2:
-                break
-            if cell_occupied(u, v, left, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad):
-                return left2, left_z
-            left -= 1
-            left2 = np.inf
-            if left >= k_lo:
-                left2, left_z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, max(g_lo, d_min + left * delta_d),
-                                                min(g_hi, d_min + (left + 1) * delta_d))
-        else:
-            if right2 >= bound2:
-                break
-            if cell_occupied(u, v, right, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad):
-                return right2, right_z
-            right += 1
-            right2 = np.inf
-            if right <= k_hi:
-                right2, right_z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, max(g_lo, d_min + right * delta_d),
-                                                  min(g_hi, d_min + (right + 1) * delta_d))
+    k = occupied_in(u, v, k_lo, k_star - 1, True, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad,
+                    bits, c_lo, c_hi)
+    if k >= 0:
+        best2, best_z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, max(below, lo, d_min + k * delta_d),
+                                        min(hi, d_min + (k + 1) * delta_d))
+    elif below > lo:
+        best2, best_z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, lo, below)
+    k = occupied_in(u, v, k_star + 1, k_hi, False, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad,
+                    bits, c_lo, c_hi)
+    if k >= 0:
+        d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, max(below, lo, d_min + k * delta_d),
+                                min(hi, d_min + (k + 1) * delta_d))
+    elif hi > above:
+        d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, above, hi)
+    else:
+        d2 = np.inf
+    if d2 < best2:
+        best2, best_z = d2, z
+    if best2 >= bound2:
+        return np.inf, 0.0
     return best2, best_z
 
 
 @njit(cache=True, error_model="numpy")
 def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_from, bound2, d_min, delta_d, n_cells,
-                   corners, offsets, free, sizes, z_near, margin, pad):
+                   corners, offsets, free, sizes, z_near, margin, pad, bits, c_lo, c_hi):
     """Squared distance from P to what is occupied along principal pixel (u, v) after fusion, its depth z*, and
-    whether that came from a candidate of a pixel without a measurement. (inf, 0, False) if nothing within
+    whether that came from a candidate of a pixel without a measurement. (inf, 0, False) if nothing nearer than
     ``bound2``.
 
     zs, ze: the principal's possibly-occupied segment; ``certain``: it starts at a measured surface; blind_from:
@@ -178,24 +341,21 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
         if certain:
             if zs >= Z:  # case (ii): the frustum from the surface on, without other cameras
                 best2, best_z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, zs, ze)
+                if best2 >= bound2:
+                    best2 = np.inf
             else:  # case (iii): the surface's own cell is certain, the gray area behind it is a candidate
-                cell_end = d_min + (np.floor((zs - d_min) / delta_d) + 1.0) * delta_d if zs >= d_min else d_min
-                best2, best_z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, zs, min(cell_end, ze))
-                if cell_end < ze:
-                    d2, z = nearest_confirmed(X, Y, Z, a0, a1, b0, b1, cell_end, min(ze, z_far), min(best2, bound2),
-                                              u, v, d_min, delta_d, n_cells, corners, offsets, free, sizes, z_near,
-                                              margin, pad)
-                    if d2 < best2:
-                        best2, best_z = d2, z
+                best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs, surface_cell_end(zs, d_min, delta_d),
+                                                  min(ze, z_far), bound2, u, v, d_min, delta_d, n_cells, corners,
+                                                  offsets, free, sizes, z_near, margin, pad, bits, c_lo, c_hi)
         else:  # no measurement: the whole segment is a candidate
-            d2, z = nearest_confirmed(X, Y, Z, a0, a1, b0, b1, zs, min(ze, z_far), bound2, u, v, d_min, delta_d,
-                                      n_cells, corners, offsets, free, sizes, z_near, margin, pad)
-            if d2 < best2:
-                best2, best_z = d2, z
-                from_invalid = True
+            best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs, zs, min(ze, z_far), bound2, u, v,
+                                              d_min, delta_d, n_cells, corners, offsets, free, sizes, z_near, margin,
+                                              pad, bits, c_lo, c_hi)
+            from_invalid = best2 < np.inf
     if blind_from <= z_far:  # case (iv): behind the robot
-        d2, z = nearest_confirmed(X, Y, Z, a0, a1, b0, b1, blind_from, z_far, min(best2, bound2), u, v, d_min,
-                                  delta_d, n_cells, corners, offsets, free, sizes, z_near, margin, pad)
+        d2, z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, blind_from, blind_from, z_far, min(best2, bound2), u,
+                                  v, d_min, delta_d, n_cells, corners, offsets, free, sizes, z_near, margin, pad, bits,
+                                  c_lo, c_hi)
         if d2 < best2:
             best2, best_z = d2, z
             from_invalid = False
@@ -207,7 +367,7 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
 @njit(cache=True, error_model="numpy")
 def fused_query_point(X, Y, Z, rho, z_start, z_end, certain, blind_from, fx, fy, cx, cy, z_min, z_max, aggregate,
                       unseen_occupied, near_eps, inside_tol, min_direction, d_min, delta_d, n_cells, corners, offsets,
-                      free, sizes, z_near, margin, pad, spans, out_direction):
+                      free, sizes, z_near, margin, pad, bits, c_lo, c_hi, spans, out_direction):
     """Distance from one control point P = (X, Y, Z) (metres, principal optical frame) to what the principal camera
     says is possibly occupied and the secondary cameras do not clear, aggregated as ``aggregate``; the fused
     counterpart of :func:`depthguard.depthspace._kernels.query_point`. Returns (distance, count, invalid_count,
@@ -221,6 +381,7 @@ def fused_query_point(X, Y, Z, rho, z_start, z_end, certain, blind_from, fx, fy,
         return 0.0, 1, 0, flags
     prune_min = aggregate == AGG_MIN
     z_far = Z + rho
+    d_max = d_min + n_cells * delta_d
     best2 = np.inf
     best_u = 0
     best_v = 0
@@ -242,15 +403,22 @@ def fused_query_point(X, Y, Z, rho, z_start, z_end, certain, blind_from, fx, fy,
             first = min(zs, bf)
             if first > z_far:
                 continue
+            if not certain[v, u] or zs > z_far:
+                # Only candidates: skip the pixel when the other cameras cleared every cell of them in reach.
+                s = candidate_start(zs, np.float64(z_end[v, u]), certain[v, u], bf, Z, rho, d_min, delta_d)
+                if s >= d_min and z_far <= d_max:
+                    k_a, k_b = candidate_cells(zs, np.float64(z_end[v, u]), certain[v, u], bf, Z, rho, d_min, delta_d,
+                                               n_cells)
+                    if k_a > k_b or (c_lo[v, u] <= k_a and k_b <= c_hi[v, u] and set_bit_in(bits[v, u], k_a, k_b,
+                                                                                               False) < 0):
+                        continue
             a0 = (u - 0.5 - cx) / fx
             a1 = (u + 0.5 - cx) / fx
+            # With min, a pixel that only ties the best so far cannot win: pixels come in (v, u) order.
             bound2 = min(rho2, best2) if prune_min else rho2
-            lb2, _ = frustum_nearest(X, Y, Z, a0, a1, b0, b1, first, np.inf)  # a lower bound
-            if lb2 >= bound2 and not (prune_min and lb2 == best2):
-                continue
             d2, z, from_invalid = pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, np.float64(z_end[v, u]),
-                                                 certain[v, u], bf, rho2, d_min, delta_d, n_cells, corners, offsets,
-                                                 free, sizes, z_near, margin, pad)
+                                                 certain[v, u], bf, bound2, d_min, delta_d, n_cells, corners, offsets,
+                                                 free, sizes, z_near, margin, pad, bits, c_lo, c_hi)
             if d2 >= rho2:
                 continue
             if d2 < best2 or (d2 == best2 and (v < best_v or (v == best_v and u < best_u))):
@@ -281,7 +449,8 @@ def fused_query_point(X, Y, Z, rho, z_start, z_end, certain, blind_from, fx, fy,
 @njit(parallel=True, cache=True, error_model="numpy")
 def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, fx, fy, cx, cy, z_min, z_max,
                        aggregate, unseen_occupied, near_eps, inside_tol, min_direction, d_min, delta_d, n_cells, corners,
-                       offsets, free, sizes, z_near, margin, pad, distance, direction, count, invalid_count, flags):
+                       offsets, free, sizes, z_near, margin, pad, bits, c_lo, c_hi, distance, direction, count,
+                       invalid_count, flags):
     """:func:`fused_query_point` for each of the (n, 3) principal-frame points, in parallel."""
     n = points_camera.shape[0]
     spans = np.empty((n, z_start.shape[0], 2), dtype=np.int64)
@@ -289,7 +458,8 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
         d, c, k, f = fused_query_point(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, z_start,
                                        z_end, certain, blind_from, fx, fy, cx, cy, z_min, z_max, aggregate,
                                        unseen_occupied, near_eps, inside_tol, min_direction, d_min, delta_d, n_cells,
-                                       corners, offsets, free, sizes, z_near, margin, pad, spans[i], direction[i])
+                                       corners, offsets, free, sizes, z_near, margin, pad, bits, c_lo, c_hi, spans[i],
+                                       direction[i])
         distance[i] = d
         count[i] = c
         invalid_count[i] = k
