@@ -41,8 +41,8 @@ class FusedFrames:
     """The frames of one moment fused through the principal camera's depth grid (SPEC section 8), for any number of
     queries.
 
-    Each query classifies the grid cells its control points may look at (in parallel, rows shared among threads) and
-    keeps their classes for the later queries on the same frames: a cell is classified at most once per frame.
+    A query classifies the grid cells it looks at and keeps their classes for the later queries on the same frames:
+    a cell is classified at most once per frame.
 
     Args:
         grid: the depth grid map of ``rig`` for the principal camera (:func:`build_map`).
@@ -88,12 +88,12 @@ class FusedFrames:
         cams = [rig.cameras[grid.secondaries[i]] for i in used]
         h_max = max([c.height for c in cams], default=1)
         w_max = max([c.width for c in cams], default=1)
-        self._free = np.zeros((len(used), h_max, w_max), dtype=np.float32)
+        free = np.zeros((len(used), h_max, w_max), dtype=np.float32)
         for k, (i, cam) in enumerate(zip(used, cams)):
             image = secondaries[grid.secondaries[i]]
             if image.shape != cam.shape:
                 raise InputError(f"the free image of camera {cam.name!r} is {image.shape}, the camera is {cam.shape}")
-            self._free[k, : cam.height, : cam.width] = image
+            free[k, : cam.height, : cam.width] = image
         self.secondaries = tuple(grid.secondaries[i] for i in used)
         self._stale = len(used) < len(grid.secondaries)
         self._sizes = np.array([[c.width, c.height] for c in cams], dtype=np.int64).reshape(-1, 2)
@@ -101,7 +101,9 @@ class FusedFrames:
         self._corners = np.ascontiguousarray(grid.corners[used])
         self._offsets = np.ascontiguousarray(grid.offsets[used])
         self._margin = float(margin)
-        self._pad = int(pad)
+        # Each pixel's smallest free depth within pad pixels: a cell's grown footprint is then its own pixels.
+        self._eroded = np.empty_like(free)
+        _kernels.erode_free(free, self._sizes, int(pad), self._eroded)
         self._certain = ((principal.invalid == 0) | (principal.z_start != np.float32(camera.depth_range[0]))).astype(
             np.uint8)
         if principal.robot_pixels:
@@ -111,10 +113,11 @@ class FusedFrames:
         else:
             blind_from = np.full(camera.shape, np.inf)
         self._blind_from = blind_from.astype(np.float32)
-        # The cells classified so far: bit k of _bits[v, u] for cells _c_lo[v, u].._c_hi[v, u].
-        self._bits = np.empty(camera.shape + ((grid.n_cells + 63) // 64,), dtype=np.uint64)
-        self._c_lo = np.zeros(camera.shape, dtype=np.int32)
-        self._c_hi = np.full(camera.shape, -1, dtype=np.int32)
+        # The cells' classes so far, a byte each: 0 unknown, 1 free, 2 occupied. The zeroed pages come from the
+        # operating system as they are first touched, so memory grows with the cells looked at, not with the grid.
+        self._cells = np.zeros(camera.shape + (grid.n_cells,), dtype=np.uint8)
+        # Per pixel, one run of cells known free, to skip without reading them: (first << 32) | last.
+        self._free_run = np.full(camera.shape, _kernels.NO_FREE_RUN, dtype=np.int64)
 
     def distances(self, points_world, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
                   unseen: str = config.DEFAULT_UNSEEN, check: bool = True) -> DistanceResult:
@@ -134,11 +137,9 @@ class FusedFrames:
             common = (principal.z_start, principal.z_end, self._certain, self._blind_from, camera.fx, camera.fy,
                       camera.cx, camera.cy, z_min, z_max)
             near_inside = (config.NEAR_PLANE_EPSILON, config.INSIDE_TOLERANCE)
-            cells = (grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets, self._free, self._sizes,
-                     self._z_near, self._margin, self._pad, self._bits, self._c_lo, self._c_hi)
+            cells = (grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets, self._eroded, self._sizes,
+                     self._z_near, self._margin, self._cells, self._free_run)
             with parallel_chunksize(1):
-                _kernels.classify_cells(points_camera, float(rho), *common, unseen == "occupied", *near_inside,
-                                        *cells)
                 _kernels.fused_query_points(points_camera, float(rho), *common, config.AGGREGATES.index(aggregate),
                                             unseen == "occupied", *near_inside, config.MIN_DIRECTION_NORM, *cells,
                                             distance, direction_camera, count, invalid_count, flags)

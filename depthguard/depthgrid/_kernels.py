@@ -42,59 +42,6 @@ def free_depths(raw, scale, z_min, z_max, m0, m1, m2, free):
 
 
 @njit(cache=True, error_model="numpy")
-def camera_clears(corners, offset, free, width, height, z_near, z0, z1, u, v, margin, pad):
-    """Whether one secondary camera saw through the whole cell [z0, z1] of principal pixel (u, v) (see module
-    docstring). corners: (H+1, W+1, 3) the map's A for that camera; offset: (3,) its B; free: its (h, w) image."""
-    x_lo = np.inf
-    x_hi = -np.inf
-    y_lo = np.inf
-    y_hi = -np.inf
-    far = 0.0
-    for dv in range(2):
-        for du in range(2):
-            a0 = corners[v + dv, u + du, 0]
-            a1 = corners[v + dv, u + du, 1]
-            a2 = corners[v + dv, u + du, 2]
-            for k in range(2):
-                z = z0 if k == 0 else z1
-                hz = a2 * z + offset[2]
-                if hz <= z_near:  # part of the cell is behind the camera or nearer than it can measure
-                    return False
-                x = (a0 * z + offset[0]) / hz
-                y = (a1 * z + offset[1]) / hz
-                x_lo = min(x_lo, x)
-                x_hi = max(x_hi, x)
-                y_lo = min(y_lo, y)
-                y_hi = max(y_hi, y)
-                far = max(far, hz)
-    # Pixels whose footprint [q - 1/2, q + 1/2] meets the corners' bounding box, grown by pad pixels.
-    q_lo = np.ceil(x_lo - 0.5) - pad
-    q_hi = np.floor(x_hi + 0.5) + pad
-    r_lo = np.ceil(y_lo - 0.5) - pad
-    r_hi = np.floor(y_hi + 0.5) + pad
-    if q_lo < 0.0 or r_lo < 0.0 or q_hi > width - 1 or r_hi > height - 1:
-        return False  # the footprint leaves the image
-    need = far + margin
-    for r in range(int(r_lo), int(r_hi) + 1):
-        for q in range(int(q_lo), int(q_hi) + 1):
-            if free[r, q] < need:
-                return False
-    return True
-
-
-@njit(cache=True, error_model="numpy")
-def cell_occupied(u, v, k, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad):
-    """Whether cell k of principal pixel (u, v) is occupied: no secondary camera cleared it."""
-    z0 = d_min + k * delta_d
-    z1 = z0 + delta_d
-    for j in range(corners.shape[0]):
-        if camera_clears(corners[j], offsets[j], free[j], sizes[j, 0], sizes[j, 1], z_near[j], z0, z1, u, v, margin,
-                         pad):
-            return False
-    return True
-
-
-@njit(cache=True, error_model="numpy")
 def surface_cell_end(zs, d_min, delta_d):
     """Where the grid cell holding a measured surface at depth zs ends (d_min for a surface before the grid)."""
     if zs < d_min:
@@ -102,184 +49,196 @@ def surface_cell_end(zs, d_min, delta_d):
     return d_min + (np.floor((zs - d_min) / delta_d) + 1.0) * delta_d
 
 
-@njit(cache=True, error_model="numpy")
-def candidate_start(zs, ze, certain, bf, Z, rho, d_min, delta_d):
-    """Where the first candidate piece along one principal pixel starts for a control point at depth Z (inf for
-    none before Z + rho)."""
-    z_far = Z + rho
-    s = np.inf
-    if zs <= z_far:
-        if certain:
-            if zs < Z:
-                cell_end = surface_cell_end(zs, d_min, delta_d)
-                if cell_end < ze:
-                    s = cell_end
-        else:
-            s = zs
-    if bf <= z_far:
-        s = min(s, bf)
-    return s
-
-
-@njit(cache=True, error_model="numpy")
-def candidate_cells(zs, ze, certain, bf, Z, rho, d_min, delta_d, n_cells):
-    """The grid cells (k_a, k_b) that fusion may have to classify along one principal pixel for a control point at
-    depth Z: those of the pixel's candidate pieces (see module docstring) that lie within [Z - rho, Z + rho]; a cell
-    outside that depth span is farther than rho from the point. k_a > k_b for none."""
-    z_far = Z + rho
-    lo = max(candidate_start(zs, ze, certain, bf, Z, rho, d_min, delta_d), Z - rho, d_min)
-    hi = min(z_far, d_min + n_cells * delta_d)
-    if lo > hi:
-        return 1, 0
-    return min(int((lo - d_min) / delta_d), n_cells - 1), min(int((hi - d_min) / delta_d), n_cells - 1)
-
-
-@njit(cache=True, error_model="numpy")
-def classify_run(u, v, k_a, k_b, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad, bits):
-    """Classify cells k_a..k_b of principal pixel (u, v) with the secondary cameras: bit k of bits[v, u] set when
-    cell k is occupied (no camera clears it), cleared when it is free."""
-    for k in range(k_a, k_b + 1):
-        word = k >> 6
-        bit = np.uint64(1) << np.uint64(k & 63)
-        if cell_occupied(u, v, k, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad):
-            bits[v, u, word] |= bit
-        else:
-            bits[v, u, word] &= ~bit
-
-
 @njit(parallel=True, cache=True, error_model="numpy")
-def classify_cells(points_camera, rho, z_start, z_end, certain, blind_from, fx, fy, cx, cy, z_min, z_max,
-                   unseen_occupied, near_eps, inside_tol, d_min, delta_d, n_cells, corners, offsets, free, sizes,
-                   z_near, margin, pad, bits, c_lo, c_hi):
-    """Classify, once per frame, every grid cell that the queries of these control points may look at, and extend the
-    per-pixel cache: bits[v, u] holds the classes of cells c_lo[v, u]..c_hi[v, u] (none while c_lo > c_hi).
+def erode_free(free, sizes, pad, out):
+    """out[j, r, q] = the smallest free[j] over the pixels within pad of (r, q) (a (2 pad + 1)^2 square), 0 where
+    that square leaves camera j's image: a cell's footprint then needs only its own pixels read, and the grown
+    footprint's pixels and its staying inside the image come with them. free, out: (J, h, w) float32."""
+    n_cams, h, w = free.shape
+    row_min = np.empty((n_cams, h, w), dtype=np.float32)
+    for j in range(n_cams):
+        width = sizes[j, 0]
+        height = sizes[j, 1]
+        for r in prange(h):
+            for q in range(w):
+                m = np.float32(np.inf)
+                if r >= height or q - pad < 0 or q + pad > width - 1:
+                    m = np.float32(0.0)
+                else:
+                    for t in range(q - pad, q + pad + 1):
+                        m = min(m, free[j, r, t])
+                row_min[j, r, q] = m
+        for r in prange(h):
+            for q in range(w):
+                m = np.float32(np.inf)
+                if r - pad < 0 or r + pad > height - 1:
+                    m = np.float32(0.0)
+                else:
+                    for t in range(r - pad, r + pad + 1):
+                        m = min(m, row_min[j, t, q])
+                out[j, r, q] = m
 
-    Rows are shared out among threads, so each pixel's cache has one writer. The queries read the cache and classify
-    any cell outside it themselves, so the cache only saves time: it never changes a result.
+
+@njit(cache=True, error_model="numpy", inline="always")
+def face_box(corners, offset, u, v, z, z_near):
+    """The 4 corners of principal pixel (u, v)'s frustum at depth z, projected into one secondary camera: (ok,
+    x_lo, x_hi, y_lo, y_hi, largest depth); not ok when a corner is behind the camera or nearer than it measures."""
+    x_lo = np.inf
+    x_hi = -np.inf
+    y_lo = np.inf
+    y_hi = -np.inf
+    far = 0.0
+    for dv in range(2):
+        for du in range(2):
+            hz = corners[v + dv, u + du, 2] * z + offset[2]
+            if hz <= z_near:
+                return False, x_lo, x_hi, y_lo, y_hi, far
+            x = (corners[v + dv, u + du, 0] * z + offset[0]) / hz
+            y = (corners[v + dv, u + du, 1] * z + offset[1]) / hz
+            x_lo = min(x_lo, x)
+            x_hi = max(x_hi, x)
+            y_lo = min(y_lo, y)
+            y_hi = max(y_hi, y)
+            far = max(far, hz)
+    return True, x_lo, x_hi, y_lo, y_hi, far
+
+
+@njit(cache=True, error_model="numpy")
+def box_seen_through(eroded, width, height, x_lo, x_hi, y_lo, y_hi, need):
+    """Whether every pixel whose footprint meets [x_lo, x_hi] x [y_lo, y_hi], grown by the erosion's pad, lies in
+    the image and saw at least ``need`` metres."""
+    q_lo = np.ceil(x_lo - 0.5)
+    q_hi = np.floor(x_hi + 0.5)
+    r_lo = np.ceil(y_lo - 0.5)
+    r_hi = np.floor(y_hi + 0.5)
+    if q_lo < 0.0 or r_lo < 0.0 or q_hi > width - 1 or r_hi > height - 1:
+        return False
+    for r in range(int(r_lo), int(r_hi) + 1):
+        for q in range(int(q_lo), int(q_hi) + 1):
+            if eroded[r, q] < need:
+                return False
+    return True
+
+
+CLASSIFY_RUN = 8  # cells classified together: neighbours share a face, projected once
+
+
+@njit(cache=True, error_model="numpy")
+def classify_run(u, v, k_a, k_b, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin, cells):
+    """Classify cells k_a..k_b (at most 64) of principal pixel (u, v) into cells[v, u, k]: 1 when some secondary
+    camera saw through the whole cell, else 2 (occupied, or hidden from every camera). Each face between two cells is
+    projected once per camera."""
+    cleared = np.uint64(0)
+    for j in range(corners.shape[0]):
+        width = sizes[j, 0]
+        height = sizes[j, 1]
+        ok0, x_lo0, x_hi0, y_lo0, y_hi0, far0 = face_box(corners[j], offsets[j], u, v, d_min + k_a * delta_d,
+                                                         z_near[j])
+        for i in range(k_b - k_a + 1):
+            k = k_a + i
+            ok1, x_lo1, x_hi1, y_lo1, y_hi1, far1 = face_box(corners[j], offsets[j], u, v, d_min + (k + 1) * delta_d,
+                                                             z_near[j])
+            bit = np.uint64(1) << np.uint64(i)
+            if ok0 and ok1 and (cleared & bit) == np.uint64(0):
+                if box_seen_through(eroded[j], width, height, min(x_lo0, x_lo1), max(x_hi0, x_hi1), min(y_lo0, y_lo1),
+                                    max(y_hi0, y_hi1), max(far0, far1) + margin):
+                    cleared |= bit
+            ok0, x_lo0, x_hi0, y_lo0, y_hi0, far0 = ok1, x_lo1, x_hi1, y_lo1, y_hi1, far1
+    for i in range(k_b - k_a + 1):
+        cells[v, u, k_a + i] = 1 if (cleared >> np.uint64(i)) & np.uint64(1) else 2
+
+
+@njit(cache=True, error_model="numpy")
+def _next_not_free(cells, v, u, k, k_end, step):
+    """The first cell from k towards k_end (inclusive, by step +-1) not known to be free, or k_end + step."""
+    while k != k_end + step and cells[v, u, k] == 1:
+        k += step
+    return k
+
+
+@njit(cache=True, error_model="numpy")
+def occupied_in(u, v, k_lo, k_hi, highest, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin, cells):
+    """The highest (or lowest) occupied cell in k_lo..k_hi of principal pixel (u, v), -1 for none.
+
+    cells[v, u, k] caches each cell's class for the frame: 0 unknown, 1 free, 2 occupied. A cell met unknown is
+    classified with the next few in the walk's direction (:func:`classify_run`). Threads that query different
+    control points may classify the same cell at once; each writes the same byte, a function of this frame's images
+    alone, so whichever write lands, the cache holds the right class.
     """
-    n = points_camera.shape[0]
-    height, width = z_start.shape
-    spans = np.empty((n, height, 2), dtype=np.int64)
-    rows = np.empty((n, 2), dtype=np.int64)
-    scratch = np.empty(3)
-    for i in range(n):
-        X, Y, Z = points_camera[i, 0], points_camera[i, 1], points_camera[i, 2]
-        _, unseen_here, _, _, _, _, _, _, v_lo, v_hi = surveillance_region(
-            X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_max, unseen_occupied, near_eps, inside_tol,
-            spans[i], scratch)
-        rows[i, 0] = v_lo if not unseen_here else 0
-        rows[i, 1] = v_hi if not unseen_here else -1
-    first = height
-    last = -1
-    for i in range(n):
-        if rows[i, 0] <= rows[i, 1]:
-            first = min(first, rows[i, 0])
-            last = max(last, rows[i, 1])
-    for v in prange(first, last + 1):
-        for i in range(n):
-            if v < rows[i, 0] or v > rows[i, 1]:
-                continue
-            Z = points_camera[i, 2]
-            for u in range(spans[i, v, 0], spans[i, v, 1] + 1):
-                k_a, k_b = candidate_cells(np.float64(z_start[v, u]), np.float64(z_end[v, u]), certain[v, u],
-                                           np.float64(blind_from[v, u]), Z, rho, d_min, delta_d, n_cells)
-                if k_a > k_b:
-                    continue
-                lo = c_lo[v, u]
-                hi = c_hi[v, u]
-                if lo > hi:
-                    classify_run(u, v, k_a, k_b, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad,
-                                 bits)
-                    c_lo[v, u] = k_a
-                    c_hi[v, u] = k_b
-                    continue
-                if k_a < lo:
-                    classify_run(u, v, k_a, lo - 1, d_min, delta_d, corners, offsets, free, sizes, z_near, margin,
-                                 pad, bits)
-                    c_lo[v, u] = k_a
-                if k_b > hi:
-                    classify_run(u, v, hi + 1, k_b, d_min, delta_d, corners, offsets, free, sizes, z_near, margin,
-                                 pad, bits)
-                    c_hi[v, u] = k_b
-
-
-@njit(cache=True, error_model="numpy")
-def cell_is_occupied(u, v, k, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad, bits, c_lo, c_hi):
-    """Cell k of principal pixel (u, v): from the cache when it holds it, else classified here."""
-    if c_lo[v, u] <= k and k <= c_hi[v, u]:
-        return (bits[v, u, k >> 6] >> np.uint64(k & 63)) & np.uint64(1) != 0
-    return cell_occupied(u, v, k, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad)
-
-
-_ONE = np.uint64(1)
-_ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
-
-
-@njit(cache=True, error_model="numpy")
-def _bit_index(word, highest):
-    """The index (0-63) of the highest or the lowest set bit of a non-zero uint64, by halving."""
-    index = 0
-    width = 32
-    while width > 0:
-        shift = np.uint64(width)
-        if highest:
-            if word >> shift != np.uint64(0):
-                word >>= shift
-                index += width
-        else:
-            if word & ((_ONE << shift) - _ONE) == np.uint64(0):
-                word >>= shift
-                index += width
-        width //= 2
-    return index
-
-
-@njit(cache=True, error_model="numpy")
-def set_bit_in(row, k_lo, k_hi, highest):
-    """The highest (or lowest) k in [k_lo, k_hi] whose bit is set in row (words of 64 cells), -1 for none."""
-    w_lo = k_lo >> 6
-    w_hi = k_hi >> 6
-    w = w_hi if highest else w_lo
-    while w_lo <= w <= w_hi:
-        word = row[w]
-        if w == w_hi and (k_hi & 63) < 63:
-            word &= (_ONE << np.uint64((k_hi & 63) + 1)) - _ONE
-        if w == w_lo:
-            word &= _ALL << np.uint64(k_lo & 63)
-        if word != np.uint64(0):
-            return w * 64 + _bit_index(word, highest)
-        w += -1 if highest else 1
-    return -1
-
-
-@njit(cache=True, error_model="numpy")
-def occupied_in(u, v, k_lo, k_hi, highest, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad, bits,
-                c_lo, c_hi):
-    """The highest (or lowest) occupied cell in k_lo..k_hi of principal pixel (u, v), -1 for none: 64 cells a step
-    where the cache holds them, one by one otherwise."""
     if k_lo > k_hi:
         return -1
-    if c_lo[v, u] <= k_lo and k_hi <= c_hi[v, u]:
-        return set_bit_in(bits[v, u], k_lo, k_hi, highest)
-    for i in range(k_hi - k_lo + 1):
-        k = k_hi - i if highest else k_lo + i
-        if cell_is_occupied(u, v, k, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad, bits, c_lo,
-                            c_hi):
+    step = -1 if highest else 1
+    k_end = k_lo if highest else k_hi
+    k = k_hi if highest else k_lo
+    while True:
+        k = _next_not_free(cells, v, u, k, k_end, step)
+        if k == k_end + step:
+            return -1
+        if cells[v, u, k] == 0:
+            if highest:
+                classify_run(u, v, max(k - CLASSIFY_RUN + 1, k_end), k, d_min, delta_d, corners, offsets, eroded,
+                             sizes, z_near, margin, cells)
+            else:
+                classify_run(u, v, k, min(k + CLASSIFY_RUN - 1, k_end), d_min, delta_d, corners, offsets, eroded,
+                             sizes, z_near, margin, cells)
+        if cells[v, u, k] == 2:
             return k
-    return -1
+        k += step
+
+
+NO_FREE_RUN = 1 << 32  # free_run's value for "no run known": the empty range 1..0
+
+
+@njit(cache=True, error_model="numpy")
+def remember_free_run(free_run, v, u, k_lo, k_hi):
+    """Record that cells k_lo..k_hi of pixel (u, v) are all free: free_run[v, u] = (first << 32) | last of one run
+    of cells known free, grown by this one where they touch, else replaced by the longer. One 8-byte store, so a
+    thread never reads half of another's run; every run stored is free, whichever store lands."""
+    if k_lo > k_hi:
+        return
+    run = free_run[v, u]
+    run_lo = run >> 32
+    run_hi = run & 0xFFFFFFFF
+    if run_lo <= k_hi + 1 and k_lo <= run_hi + 1:
+        k_lo = min(k_lo, run_lo)
+        k_hi = max(k_hi, run_hi)
+    elif run_hi - run_lo > k_hi - k_lo:
+        return
+    free_run[v, u] = (np.int64(k_lo) << 32) | np.int64(k_hi)
+
+
+@njit(cache=True, error_model="numpy")
+def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, d_min, delta_d, corners, offsets, eroded, sizes, z_near,
+              margin, cells, free_run):
+    """:func:`nearest_confirmed`'s walk down and up from cell k_star (or from the ends of the known free run holding
+    it) to the first occupied cell each way within k_lo..k_hi. Returns (k_left, k_right), -1 for none, or (-2, -2)
+    when k_star's own cell is occupied. Records the free run found between them."""
+    if not in_run and occupied_in(u, v, k_star, k_star, False, d_min, delta_d, corners, offsets, eroded, sizes, z_near,
+                                  margin, cells) >= 0:
+        return -2, -2
+    down_from = run_lo - 1 if in_run else k_star - 1
+    up_from = run_hi + 1 if in_run else k_star + 1
+    k_left = occupied_in(u, v, k_lo, down_from, True, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin,
+                         cells)
+    k_right = occupied_in(u, v, up_from, k_hi, False, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin,
+                          cells)
+    # Everything between the two is free now.
+    free_lo = k_left + 1 if k_left >= 0 else (min(k_lo, run_lo) if in_run else k_lo)
+    free_hi = k_right - 1 if k_right >= 0 else (max(k_hi, run_hi) if in_run else k_hi)
+    remember_free_run(free_run, v, u, free_lo, free_hi)
+    return k_left, k_right
 
 
 @njit(cache=True, error_model="numpy")
 def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, u, v, d_min, delta_d, n_cells,
-                      corners, offsets, free, sizes, z_near, margin, pad, bits, c_lo, c_hi):
+                      corners, offsets, eroded, sizes, z_near, margin, cells, free_run):
     """The nearest occupied part of [lo, hi] along principal pixel (u, v)'s frustum, nearer than ``bound2``: the
     part [lo, certain_to] is occupied as it stands (a measured surface's own cell; certain_to <= lo for none), and so
     are the parts outside the grid [d_min, d_max], which no camera can check; the rest is candidate cells.
 
     The distance from P along one convex frustum is unimodal in depth, so the nearest occupied part is the one
     holding the nearest point z* of [lo, hi] if that part is occupied, else the first occupied part met walking
-    down from z*, or the first walking up. Cells shallower than Z - rho or deeper than Z + rho are farther than rho
-    and are never looked at. Returns (squared distance, z*), (inf, 0) if nothing occupied comes nearer than bound2.
+    down from z*, or the first walking up. Cells too far from z* to come nearer than bound2 are never looked at. Returns (squared distance, z*), (inf, 0) if nothing occupied comes nearer than bound2.
     """
     if lo > hi:
         return np.inf, 0.0
@@ -292,23 +251,34 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
     above = max(d_max, below)
     if (below > lo and z <= below) or (hi > above and z >= above):
         return d2, z
-    k_lo = max(int((max(below, lo) - d_min) / delta_d), int((max(Z - rho, d_min) - d_min) / delta_d))
-    k_hi = min(int((min(hi, d_max) - d_min) / delta_d), n_cells - 1)
+    # g(z), the squared distance from P to the frustum's slice at depth z, is convex with g'' >= 2, so
+    # g(z) >= d2 + (z - z*)^2 and only cells within reach of z* can come nearer than bound2.
+    reach = np.sqrt(bound2 - d2)
+    k_lo = max(int((max(below, lo) - d_min) / delta_d), int((max(z - reach, d_min) - d_min) / delta_d))
+    k_hi = min(int((min(hi, d_max, z + reach) - d_min) / delta_d), n_cells - 1)
     k_star = min(max(int((z - d_min) / delta_d), k_lo), k_hi)
-    if cell_is_occupied(u, v, k_star, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad, bits, c_lo,
-                        c_hi):
-        return d2, z
+    # Skip the run of cells already known free around z*, if there is one; else start at z*'s own cell.
+    run = free_run[v, u]
+    run_lo = run >> 32
+    run_hi = run & 0xFFFFFFFF
+    in_run = run_lo <= k_star <= run_hi
+    if run_lo <= k_lo and k_hi <= run_hi:
+        k_left = -1
+        k_right = -1
+    else:
+        k_left, k_right = _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, d_min, delta_d, corners,
+                                    offsets, eroded, sizes, z_near, margin, cells, free_run)
+        if k_left == -2:  # z*'s own cell is occupied
+            return d2, z
     best2 = np.inf
     best_z = 0.0
-    k = occupied_in(u, v, k_lo, k_star - 1, True, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad,
-                    bits, c_lo, c_hi)
+    k = k_left
     if k >= 0:
         best2, best_z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, max(below, lo, d_min + k * delta_d),
                                         min(hi, d_min + (k + 1) * delta_d))
     elif below > lo:
         best2, best_z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, lo, below)
-    k = occupied_in(u, v, k_star + 1, k_hi, False, d_min, delta_d, corners, offsets, free, sizes, z_near, margin, pad,
-                    bits, c_lo, c_hi)
+    k = k_right
     if k >= 0:
         d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, max(below, lo, d_min + k * delta_d),
                                 min(hi, d_min + (k + 1) * delta_d))
@@ -325,7 +295,7 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
 
 @njit(cache=True, error_model="numpy")
 def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_from, bound2, d_min, delta_d, n_cells,
-                   corners, offsets, free, sizes, z_near, margin, pad, bits, c_lo, c_hi):
+                   corners, offsets, eroded, sizes, z_near, margin, cells, free_run):
     """Squared distance from P to what is occupied along principal pixel (u, v) after fusion, its depth z*, and
     whether that came from a candidate of a pixel without a measurement. (inf, 0, False) if nothing nearer than
     ``bound2``.
@@ -346,16 +316,16 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
             else:  # case (iii): the surface's own cell is certain, the gray area behind it is a candidate
                 best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs, surface_cell_end(zs, d_min, delta_d),
                                                   min(ze, z_far), bound2, u, v, d_min, delta_d, n_cells, corners,
-                                                  offsets, free, sizes, z_near, margin, pad, bits, c_lo, c_hi)
+                                                  offsets, eroded, sizes, z_near, margin, cells, free_run)
         else:  # no measurement: the whole segment is a candidate
             best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs, zs, min(ze, z_far), bound2, u, v,
-                                              d_min, delta_d, n_cells, corners, offsets, free, sizes, z_near, margin,
-                                              pad, bits, c_lo, c_hi)
+                                              d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin,
+                                              cells, free_run)
             from_invalid = best2 < np.inf
     if blind_from <= z_far:  # case (iv): behind the robot
         d2, z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, blind_from, blind_from, z_far, min(best2, bound2), u,
-                                  v, d_min, delta_d, n_cells, corners, offsets, free, sizes, z_near, margin, pad, bits,
-                                  c_lo, c_hi)
+                                  v, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin,
+                                  cells, free_run)
         if d2 < best2:
             best2, best_z = d2, z
             from_invalid = False
@@ -367,7 +337,7 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
 @njit(cache=True, error_model="numpy")
 def fused_query_point(X, Y, Z, rho, z_start, z_end, certain, blind_from, fx, fy, cx, cy, z_min, z_max, aggregate,
                       unseen_occupied, near_eps, inside_tol, min_direction, d_min, delta_d, n_cells, corners, offsets,
-                      free, sizes, z_near, margin, pad, bits, c_lo, c_hi, spans, out_direction):
+                      eroded, sizes, z_near, margin, cells, free_run, spans, out_direction):
     """Distance from one control point P = (X, Y, Z) (metres, principal optical frame) to what the principal camera
     says is possibly occupied and the secondary cameras do not clear, aggregated as ``aggregate``; the fused
     counterpart of :func:`depthguard.depthspace._kernels.query_point`. Returns (distance, count, invalid_count,
@@ -381,7 +351,6 @@ def fused_query_point(X, Y, Z, rho, z_start, z_end, certain, blind_from, fx, fy,
         return 0.0, 1, 0, flags
     prune_min = aggregate == AGG_MIN
     z_far = Z + rho
-    d_max = d_min + n_cells * delta_d
     best2 = np.inf
     best_u = 0
     best_v = 0
@@ -403,22 +372,13 @@ def fused_query_point(X, Y, Z, rho, z_start, z_end, certain, blind_from, fx, fy,
             first = min(zs, bf)
             if first > z_far:
                 continue
-            if not certain[v, u] or zs > z_far:
-                # Only candidates: skip the pixel when the other cameras cleared every cell of them in reach.
-                s = candidate_start(zs, np.float64(z_end[v, u]), certain[v, u], bf, Z, rho, d_min, delta_d)
-                if s >= d_min and z_far <= d_max:
-                    k_a, k_b = candidate_cells(zs, np.float64(z_end[v, u]), certain[v, u], bf, Z, rho, d_min, delta_d,
-                                               n_cells)
-                    if k_a > k_b or (c_lo[v, u] <= k_a and k_b <= c_hi[v, u] and set_bit_in(bits[v, u], k_a, k_b,
-                                                                                               False) < 0):
-                        continue
             a0 = (u - 0.5 - cx) / fx
             a1 = (u + 0.5 - cx) / fx
             # With min, a pixel that only ties the best so far cannot win: pixels come in (v, u) order.
             bound2 = min(rho2, best2) if prune_min else rho2
             d2, z, from_invalid = pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, np.float64(z_end[v, u]),
                                                  certain[v, u], bf, bound2, d_min, delta_d, n_cells, corners, offsets,
-                                                 free, sizes, z_near, margin, pad, bits, c_lo, c_hi)
+                                                 eroded, sizes, z_near, margin, cells, free_run)
             if d2 >= rho2:
                 continue
             if d2 < best2 or (d2 == best2 and (v < best_v or (v == best_v and u < best_u))):
@@ -449,7 +409,7 @@ def fused_query_point(X, Y, Z, rho, z_start, z_end, certain, blind_from, fx, fy,
 @njit(parallel=True, cache=True, error_model="numpy")
 def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, fx, fy, cx, cy, z_min, z_max,
                        aggregate, unseen_occupied, near_eps, inside_tol, min_direction, d_min, delta_d, n_cells, corners,
-                       offsets, free, sizes, z_near, margin, pad, bits, c_lo, c_hi, distance, direction, count,
+                       offsets, eroded, sizes, z_near, margin, cells, free_run, distance, direction, count,
                        invalid_count, flags):
     """:func:`fused_query_point` for each of the (n, 3) principal-frame points, in parallel."""
     n = points_camera.shape[0]
@@ -458,7 +418,7 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
         d, c, k, f = fused_query_point(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, z_start,
                                        z_end, certain, blind_from, fx, fy, cx, cy, z_min, z_max, aggregate,
                                        unseen_occupied, near_eps, inside_tol, min_direction, d_min, delta_d, n_cells,
-                                       corners, offsets, free, sizes, z_near, margin, pad, bits, c_lo, c_hi, spans[i],
+                                       corners, offsets, eroded, sizes, z_near, margin, cells, free_run, spans[i],
                                        direction[i])
         distance[i] = d
         count[i] = c
