@@ -22,6 +22,7 @@ from depthguard.depthspace._kernels import (
     AGG_MIN,
     _finish_min_at_pixel,
     _finish_sum,
+    _guess_piece_row,
     frustum_nearest,
     surveillance_region,
 )
@@ -207,6 +208,16 @@ def remember_free_run(free_run, v, u, k_lo, k_hi):
     free_run[v, u] = (np.int64(k_lo) << 32) | np.int64(k_hi)
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def known_free(lo, hi, u, v, d_min, delta_d, n_cells, free_run):
+    """Whether every cell of the candidate range [lo, hi] (inside the grid) of pixel (u, v) is known free."""
+    if lo < d_min or hi > d_min + n_cells * delta_d:
+        return False
+    run = free_run[v, u]
+    return (run >> 32) <= int((lo - d_min) / delta_d) and min(int((hi - d_min) / delta_d), n_cells - 1) <= (
+        run & 0xFFFFFFFF)
+
+
 @njit(cache=True, error_model="numpy")
 def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, d_min, delta_d, corners, offsets, eroded, sizes, z_near,
               margin, cells, free_run):
@@ -238,29 +249,42 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
 
     The distance from P along one convex frustum is unimodal in depth, so the nearest occupied part is the one
     holding the nearest point z* of [lo, hi] if that part is occupied, else the first occupied part met walking
-    down from z*, or the first walking up. Cells too far from z* to come nearer than bound2 are never looked at. Returns (squared distance, z*), (inf, 0) if nothing occupied comes nearer than bound2.
+    down from z*, or the first walking up.
+
+    A range of candidate cells alone (no certain part) is walked whole, and the run of cells found free is kept in
+    free_run, so that the next control point whose range that run covers skips the pixel at once: the space behind
+    the robot, which every point on the robot looks at, is mostly such a range. Elsewhere only cells close enough
+    to z* to come nearer than bound2 are looked at. Returns (squared distance, z*), (inf, 0) if nothing occupied
+    comes nearer than bound2.
     """
     if lo > hi:
-        return np.inf, 0.0
-    d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, lo, hi)
-    if d2 >= bound2:
         return np.inf, 0.0
     d_max = d_min + n_cells * delta_d
     # Occupied as they stand: [lo, below] when below > lo, and [above, hi] (beyond the grid) when hi > above.
     below = max(certain_to, min(d_min, hi)) if lo < d_min else certain_to
     above = max(d_max, below)
-    if (below > lo and z <= below) or (hi > above and z >= above):
-        return d2, z
-    # g(z), the squared distance from P to the frustum's slice at depth z, is convex with g'' >= 2, so
-    # g(z) >= d2 + (z - z*)^2 and only cells within reach of z* can come nearer than bound2.
-    reach = np.sqrt(bound2 - d2)
-    k_lo = max(int((max(below, lo) - d_min) / delta_d), int((max(z - reach, d_min) - d_min) / delta_d))
-    k_hi = min(int((min(hi, d_max, z + reach) - d_min) / delta_d), n_cells - 1)
-    k_star = min(max(int((z - d_min) / delta_d), k_lo), k_hi)
-    # Skip the run of cells already known free around z*, if there is one; else start at z*'s own cell.
+    candidates_only = below <= lo and hi <= above
+    if candidates_only:
+        if known_free(lo, hi, u, v, d_min, delta_d, n_cells, free_run):
+            return np.inf, 0.0
+        k_lo = int((lo - d_min) / delta_d)
+        k_hi = min(int((hi - d_min) / delta_d), n_cells - 1)
     run = free_run[v, u]
     run_lo = run >> 32
     run_hi = run & 0xFFFFFFFF
+    d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, lo, hi)
+    if d2 >= bound2:
+        return np.inf, 0.0
+    if (below > lo and z <= below) or (hi > above and z >= above):
+        return d2, z
+    if not candidates_only:
+        # g(z), the squared distance from P to the frustum's slice at depth z, is convex with g'' >= 2, so
+        # g(z) >= d2 + (z - z*)^2 and only cells within reach of z* can come nearer than bound2.
+        reach = np.sqrt(bound2 - d2)
+        k_lo = max(int((max(below, lo) - d_min) / delta_d), int((max(z - reach, d_min) - d_min) / delta_d))
+        k_hi = min(int((min(hi, d_max, z + reach) - d_min) / delta_d), n_cells - 1)
+    k_star = min(max(int((z - d_min) / delta_d), k_lo), k_hi)
+    # Skip the run of cells already known free around z*, if there is one; else start at z*'s own cell.
     in_run = run_lo <= k_star <= run_hi
     if run_lo <= k_lo and k_hi <= run_hi:
         k_left = -1
@@ -337,7 +361,7 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
 @njit(cache=True, error_model="numpy")
 def fused_query_point(X, Y, Z, rho, z_start, z_end, certain, blind_from, fx, fy, cx, cy, z_min, z_max, aggregate,
                       unseen_occupied, near_eps, inside_tol, min_direction, d_min, delta_d, n_cells, corners, offsets,
-                      eroded, sizes, z_near, margin, cells, free_run, spans, out_direction):
+                      eroded, sizes, z_near, margin, cells, free_run, spans, scratch, out_direction):
     """Distance from one control point P = (X, Y, Z) (metres, principal optical frame) to what the principal camera
     says is possibly occupied and the secondary cameras do not clear, aggregated as ``aggregate``; the fused
     counterpart of :func:`depthguard.depthspace._kernels.query_point`. Returns (distance, count, invalid_count,
@@ -363,22 +387,53 @@ def fused_query_point(X, Y, Z, rho, z_start, z_end, certain, blind_from, fx, fy,
     sx = 0.0
     sy = 0.0
     sz = 0.0
+    inv_fx = 1.0 / fx
+    z_in = scratch[0]
+    u_in = scratch[1]
+    d2_row = scratch[2]
+    z_row = scratch[3]
+    z_hi_in = scratch[4]
     for v in range(v_lo, v_hi + 1):
         b0 = (v - 0.5 - cy) / fy
         b1 = (v + 0.5 - cy) / fy
+        # Gather the row's pixels with something possibly occupied in reach, and the depth span that holds it.
+        m = 0
         for u in range(spans[v, 0], spans[v, 1] + 1):
             zs = np.float64(z_start[v, u])
             bf = np.float64(blind_from[v, u])
-            first = min(zs, bf)
-            if first > z_far:
+            if min(zs, bf) > z_far:
                 continue
-            a0 = (u - 0.5 - cx) / fx
-            a1 = (u + 0.5 - cx) / fx
+            if zs > z_far and known_free(bf, z_far, u, v, d_min, delta_d, n_cells, free_run):
+                continue  # the space behind the robot, every cell in reach known free
+            z_in[m] = min(zs, bf)
+            z_hi_in[m] = min(np.float64(z_end[v, u]), z_far) if (certain[v, u] and bf > z_far) else z_far
+            u_in[m] = u
+            m += 1
+        if m == 0:
+            continue
+        # The nearest point of that span, a lower bound of the pixel's distance (vectorised).
+        _guess_piece_row(X, Y, Z, b0, b1, z_in, z_hi_in, u_in, m, inv_fx, cx, d2_row, z_row)
+        for i in range(m):
+            u = int(u_in[i])
+            a0 = (u - 0.5 - cx) * inv_fx
+            a1 = (u + 0.5 - cx) * inv_fx
+            d2 = d2_row[i]
+            z = z_row[i]
+            if d2 < 0.0:
+                d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, z_in[i], z_hi_in[i])
             # With min, a pixel that only ties the best so far cannot win: pixels come in (v, u) order.
             bound2 = min(rho2, best2) if prune_min else rho2
-            d2, z, from_invalid = pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, np.float64(z_end[v, u]),
-                                                 certain[v, u], bf, bound2, d_min, delta_d, n_cells, corners, offsets,
-                                                 eroded, sizes, z_near, margin, cells, free_run)
+            if d2 >= bound2:
+                continue
+            zs = np.float64(z_start[v, u])
+            bf = np.float64(blind_from[v, u])
+            from_invalid = False
+            # A measured surface and nothing behind the robot in reach, its nearest point on the surface's own cell
+            # or, the surface behind P (case ii), anywhere: that is the answer. Otherwise ask the grid.
+            if not (certain[v, u] and bf > z_far and (zs >= Z or z <= surface_cell_end(zs, d_min, delta_d))):
+                d2, z, from_invalid = pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, np.float64(z_end[v, u]),
+                                                     certain[v, u], bf, bound2, d_min, delta_d, n_cells, corners,
+                                                     offsets, eroded, sizes, z_near, margin, cells, free_run)
             if d2 >= rho2:
                 continue
             if d2 < best2 or (d2 == best2 and (v < best_v or (v == best_v and u < best_u))):
@@ -414,12 +469,13 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
     """:func:`fused_query_point` for each of the (n, 3) principal-frame points, in parallel."""
     n = points_camera.shape[0]
     spans = np.empty((n, z_start.shape[0], 2), dtype=np.int64)
+    scratch = np.empty((n, 5, z_start.shape[1]))
     for i in prange(n):
         d, c, k, f = fused_query_point(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, z_start,
                                        z_end, certain, blind_from, fx, fy, cx, cy, z_min, z_max, aggregate,
                                        unseen_occupied, near_eps, inside_tol, min_direction, d_min, delta_d, n_cells,
                                        corners, offsets, eroded, sizes, z_near, margin, cells, free_run, spans[i],
-                                       direction[i])
+                                       scratch[i], direction[i])
         distance[i] = d
         count[i] = c
         invalid_count[i] = k
