@@ -104,15 +104,12 @@ class FusedFrames:
         # Each pixel's smallest free depth within pad pixels: a cell's grown footprint is then its own pixels.
         self._eroded = np.empty_like(free)
         _kernels.erode_free(free, self._sizes, int(pad), self._eroded)
-        self._certain = ((principal.invalid == 0) | (principal.z_start != np.float32(camera.depth_range[0]))).astype(
-            np.uint8)
-        if principal.robot_pixels:
-            far = np.asarray(robot_far, dtype=np.float64)
-            slack = robot_tolerance + camera.noise.margin(far)
-            blind_from = np.where(np.isfinite(principal.blind), np.maximum(principal.blind, far + slack), np.inf)
-        else:
-            blind_from = np.full(camera.shape, np.inf)
-        self._blind_from = blind_from.astype(np.float32)
+        self._certain = np.empty(camera.shape, dtype=np.uint8)
+        self._blind_from = np.empty(camera.shape, dtype=np.float32)
+        far = np.zeros(camera.shape, dtype=np.float32) if robot_far is None else robot_far
+        _kernels.principal_arrays(principal.z_start, principal.invalid, np.float32(camera.depth_range[0]),
+                                  principal.blind, far, float(robot_tolerance), *camera.noise.coefficients(),
+                                  self._certain, self._blind_from)
         # The cells' classes so far, a byte each: 0 unknown, 1 free, 2 occupied. The zeroed pages come from the
         # operating system as they are first touched, so memory grows with the cells looked at, not with the grid.
         self._cells = np.zeros(camera.shape + (grid.n_cells,), dtype=np.uint8)

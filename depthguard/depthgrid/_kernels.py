@@ -51,6 +51,24 @@ def surface_cell_end(zs, d_min, delta_d):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
+def principal_arrays(z_start, invalid, invalid_start, blind, robot_far, slack, m0, m1, m2, certain, blind_from):
+    """Per pixel of the principal frame: certain = 1 where its possibly-occupied segment starts at a measured
+    surface (a valid pixel, or an invalid one whose segment starts elsewhere than the invalid start depth), and
+    blind_from = where the space behind the robot starts: past the robot's body (robot_far) by the self-filter's
+    slack plus the noise margin there, and never before ``blind``; inf where no robot is seen."""
+    h, w = z_start.shape
+    for v in prange(h):
+        for u in range(w):
+            certain[v, u] = 1 if (invalid[v, u] == 0 or z_start[v, u] != invalid_start) else 0
+            b = np.float64(blind[v, u])
+            if np.isfinite(b):
+                far = np.float64(robot_far[v, u])
+                blind_from[v, u] = max(b, far + slack + max(m0 + (m1 + m2 * far) * far, 0.0))
+            else:
+                blind_from[v, u] = np.inf
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
 def erode_free(free, sizes, pad, out):
     """out[j, r, q] = the smallest free[j] over the pixels within pad of (r, q) (a (2 pad + 1)^2 square), 0 where
     that square leaves camera j's image: a cell's footprint then needs only its own pixels read, and the grown
@@ -94,8 +112,9 @@ def face_box(corners, offset, u, v, z, z_near):
             hz = corners[v + dv, u + du, 2] * z + offset[2]
             if hz <= z_near:
                 return False, x_lo, x_hi, y_lo, y_hi, far
-            x = (corners[v + dv, u + du, 0] * z + offset[0]) / hz
-            y = (corners[v + dv, u + du, 1] * z + offset[1]) / hz
+            inv = 1.0 / hz
+            x = (corners[v + dv, u + du, 0] * z + offset[0]) * inv
+            y = (corners[v + dv, u + du, 1] * z + offset[1]) * inv
             x_lo = min(x_lo, x)
             x_hi = max(x_hi, x)
             y_lo = min(y_lo, y)
@@ -149,7 +168,7 @@ def classify_run(u, v, k_a, k_b, d_min, delta_d, corners, offsets, eroded, sizes
         cells[v, u, k_a + i] = 1 if (cleared >> np.uint64(i)) & np.uint64(1) else 2
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _next_not_free(cells, v, u, k, k_end, step):
     """The first cell from k towards k_end (inclusive, by step +-1) not known to be free, or k_end + step."""
     while k != k_end + step and cells[v, u, k] == 1:
@@ -157,7 +176,7 @@ def _next_not_free(cells, v, u, k, k_end, step):
     return k
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def occupied_in(u, v, k_lo, k_hi, highest, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin, cells):
     """The highest (or lowest) occupied cell in k_lo..k_hi of principal pixel (u, v), -1 for none.
 
@@ -190,7 +209,7 @@ def occupied_in(u, v, k_lo, k_hi, highest, d_min, delta_d, corners, offsets, ero
 NO_FREE_RUN = 1 << 32  # free_run's value for "no run known": the empty range 1..0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def remember_free_run(free_run, v, u, k_lo, k_hi):
     """Record that cells k_lo..k_hi of pixel (u, v) are all free: free_run[v, u] = (first << 32) | last of one run
     of cells known free, grown by this one where they touch, else replaced by the longer. One 8-byte store, so a
@@ -218,7 +237,7 @@ def known_free(lo, hi, u, v, d_min, delta_d, n_cells, free_run):
         run & 0xFFFFFFFF)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, d_min, delta_d, corners, offsets, eroded, sizes, z_near,
               margin, cells, free_run):
     """:func:`nearest_confirmed`'s walk down and up from cell k_star (or from the ends of the known free run holding
@@ -240,7 +259,7 @@ def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, d_min, delta_d, 
     return k_left, k_right
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, u, v, d_min, delta_d, n_cells,
                       corners, offsets, eroded, sizes, z_near, margin, cells, free_run):
     """The nearest occupied part of [lo, hi] along principal pixel (u, v)'s frustum, nearer than ``bound2``: the
