@@ -121,16 +121,20 @@ class DistanceMonitor:
             image = frame if frame.data.shape == camera.shape else depth_image(frame.data, camera, frame.timestamp)
         else:
             image = depth_image(frame, camera)
-        robot_near = None
+        robot_near = robot_far = None
         if self._silhouette is not None:
             if joints is None:
                 raise InputError(f"camera {name!r}: this monitor filters the robot out of its frames: pass the robot's "
                                  "joint positions at the frame's capture time (query(..., joints=...))")
             joints = self.robot.joint_vector(joints)
             robot_near = self._silhouette.render(camera, joints)
+            if len(self.rig.cameras) > 1 and name in self.principals:
+                # A principal of the depth grid needs where the robot ends (case iv); with it, what the camera saw
+                # past the padded robot also stays a surface rather than blind space.
+                robot_far = self._silhouette.render_far(camera, joints)
         occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels, robot_near=robot_near,
-                                  robot_tolerance=self.self_filter_tolerance)
-        state = _CameraFrame(self, camera, image, occupancy, joints)
+                                  robot_tolerance=self.self_filter_tolerance, robot_far=robot_far)
+        state = _CameraFrame(self, camera, image, occupancy, joints, robot_far)
         if isinstance(frame, DepthImage):
             self._prepared[name] = (frame, state)
         return state
@@ -222,13 +226,14 @@ class _CameraFrame:
     """One camera's latest frame as the monitor prepared it: its occupancy, and, when the depth grid needs them,
     where the robot's body ends along each pixel (for a principal) and how far it saw (for a secondary)."""
 
-    def __init__(self, monitor: DistanceMonitor, camera, image: DepthImage, occupancy: OccupancyImage, joints):
+    def __init__(self, monitor: DistanceMonitor, camera, image: DepthImage, occupancy: OccupancyImage, joints,
+                 robot_far=None):
         self._monitor = monitor
         self.camera = camera
         self.image = image
         self.occupancy = occupancy
         self._joints = joints
-        self._robot_far = None
+        self._robot_far = robot_far
         self._free = None
 
     @property

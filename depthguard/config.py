@@ -213,3 +213,6 @@ DEFAULT_FUSION_MARGIN = 0.01
 
 #: Fusion: a cell's footprint in a secondary camera is grown by this many pixels on every side (calibration error).
 DEFAULT_FUSION_PIXELS = 1
+# Each control point's rows are shared among this many parallel tasks (every n-th row), so that one point near much
+# clutter does not leave the other threads idle.
+FUSION_ROW_CHUNKS = 4

@@ -56,7 +56,7 @@ def block_minimum(z_start, block, out):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def robot_filter(z_start, invalid, policy_start, robot_near, tolerance, m0, m1, m2, z_end, blind):
+def robot_filter(z_start, invalid, policy_start, robot_near, robot_far, has_far, tolerance, m0, m1, m2, z_end, blind):
     """Self-filtering (SPEC section 7): remove the robot from what a frame says is possibly occupied.
 
     robot_near: (h, w) float32 metres, the nearest rendered robot surface per pixel (0 where the robot is not
@@ -64,7 +64,10 @@ def robot_filter(z_start, invalid, policy_start, robot_near, tolerance, m0, m1, 
     with d_r' the nearest rendered robot surface in the pixel's 3x3 neighbourhood (one pixel of slack for
     calibration and for silhouettes, where the rendered depth changes fast). Its ray is free up to the robot
     (z_start = inf) and unknown from the robot on (blind = d_r). A pixel clearly in
-    front of the robot keeps its obstacle, which hides everything behind it anyway. A pixel whose occupied set the
+    front of the robot keeps its obstacle, which hides everything behind it anyway. With ``has_far``, robot_far
+    (h, w) float32 is where the rendered robot ends along each pixel: a measurement beyond the farthest end in the
+    3x3 neighbourhood (plus the tolerance and the noise margin) saw past the robot's padded geometry, through
+    space the real robot does not fill, and stays what it is: a surface, with nothing hidden in front of it. A pixel whose occupied set the
     invalid-pixel policy made (z_start == policy_start, invalid) is occupied only up to the robot:
     z_end = d_r - tolerance - m(d_r), with the blind spot from the robot on.
     Edits z_start, and z_end and blind (h, w) float32 metres (inf = none), in place on the robot's pixels.
@@ -74,12 +77,13 @@ def robot_filter(z_start, invalid, policy_start, robot_near, tolerance, m0, m1, 
         row = robot_near[v]
         for u in range(w):
             if row[u] > 0.0:
-                _filter_robot_pixel(v, u, z_start, invalid, policy_start, robot_near, tolerance, m0, m1, m2, z_end,
-                                    blind)
+                _filter_robot_pixel(v, u, z_start, invalid, policy_start, robot_near, robot_far, has_far, tolerance,
+                                    m0, m1, m2, z_end, blind)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _filter_robot_pixel(v, u, z_start, invalid, policy_start, robot_near, tolerance, m0, m1, m2, z_end, blind):
+def _filter_robot_pixel(v, u, z_start, invalid, policy_start, robot_near, robot_far, has_far, tolerance, m0, m1, m2,
+                        z_end, blind):
     """:func:`robot_filter` on one pixel where the robot is rendered."""
     h, w = z_start.shape
     d_r = np.float64(robot_near[v, u])
@@ -100,6 +104,14 @@ def _filter_robot_pixel(v, u, z_start, invalid, policy_start, robot_near, tolera
             z_start[v, u] = np.inf
         blind[v, u] = d_r
     elif zs >= front:
+        if has_far:
+            d_far = 0.0
+            for dv in range(-1, 2):
+                vv = min(max(v + dv, 0), h - 1)
+                for du in range(-1, 2):
+                    d_far = max(d_far, np.float64(robot_far[vv, min(max(u + du, 0), w - 1)]))
+            if zs > d_far + tolerance + max(m0 + (m1 + m2 * d_far) * d_far, 0.0):
+                return  # seen past the robot
         z_start[v, u] = np.inf
         blind[v, u] = d_r
 

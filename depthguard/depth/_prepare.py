@@ -63,7 +63,8 @@ class OccupancyImage:
 
 def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = config.DEFAULT_INVALID,
                   hole_pixels: int = config.DEFAULT_NEIGHBOR_HOLE_PIXELS, robot_near: np.ndarray | None = None,
-                  robot_tolerance: float = config.SELF_FILTER_TOLERANCE) -> OccupancyImage:
+                  robot_tolerance: float = config.SELF_FILTER_TOLERANCE,
+                  robot_far: np.ndarray | None = None) -> OccupancyImage:
     """Turn a checked :class:`DepthImage` of ``camera`` into an :class:`OccupancyImage` (one pass, numba).
 
     Args:
@@ -75,6 +76,9 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
             sit in the difference.
         robot_tolerance: metres by which a measurement may lie in front of the rendered robot and still be the
             robot (calibration, joint-state timing), on top of the noise margin.
+        robot_far: optional, with ``robot_near``: where the rendered robot ends along each pixel (its farthest
+            surface; 0 where it is not). A measurement farther than that (plus the tolerance and the noise margin)
+            saw past the padded geometry and stays a surface instead of making the space behind the robot blind.
     """
     if invalid not in config.INVALID_POLICIES:
         raise InputError(f"invalid-pixel policy must be one of {config.INVALID_POLICIES}, got {invalid!r}")
@@ -96,8 +100,9 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
         near = _robot_image(robot_near, camera, "robot_near")
         if not (np.isfinite(robot_tolerance) and robot_tolerance >= 0):
             raise InputError(f"robot_tolerance must be a non-negative number of metres, got {robot_tolerance!r}")
-        _kernels.robot_filter(z_start, invalid_mask, np.float32(invalid_start), near, float(robot_tolerance), m0, m1,
-                              m2, z_end, blind)
+        far = near if robot_far is None else _robot_image(robot_far, camera, "robot_far")
+        _kernels.robot_filter(z_start, invalid_mask, np.float32(invalid_start), near, far, robot_far is not None,
+                              float(robot_tolerance), m0, m1, m2, z_end, blind)
     if invalid == "neighbors" and n_invalid:
         _kernels.fill_small_holes(depth.data, float(depth.depth_scale), invalid_mask, int(hole_pixels), m0, m1, m2,
                                   z_start, z_end, blind, np.empty((h, w), dtype=np.uint8),

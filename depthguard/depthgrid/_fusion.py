@@ -135,7 +135,7 @@ class FusedFrames:
                       camera.cx, camera.cy, z_min, z_max)
             near_inside = (config.NEAR_PLANE_EPSILON, config.INSIDE_TOLERANCE)
             cells = (grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets, self._eroded, self._sizes,
-                     self._z_near, self._margin, self._cells, self._free_run)
+                     self._z_near, self._margin, self._cells, self._free_run, config.FUSION_ROW_CHUNKS)
             with parallel_chunksize(1):
                 _kernels.fused_query_points(points_camera, float(rho), *common, config.AGGREGATES.index(aggregate),
                                             unseen == "occupied", *near_inside, config.MIN_DIRECTION_NORM, *cells,

@@ -377,22 +377,22 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
     return best2, best_z, from_invalid
 
 
+# The sums over one control point's contributing pixels (:func:`fused_rows`), in a float64 array of this length.
+ACC_COUNT, ACC_INVALID, ACC_INSIDE, ACC_SUM_D, ACC_SX, ACC_SY, ACC_SZ, ACC_BEST2, ACC_BEST_U, ACC_BEST_V, ACC_BEST_Z, \
+    ACC_BEST_INVALID = range(12)
+N_ACC = 12
+
+
 @njit(cache=True, error_model="numpy")
-def fused_query_point(X, Y, Z, rho, z_start, z_end, certain, blind_from, fx, fy, cx, cy, z_min, z_max, aggregate,
-                      unseen_occupied, near_eps, inside_tol, min_direction, d_min, delta_d, n_cells, corners, offsets,
-                      eroded, sizes, z_near, margin, cells, free_run, spans, scratch, out_direction):
-    """Distance from one control point P = (X, Y, Z) (metres, principal optical frame) to what the principal camera
-    says is possibly occupied and the secondary cameras do not clear, aggregated as ``aggregate``; the fused
-    counterpart of :func:`depthguard.depthspace._kernels.query_point`. Returns (distance, count, invalid_count,
-    flags); writes the unit direction (from the obstacle towards P, principal optical frame) into out_direction."""
-    height, width = z_start.shape
+def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, certain, blind_from, fx, fy, cx, cy,
+               prune_min, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, free_run,
+               scratch, acc):
+    """One control point P = (X, Y, Z) (metres, principal optical frame) against the rows v_first, v_first + v_step,
+    ... <= v_last of its surveillance region (``spans``): what the principal camera says is possibly occupied and
+    the secondary cameras do not clear. Writes into acc (N_ACC,) the count of contributing pixels, those from pixels
+    without a measurement, whether P is inside, the sums of their distances and unit directions, and the nearest
+    one (squared distance, pixel, depth, from a pixel without a measurement?). ``scratch`` (5, width) float64."""
     rho2 = rho * rho
-    flags, unseen_here, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi = surveillance_region(
-        X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_max, unseen_occupied, near_eps, inside_tol, spans,
-        out_direction)
-    if unseen_here:
-        return 0.0, 1, 0, flags
-    prune_min = aggregate == AGG_MIN
     z_far = Z + rho
     best2 = np.inf
     best_u = 0
@@ -412,7 +412,7 @@ def fused_query_point(X, Y, Z, rho, z_start, z_end, certain, blind_from, fx, fy,
     d2_row = scratch[2]
     z_row = scratch[3]
     z_hi_in = scratch[4]
-    for v in range(v_lo, v_hi + 1):
+    for v in range(v_first, v_last + 1, v_step):
         b0 = (v - 0.5 - cy) / fy
         b1 = (v + 0.5 - cy) / fy
         # Gather the row's pixels with something possibly occupied in reach, and the depth span that holds it.
@@ -473,29 +473,89 @@ def fused_query_point(X, Y, Z, rho, z_start, z_end, certain, blind_from, fx, fy,
             sx += (X - min(max(X, a0 * z), a1 * z)) / d
             sy += (Y - min(max(Y, b0 * z), b1 * z)) / d
             sz += (Z - z) / d
-    if prune_min:
-        return _finish_min_at_pixel(X, Y, Z, best2, best_u, best_v, best_z, best_invalid, fx, fy, cx, cy, unseen_d, nx,
-                                    ny, nz, flags, inside_tol, out_direction)
-    return _finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, unseen_d, nx, ny, nz, flags,
-                       inside_tol, min_direction, out_direction)
+    acc[ACC_COUNT] = count
+    acc[ACC_INVALID] = n_invalid
+    acc[ACC_INSIDE] = 1.0 if inside else 0.0
+    acc[ACC_SUM_D] = sum_d
+    acc[ACC_SX] = sx
+    acc[ACC_SY] = sy
+    acc[ACC_SZ] = sz
+    acc[ACC_BEST2] = best2
+    acc[ACC_BEST_U] = best_u
+    acc[ACC_BEST_V] = best_v
+    acc[ACC_BEST_Z] = best_z
+    acc[ACC_BEST_INVALID] = best_invalid
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
 def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, fx, fy, cx, cy, z_min, z_max,
                        aggregate, unseen_occupied, near_eps, inside_tol, min_direction, d_min, delta_d, n_cells, corners,
-                       offsets, eroded, sizes, z_near, margin, cells, free_run, distance, direction, count,
-                       invalid_count, flags):
-    """:func:`fused_query_point` for each of the (n, 3) principal-frame points, in parallel."""
+                       offsets, eroded, sizes, z_near, margin, cells, free_run, row_chunks, distance, direction,
+                       count, invalid_count, flags):
+    """Distances from the (n, 3) control points (metres, principal optical frame) to what the principal camera says
+    is possibly occupied and the secondary cameras do not clear, aggregated as ``aggregate``; the fused counterpart
+    of :func:`depthguard.depthspace._kernels.query_points`. Writes distance (n,), the unit direction (n, 3) (from
+    the obstacle towards P, principal optical frame), count, invalid_count and flags.
+
+    Each point's region is split into ``row_chunks`` interleaved sets of rows, and the n * row_chunks tasks run in
+    parallel: a point near much clutter does not leave the other threads idle. Their sums are then added in a fixed
+    order, so a query's answer does not depend on the threads' timing.
+    """
     n = points_camera.shape[0]
-    spans = np.empty((n, z_start.shape[0], 2), dtype=np.int64)
-    scratch = np.empty((n, 5, z_start.shape[1]))
+    height, width = z_start.shape
+    spans = np.empty((n, height, 2), dtype=np.int64)
+    region = np.empty((n, 8))  # flags, P unseen?, unseen_d, nx, ny, nz, v_lo, v_hi
     for i in prange(n):
-        d, c, k, f = fused_query_point(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, z_start,
-                                       z_end, certain, blind_from, fx, fy, cx, cy, z_min, z_max, aggregate,
-                                       unseen_occupied, near_eps, inside_tol, min_direction, d_min, delta_d, n_cells,
-                                       corners, offsets, eroded, sizes, z_near, margin, cells, free_run, spans[i],
-                                       scratch[i], direction[i])
+        f, unseen_here, unseen_d, nx, ny, nz, _, _, v_lo, v_hi = surveillance_region(
+            points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, width, height, fx, fy, cx, cy, z_min,
+            z_max, unseen_occupied, near_eps, inside_tol, spans[i], direction[i])
+        region[i, 0] = f
+        region[i, 1] = 1.0 if unseen_here else 0.0
+        region[i, 2] = unseen_d
+        region[i, 3] = nx
+        region[i, 4] = ny
+        region[i, 5] = nz
+        region[i, 6] = v_lo
+        region[i, 7] = v_hi if not unseen_here else v_lo - 1
+    prune_min = aggregate == AGG_MIN
+    acc = np.empty((n, row_chunks, N_ACC))
+    scratch = np.empty((n * row_chunks, 5, width))
+    for t in prange(n * row_chunks):
+        i = t // row_chunks
+        c = t % row_chunks
+        fused_rows(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, int(region[i, 6]) + c,
+                   int(region[i, 7]), row_chunks, spans[i], z_start, z_end, certain, blind_from, fx, fy, cx, cy,
+                   prune_min, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells,
+                   free_run, scratch[t], acc[i, c])
+    for i in range(n):
+        X, Y, Z = points_camera[i, 0], points_camera[i, 1], points_camera[i, 2]
+        f = int(region[i, 0])
+        if region[i, 1] != 0.0:
+            distance[i], count[i], invalid_count[i], flags[i] = 0.0, 1, 0, f
+            continue
+        total = acc[i, 0].copy()
+        for c in range(1, row_chunks):
+            part = acc[i, c]
+            for a in (ACC_COUNT, ACC_INVALID, ACC_SUM_D, ACC_SX, ACC_SY, ACC_SZ):
+                total[a] += part[a]
+            total[ACC_INSIDE] = max(total[ACC_INSIDE], part[ACC_INSIDE])
+            # The nearest pixel; among equals, the first in (v, u) order, as one scan of the rows would find.
+            if part[ACC_BEST2] < total[ACC_BEST2] or (part[ACC_BEST2] == total[ACC_BEST2] and (
+                    part[ACC_BEST_V] < total[ACC_BEST_V] or (part[ACC_BEST_V] == total[ACC_BEST_V]
+                                                             and part[ACC_BEST_U] < total[ACC_BEST_U]))):
+                for a in (ACC_BEST2, ACC_BEST_U, ACC_BEST_V, ACC_BEST_Z, ACC_BEST_INVALID):
+                    total[a] = part[a]
+        if prune_min:
+            d, k, m, g = _finish_min_at_pixel(X, Y, Z, total[ACC_BEST2], int(total[ACC_BEST_U]),
+                                              int(total[ACC_BEST_V]), total[ACC_BEST_Z], int(total[ACC_BEST_INVALID]),
+                                              fx, fy, cx, cy, region[i, 2], region[i, 3], region[i, 4], region[i, 5],
+                                              f, inside_tol, direction[i])
+        else:
+            d, k, m, g = _finish_sum(aggregate, int(total[ACC_COUNT]), int(total[ACC_INVALID]),
+                                     total[ACC_INSIDE] != 0.0, total[ACC_SUM_D], total[ACC_SX], total[ACC_SY],
+                                     total[ACC_SZ], total[ACC_BEST2], region[i, 2], region[i, 3], region[i, 4],
+                                     region[i, 5], f, inside_tol, min_direction, direction[i])
         distance[i] = d
-        count[i] = c
-        invalid_count[i] = k
-        flags[i] = f
+        count[i] = k
+        invalid_count[i] = m
+        flags[i] = g
