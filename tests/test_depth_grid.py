@@ -6,7 +6,7 @@ import pytest
 
 import depthguard as dg
 import naive
-from depthguard.depthgrid import MapError, build_map, free_image, fused_distances, load_map, save_map
+from depthguard.depthgrid import FusedFrames, MapError, build_map, free_image, fused_distances, load_map, save_map
 from depthguard.rendering import Renderer, primitive_mesh, MeshInstance
 from depthguard.scenes import Box, Capsule, Sphere, render_depth, scene_distance
 from depthguard.transforms import look_at
@@ -213,3 +213,79 @@ def test_fused_kernel_equals_twin_behind_a_robot():
     truth = scene_distance([hand], points)
     fused = fused_distances(grid, r, principal, frees, points, 0.4, "min", robot_far=robot_far)
     assert fused.distance[3] <= truth[3] + 0.02
+
+
+def robot_scene_frames(width=80, height=60):
+    """A capsule arm filtered out of the principal frame (case iv), a hand behind it, a few holes: the rig, map,
+    principal frame, the second camera's free image and the principal's robot_far."""
+    arm = [Capsule((0.0, 0.0, 0.0), (0.0, 0.0, 0.7), 0.08), Capsule((0.0, 0.0, 0.7), (0.3, 0.3, 0.9), 0.06)]
+    r = rig(width, height)
+    p, s = r.cameras["p"], r.cameras["s"]
+    padded = [Capsule(c.p0, c.p1, c.radius + 0.02) for c in arm]
+    with Renderer() as renderer:
+        instances = [MeshInstance(renderer.add_mesh(*primitive_mesh(c, 32), closed=True), np.eye(4)) for c in padded]
+        robot_near = renderer.render_depth(p, instances)
+        robot_far = renderer.render_depth_max(p, instances)
+    scene = ROOM + arm + [Sphere((-0.25, 0.05, 0.6), 0.05), Capsule((1.4, 0.3, 0.2), (1.4, 0.3, 1.5), 0.2)]
+    depth = render_depth(p, scene)
+    depth[np.random.default_rng(5).random(depth.shape) < 0.03] = 0
+    principal = dg.prepare_depth(dg.depth_image(depth, p), p, robot_near=robot_near, robot_far=robot_far)
+    frees = {"s": free_image(dg.depth_image(render_depth(s, scene), s), s)}
+    return r, build_map(r), principal, frees, robot_far
+
+
+@pytest.mark.parametrize("aggregate", ["min", "hybrid", "mean"])
+def test_cells_kept_for_the_frame_change_no_answer(aggregate):
+    """A FusedFrames keeps the cells its queries classified, and the runs of cells found free, for later queries on
+    the same frames. Whatever came before, a query's answer is the one a fresh FusedFrames gives."""
+    r, grid, principal, frees, robot_far = robot_scene_frames()
+    rng = np.random.default_rng(7)
+    points = rng.uniform([-0.5, -0.6, 0.1], [1.3, 0.6, 1.3], (12, 3))
+    points[:4] = [[0.0, 0.0, 0.35], [0.0, 0.0, 0.6], [0.15, 0.15, 0.8], [-0.1, 0.0, 0.5]]  # on the arm
+
+    def fresh(pts):
+        return FusedFrames(grid, r, principal, frees, robot_far=robot_far).distances(pts, 0.4, aggregate)
+
+    kept = FusedFrames(grid, r, principal, frees, robot_far=robot_far)
+    for order in (rng.permutation(12), rng.permutation(12)):
+        for i in order:  # one point at a time, in random orders: each sees what the earlier ones left
+            again = kept.distances(points[i:i + 1], 0.4, aggregate)
+            alone = fresh(points[i:i + 1])
+            assert again.distance[0] == alone.distance[0] and again.count[0] == alone.count[0], i
+            assert np.allclose(again.direction, alone.direction, atol=1e-12)
+    together = kept.distances(points, 0.4, aggregate)
+    assert np.allclose(together.distance, fresh(points).distance, rtol=1e-12, atol=0)
+    assert (kept._cells > 0).sum() > 100  # the cache was used
+
+
+def test_threads_and_row_chunks_change_no_answer(monkeypatch):
+    import numba
+
+    from depthguard import config
+
+    r, grid, principal, frees, robot_far = robot_scene_frames()
+    points = np.random.default_rng(8).uniform([-0.5, -0.6, 0.1], [1.3, 0.6, 1.3], (10, 3))
+    answers = []
+    for threads, chunks in ((1, 1), (2, 1), (2, 4), (1, 3)):
+        numba.set_num_threads(threads)
+        monkeypatch.setattr(config, "FUSION_ROW_CHUNKS", chunks)
+        for aggregate in ("min", "hybrid"):
+            result = fused_distances(grid, r, principal, frees, points, 0.4, aggregate, robot_far=robot_far)
+            answers.append((aggregate, result.distance, result.count))
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    for aggregate, distance, count in answers:
+        first = next(a for a in answers if a[0] == aggregate)
+        assert np.allclose(distance, first[1], rtol=1e-12, atol=0) and np.array_equal(count, first[2])
+
+
+def test_fused_kernel_equals_twin_with_robot_far_and_holes():
+    r, grid, principal, frees, robot_far = robot_scene_frames(40, 30)
+    p = r.cameras["p"]
+    points = np.random.default_rng(9).uniform([-0.5, -0.6, 0.1], [1.3, 0.6, 1.3], (6, 3))
+    slack = 0.02 + p.noise.margin(robot_far.astype(np.float64))
+    reference = naive.fused_query_reference(grid, principal, [frees["s"]], [0.3], points, 0.4, "occupied",
+                                            robot_far=robot_far, robot_slack=slack)
+    for aggregate in ("min", "hybrid", "mean"):
+        result = fused_distances(grid, r, principal, frees, points, 0.4, aggregate, robot_far=robot_far)
+        assert np.allclose(result.distance, reference[aggregate][0], atol=1e-10), aggregate
+        assert np.array_equal(result.count, reference[aggregate][1]), aggregate

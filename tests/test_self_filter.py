@@ -144,3 +144,46 @@ def test_hole_filling_kernel_equals_its_twin(seed):
             assert np.array_equal(occupancy.z_start, z_start.astype(np.float32))
             assert np.array_equal(occupancy.z_end, z_end.astype(np.float32))
             assert np.array_equal(occupancy.blind, blind.astype(np.float32))
+
+
+def test_a_surface_seen_past_the_padded_robot_stays_a_surface():
+    """Where the padded geometry is rendered but the camera saw past it (the padding is empty space), the
+    measurement is a surface when robot_far tells where the rendered robot ends, and blind space without it. A small
+    ball in that space, behind the padding's far side, is then an obstacle rather than a flagged blind spot."""
+    from depthguard.rendering import MeshInstance, Renderer, primitive_mesh
+
+    cam = camera()
+    padding = 0.06  # generous, so that the camera sees past the padding all round the arm
+    padded = [Capsule(c.p0, c.p1, c.radius + padding) for c in ARM]
+    near = render_depth(cam, padded)
+    with Renderer() as renderer:
+        far = renderer.render_depth_max(cam, [MeshInstance(renderer.add_mesh(*primitive_mesh(c, 32), closed=True),
+                                                           np.eye(4)) for c in padded])
+
+    def both(obstacles):
+        image = dg.depth_image(render_depth(cam, ROOM + ARM + obstacles), cam)
+        return (dg.prepare_depth(image, cam, robot_near=near),
+                dg.prepare_depth(image, cam, robot_near=near, robot_far=far), image.data)
+
+    blind_only, with_far, depth = both([])
+    padding_pixels = (near > 0) & (depth > far + 0.1)  # the camera saw past the padded geometry
+    assert padding_pixels.sum() > 100
+    assert np.all(np.isinf(blind_only.z_start[padding_pixels]))  # made blind without robot_far
+    assert np.array_equal(with_far.z_start[padding_pixels], depth[padding_pixels])  # a surface with it
+    assert np.all(np.isinf(with_far.blind[padding_pixels]))
+    # Where the camera sees the arm itself, both agree: free up to the robot, blind behind it.
+    arm_pixels = (near > 0) & (depth >= near - 0.02) & (depth <= far)
+    assert arm_pixels.sum() > 1000
+    assert np.all(np.isinf(with_far.z_start[arm_pixels])) and np.all(np.isinf(blind_only.z_start[arm_pixels]))
+    assert np.array_equal(with_far.blind[arm_pixels], blind_only.blind[arm_pixels])
+    # A ball on such a pixel's ray, 8 cm past the padded geometry, beside the real arm.
+    v, u = np.argwhere(padding_pixels)[len(np.argwhere(padding_pixels)) // 2]
+    centre = cam.camera_to_world(cam.back_project(u, v, float(far[v, u]) + 0.08)[None])[0]
+    ball = Sphere(tuple(centre), 0.02)
+    blind_only, with_far, _ = both([ball])
+    P = (centre + np.array([0.0, 0.0, 0.12]))[None]
+    truth = scene_distance([ball] + ROOM, P)[0]
+    found = dg.single_camera_distances(with_far, P, 0.4, "min")
+    missed = dg.single_camera_distances(blind_only, P, 0.4, "min")
+    assert truth < 0.4 and found.distance[0] <= truth + 2 * 2.5 / cam.fx
+    assert missed.distance[0] > truth + 0.02 and dg.Flag.ROBOT_BLIND_SPOT in missed.flags[0]
