@@ -206,19 +206,25 @@ class DistanceMonitor:
         if not results:
             flag = Flag.STALE_CAMERA if any(n in stale for n in self.principals) else Flag.MISSING_CAMERA
             return _blind_result(len(points), flag, {})
-        chosen = np.zeros(len(points), dtype=np.int64)
-        if len(results) > 1:
-            holds = np.array([[Flag.REGION_OUTSIDE_VIEW not in f for f in r.flags] for r in results])
-            distances = np.array([r.distance for r in results])
-            candidates = np.where(holds, distances, -np.inf)
-            chosen = np.where(holds.any(axis=0), np.argmax(candidates, axis=0), 0)
-        pick = lambda attr: np.array([getattr(results[c], attr)[i] for i, c in enumerate(chosen)])  # noqa: E731
-        flags = tuple(results[c].flags[i] | (Flag.STALE_CAMERA if stale else Flag(0)) for i, c in enumerate(chosen))
         timestamps = {name: state.occupancy.timestamp for name, state in usable.items()}
+        invalid_pixels = {n: s.occupancy.invalid_pixels for n, s in usable.items()}
+        stale_flag = Flag.STALE_CAMERA if stale else Flag(0)
+        if len(results) == 1:
+            (result,) = results
+            return DistanceResult(distance=result.distance, direction=result.direction, count=result.count,
+                                  invalid_count=result.invalid_count,
+                                  flags=tuple(f | stale_flag for f in result.flags) if stale else result.flags,
+                                  timestamps=timestamps, cameras=tuple(usable), invalid_pixels=invalid_pixels,
+                                  principal=(result.cameras[0],) * len(points))
+        holds = np.array([[Flag.REGION_OUTSIDE_VIEW not in f for f in r.flags] for r in results])
+        distances = np.array([r.distance for r in results])
+        candidates = np.where(holds, distances, -np.inf)
+        chosen = np.where(holds.any(axis=0), np.argmax(candidates, axis=0), 0)
+        pick = lambda attr: np.array([getattr(results[c], attr)[i] for i, c in enumerate(chosen)])  # noqa: E731
+        flags = tuple(results[c].flags[i] | stale_flag for i, c in enumerate(chosen))
         return DistanceResult(distance=pick("distance"), direction=pick("direction").reshape(-1, 3),
                               count=pick("count"), invalid_count=pick("invalid_count"), flags=flags,
-                              timestamps=timestamps, cameras=tuple(usable),
-                              invalid_pixels={n: s.occupancy.invalid_pixels for n, s in usable.items()},
+                              timestamps=timestamps, cameras=tuple(usable), invalid_pixels=invalid_pixels,
                               principal=tuple(results[c].cameras[0] for c in chosen))
 
 

@@ -394,6 +394,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
     one (squared distance, pixel, depth, from a pixel without a measurement?). ``scratch`` (5, width) float64."""
     rho2 = rho * rho
     z_far = Z + rho
+    d_max = d_min + n_cells * delta_d
     best2 = np.inf
     best_u = 0
     best_v = 0
@@ -447,9 +448,15 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
             zs = np.float64(z_start[v, u])
             bf = np.float64(blind_from[v, u])
             from_invalid = False
-            # A measured surface and nothing behind the robot in reach, its nearest point on the surface's own cell
-            # or, the surface behind P (case ii), anywhere: that is the answer. Otherwise ask the grid.
-            if not (certain[v, u] and bf > z_far and (zs >= Z or z <= surface_cell_end(zs, d_min, delta_d))):
+            # The span's nearest point is the answer when it lies on something occupied for sure: a measured surface
+            # behind P (case ii, no other camera asked), the surface's own cell, or a grid cell already known to be
+            # occupied (a pixel with one piece of candidates only: a surface's gray area, or the space behind the
+            # robot). Otherwise ask the grid.
+            one_piece = certain[v, u] and bf > z_far  # a measured surface and its gray area, the span gathered
+            answered = one_piece and (zs >= Z or z <= surface_cell_end(zs, d_min, delta_d))
+            if not answered and (one_piece or zs > z_far) and d_min <= z < d_max:
+                answered = cells[v, u, min(int((z - d_min) / delta_d), n_cells - 1)] == 2
+            if not answered:
                 d2, z, from_invalid = pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, np.float64(z_end[v, u]),
                                                      certain[v, u], bf, bound2, d_min, delta_d, n_cells, corners,
                                                      offsets, eroded, sizes, z_near, margin, cells, free_run)

@@ -1,0 +1,309 @@
+"""Issue 4's workcell experiment: one depth camera against two fused through the depth grid, in reference scenario
+B's shadow and hidden-hand cases (the 2016 paper's Figs. 8, 9, 12 and 13, with numbers).
+
+Each layout (scene file) is simulated and, every frame, the control points' distances are computed three ways:
+the principal camera alone, the second camera alone (the single-camera method, SPEC sections 3-7, robot filtered
+out) and both fused through the principal camera's depth grid (SPEC section 8). Each is compared with the exact
+ground truth of :mod:`depthguard.experiments.workcell` (the person, the box, the table and shelf, the floor, walls
+and pedestal).
+
+Two layouts are packaged. ``scenario_b.yaml`` is the reference scene: both cameras on the robot's front side, so a
+region right behind the links is hidden from both and fusion counts it as occupied. ``scenario_b_across.yaml``
+puts the second camera across the robot from the principal camera (the 2016 paper: "a correct positioning of the
+cameras is crucial").
+
+What it counts, per layout, method and case (``shadow``, ``hidden_hand``), over (frame, control point) pairs:
+
+- false alarms: the reported distance is below rho while the truth is at least rho plus the tolerance;
+- misses: the reported distance is above the truth plus the tolerance. A single camera may miss only what hides
+  behind the robot, and then flags ``robot_blind_spot``; the fused result must never miss.
+
+    depthguard fusion-workcell [--out DIR] [--scene SCENE.yaml ...] [--all-frames]
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+from tqdm import tqdm
+
+import depthguard as dg
+from depthguard.errors import InputError
+from depthguard.experiments import workcell as single
+from depthguard.scenes import scene_distance
+
+RHO = single.RHO
+#: The person's actions this experiment is about, in the order they happen.
+CASES = ("shadow", "hidden_hand")
+#: Seconds simulated before and after each case by default.
+MARGIN = 0.5
+#: The name of the fused result among the methods (the others are camera names).
+FUSED = "fused"
+#: The packaged layouts, in the package's simulation folder.
+SCENES = ("scenario_b.yaml", "scenario_b_across.yaml")
+
+
+@dataclass
+class Episode:
+    """Distances along one layout's episode. Shapes: t frames, m control points, k methods in ``methods`` order
+    (each camera alone, the rig's principal camera first, then ``"fused"``)."""
+
+    layout: str                # the scene's name (its file name without .yaml)
+    times: np.ndarray          # (t,) seconds
+    control_points: tuple      # (m,) names
+    methods: tuple             # (k,) camera names, then FUSED
+    eyes: dict                 # camera name -> (3,) its optical centre, metres, world frame
+    truth: np.ndarray          # (t, m) metres: to the nearest obstacle or background surface
+    reported: np.ndarray       # (k, t, m) metres (inf: nothing within rho)
+    blind: np.ndarray          # (k, t, m) metres: distance to a single camera's robot blind spot (inf: none; fused)
+    flags: np.ndarray          # (k, t, m) int flag bits
+    tolerance: np.ndarray      # (k, t, m) metres a distance may exceed the truth by without being wrong
+    spans: list                # the person's actions: (kind, start, end)
+    seconds: float             # wall-clock time of the simulation and the queries
+
+
+def case_frames(workcell, margin: float = MARGIN) -> list[int]:
+    """Frame indices of the shadow and hidden-hand cases, ``margin`` seconds before and after each."""
+    times = workcell.times()
+    keep = np.zeros(len(times), dtype=bool)
+    for span in workcell.timeline():
+        if span.kind in CASES:
+            keep |= (times >= span.start - margin) & (times < span.end + margin)
+    if not keep.any():
+        raise InputError(f"the scene has no {' or '.join(CASES)} action", field="people")
+    return [int(i) for i in np.flatnonzero(keep)]
+
+
+def methods_of(rig) -> tuple[str, ...]:
+    """The methods compared on ``rig``: each camera alone (the principal camera first), then the fused cameras."""
+    if len(rig.cameras) < 2:
+        raise InputError(f"fusion needs at least two depth cameras, the scene has {', '.join(rig.cameras)}",
+                         field="cameras")
+    if FUSED in rig.cameras:
+        raise InputError(f"a camera is named {FUSED!r}, the name of the fused result; rename it", field="cameras")
+    principal = rig.principal or next(iter(rig.cameras))
+    return (principal,) + tuple(name for name in rig.cameras if name != principal) + (FUSED,)
+
+
+def run(workcell=None, layout: str | None = None, frames=None, duration: float | None = None,
+        seed: int | None = None, progress: bool = True) -> Episode:
+    """Simulate ``workcell`` (default: scenario B) and query each camera alone and all of them fused, every frame
+    of ``frames`` (indices; default: the shadow and hidden-hand cases, :func:`case_frames`), or of the first
+    ``duration`` seconds when that is given."""
+    from depthguard.simulation import default_workcell, simulate
+
+    workcell = workcell or default_workcell()
+    layout = layout or "scenario_b"
+    robot = workcell.robot
+    methods = methods_of(workcell.rig)
+    cameras = methods[:-1]
+    # Single cameras as in the demo (workcell.run). invalid="neighbors" fills the sensor's small dropouts along the
+    # robot's edges; large holes stay occupied. The fused monitor uses the same policy for the principal camera.
+    options = dict(rho=RHO, aggregate="hybrid", invalid="neighbors", robot=robot)
+    monitors = {name: dg.DistanceMonitor(dg.Rig({name: workcell.rig.cameras[name]}), **options) for name in cameras}
+    fused = dg.DistanceMonitor(workcell.rig, **options)
+    background = [p for parts in workcell.background().values() for p in parts]
+    if duration is not None:
+        frames = range(min(workcell.n_frames, int(round(duration * workcell.rate))))
+    elif frames is None:
+        frames = case_frames(workcell)
+    frames = list(frames)
+    rows = {key: [] for key in ("times", "truth", "reported", "blind", "flags", "depth")}
+    start = time.perf_counter()
+    for frame in tqdm(simulate(workcell, seed=seed, frames=frames), total=len(frames), disable=not progress,
+                      desc=f"{layout}: simulating, one camera and two", unit="frame"):
+        points = robot.control_point_positions(frame.joints)
+        results = [monitors[c].query({c: frame.depth[c]}, points, joints=frame.joints) for c in cameras]
+        results.append(fused.query({c: frame.depth[c] for c in cameras}, points, joints=frame.joints))
+        rows["times"].append(frame.time)
+        rows["truth"].append(np.minimum(frame.truth.distance, scene_distance(background, points)))
+        rows["reported"].append([r.distance for r in results])
+        rows["blind"].append([r.blind_distance for r in results])
+        rows["flags"].append([[int(f) for f in r.flags] for r in results])
+        rows["depth"].append([workcell.rig.cameras[c].world_to_camera(points)[:, 2] for c in cameras])
+    seconds = time.perf_counter() - start
+    per_method = {key: np.moveaxis(np.array(rows[key]), 1, 0) for key in ("reported", "blind", "flags", "depth")}
+    # Each camera alone: the demo's tolerance (2.5 pixel footprints at the point's depth, 1 mm). Fused: the larger
+    # of the cameras' (the principal's pixels make the grid's cells, the others' pixels clear them).
+    singles = single.tolerance(SimpleNamespace(depth_of_truth=per_method["depth"],
+                                               fx=np.array([workcell.rig.cameras[c].fx for c in cameras])))
+    tolerance = np.concatenate([singles, singles.max(axis=0, keepdims=True)])
+    return Episode(layout=layout, times=np.array(rows["times"]), control_points=robot.control_point_names,
+                   methods=methods, eyes={c: workcell.rig.cameras[c].T_world_camera[:3, 3].copy() for c in cameras},
+                   truth=np.array(rows["truth"]), reported=per_method["reported"], blind=per_method["blind"],
+                   flags=per_method["flags"], tolerance=tolerance,
+                   spans=[(s.kind, s.start, s.end) for s in workcell.timeline()], seconds=seconds)
+
+
+def case_rows(episode: Episode, kind: str) -> np.ndarray:
+    """(t,) bool: the frames within any span of action ``kind``."""
+    rows = np.zeros(len(episode.times), dtype=bool)
+    for name, start, end in episode.spans:
+        if name == kind:
+            rows |= (episode.times >= start) & (episode.times < end)
+    return rows
+
+
+def counts(episode: Episode, k: int, rows: np.ndarray) -> dict:
+    """Method ``k`` over the frames ``rows``: false alarms and misses among the (frame, control point) pairs.
+
+    - ``false_alarms``: pairs whose truth is at least rho + tolerance (``far_pairs``) reported below rho;
+    - ``misses``: pairs reported above truth + tolerance, split into ``flagged_misses`` (``robot_blind_spot`` set: a
+      single camera says it cannot see there) and ``unflagged_misses``.
+    """
+    truth, reported, tol = episode.truth[rows], episode.reported[k][rows], episode.tolerance[k][rows]
+    flagged = (episode.flags[k][rows] & int(dg.Flag.ROBOT_BLIND_SPOT)) != 0
+    far = truth >= RHO + tol
+    alarms = far & (reported < RHO)
+    above = reported > truth + tol
+    return {"pairs": int(truth.size), "far_pairs": int(far.sum()), "false_alarms": int(alarms.sum()),
+            "false_alarm_fraction": float(alarms.sum() / far.sum()) if far.any() else 0.0,
+            "misses": int(above.sum()), "flagged_misses": int((above & flagged).sum()),
+            "unflagged_misses": int((above & ~flagged).sum()),
+            "largest_excess_m": float(np.max(reported - truth, initial=-np.inf)),
+            "min_truth": float(truth.min(initial=np.inf)), "min_reported": float(reported.min(initial=np.inf))}
+
+
+def summary(episodes: list[Episode]) -> dict:
+    """Per layout, method and case: :func:`counts`, which flags were set, and the share of the principal camera's
+    false alarms in the shadow case that fusion removes (``false_alarms_removed``; None when it has none)."""
+    out = {"rho": RHO, "layouts": {}}
+    for episode in episodes:
+        methods = {}
+        for k, method in enumerate(episode.methods):
+            flags = episode.flags[k]
+            methods[method] = {
+                "all_frames": counts(episode, k, np.ones(len(episode.times), dtype=bool)),
+                "by_case": {kind: counts(episode, k, case_rows(episode, kind)) for kind in CASES},
+                "flagged_fraction": {flag.name.lower(): float(np.mean((flags & int(flag)) != 0)) for flag in dg.Flag
+                                     if np.any((flags & int(flag)) != 0)},
+            }
+        principal = methods[episode.methods[0]]["by_case"]["shadow"]["false_alarms"]
+        fused = methods[FUSED]["by_case"]["shadow"]["false_alarms"]
+        out["layouts"][episode.layout] = {
+            "frames": len(episode.times), "seconds": episode.seconds,
+            "eyes": {c: [round(float(x), 3) for x in eye] for c, eye in episode.eyes.items()},
+            "cases": {kind: [[start, end] for name, start, end in episode.spans if name == kind] for kind in CASES},
+            "methods": methods,
+            "false_alarms_removed": None if principal == 0 else 1.0 - fused / principal,
+        }
+    return out
+
+
+def plot(episode: Episode, out: Path) -> list[Path]:
+    """One PNG per case: the smallest distance over the control points against time (truth, each camera alone,
+    fused) above each control point's distance (truth, the principal camera alone, fused), as in the 2016 paper's
+    Figs. 8, 9, 12 and 13."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    top = 0.6
+    clip = lambda d: np.where(np.isfinite(d), np.minimum(d, top), np.nan)  # noqa: E731 (inf: nothing within rho)
+    principal, fused = 0, episode.methods.index(FUSED)
+    styles = {principal: dict(color="tab:red", lw=1.2), fused: dict(color="tab:blue", lw=1.6)}
+    blind_flag = int(dg.Flag.ROBOT_BLIND_SPOT)
+    written = []
+    for kind in CASES:
+        rows = np.zeros(len(episode.times), dtype=bool)
+        spans = [(start, end) for name, start, end in episode.spans if name == kind]
+        for start, end in spans:
+            rows |= (episode.times >= start - MARGIN) & (episode.times < end + MARGIN)
+        if not rows.any():
+            continue
+        times = episode.times[rows]
+        fig = plt.figure(figsize=(15, 12))
+        grid = fig.add_gridspec(4, 3, height_ratios=[1.4, 1, 1, 1])
+        ax = fig.add_subplot(grid[0, :])
+        for start, end in spans:
+            ax.axvspan(start, end, color="#eeeeee", lw=0)
+        ax.plot(times, clip(episode.truth[rows].min(axis=1)), "k-", lw=2, label="truth")
+        for k, method in enumerate(episode.methods):
+            label = "fused (depth grid)" if k == fused else f"{method} alone"
+            style = styles.get(k, dict(color="tab:green", lw=1.0, ls="--"))
+            ax.plot(times, clip(episode.reported[k][rows].min(axis=1)), label=label, **style)
+        ax.axhline(RHO, color="grey", ls=":", lw=0.8)
+        ax.set_ylim(0, top)
+        ax.set_ylabel("smallest distance [m]")
+        ax.set_title("smallest over the control points")
+        ax.legend(loc="lower left", fontsize=9)
+        ax.grid(alpha=0.3)
+        for j, name in enumerate(episode.control_points[:9]):
+            ax = fig.add_subplot(grid[1 + j // 3, j % 3], sharex=fig.axes[0])
+            ax.plot(times, clip(episode.truth[rows, j]), "k-", lw=1.5)
+            for k in (principal, fused):
+                ax.plot(times, clip(episode.reported[k][rows, j]), **styles[k])
+            flagged = (episode.flags[principal][rows, j] & blind_flag) != 0
+            ax.plot(times[flagged], clip(episode.blind[principal][rows][flagged, j]), ".", color="tab:orange", ms=2,
+                    label=f"{episode.methods[principal]}: blind spot (flagged)")
+            ax.axhline(RHO, color="grey", ls=":", lw=0.8)
+            ax.set_ylim(0, top)
+            ax.set_title(name, fontsize=9)
+            ax.grid(alpha=0.3)
+            if j == 0 and flagged.any():
+                ax.legend(loc="lower left", fontsize=8)
+            if j >= 6:
+                ax.set_xlabel("time [s]")
+        fig.suptitle(f"{episode.layout}, {kind.replace('_', ' ')} case (shaded): distance against time, rho = {RHO} m "
+                     "(distances above 0.6 m and 'nothing within rho' drawn at the top or not at all)")
+        fig.tight_layout()
+        path = out / f"{episode.layout}_{kind}.png"
+        fig.savefig(path, dpi=80)
+        plt.close(fig)
+        written.append(path)
+    return written
+
+
+def scene_paths() -> list[Path]:
+    """The packaged layouts' scene files."""
+    from importlib import resources
+
+    folder = resources.files("depthguard.simulation")
+    return [Path(str(folder.joinpath(name))) for name in SCENES]
+
+
+def main(out="out/fusion-workcell", duration: float | None = None, scenes=None, progress: bool = True,
+         all_frames: bool = False) -> int:
+    """Run every layout (``scenes``: scene files, default both packaged ones), print the table, write one plot per
+    case and layout and summary.json into ``out``. By default only the cases' frames (:func:`case_frames`) are
+    simulated; ``all_frames`` simulates the whole episode, ``duration`` its first seconds."""
+    from depthguard.simulation import load_workcell
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    print("Reference scenario B, the 2016 paper's shadow and hidden-hand cases: each depth camera alone (robot filtered "
+          "out)\nagainst both fused through the principal camera's depth grid; rho = "
+          f"{RHO} m, hybrid, invalid='neighbors'.\nFalse alarm: reported < rho while the truth >= rho + tolerance. "
+          "Miss: reported > truth + tolerance.\n")
+    episodes, plots = [], []
+    for path in [Path(p) for p in scenes] if scenes else scene_paths():
+        workcell = load_workcell(path)
+        frames = range(workcell.n_frames) if all_frames else None
+        episode = run(workcell, layout=path.stem, frames=frames, duration=duration, progress=progress)
+        episodes.append(episode)
+        plots += plot(episode, out)
+    result = summary(episodes)
+    (out / "summary.json").write_text(json.dumps(result, indent=2))
+    for layout, figures in result["layouts"].items():
+        eyes = "; ".join(f"{c} at ({', '.join(f'{x:g}' for x in eye)})" for c, eye in figures["eyes"].items())
+        print(f"{layout}: {eyes}; {figures['frames']} frames in {figures['seconds']:.1f} s")
+        print(f"  {'case':12s} {'method':10s} {'min truth':>9s} {'min rep.':>9s} {'false alarms':>20s} "
+              f"{'misses (flagged)':>17s}")
+        for kind in CASES:
+            for method, numbers in figures["methods"].items():
+                row = numbers["by_case"][kind]
+                alarms = f"{row['false_alarms']}/{row['far_pairs']} {row['false_alarm_fraction']:6.1%}"
+                print(f"  {kind:12s} {method:10s} {row['min_truth']:9.3f} {row['min_reported']:9.3f} {alarms:>20s} "
+                      f"{row['misses']:>8d} ({row['flagged_misses']})")
+        removed = figures["false_alarms_removed"]
+        removed = "n/a (the principal camera alone has none)" if removed is None else f"{removed:.1%}"
+        fused = figures["methods"][FUSED]["all_frames"]["misses"]
+        print(f"  shadow case, false alarms removed by fusion: {removed}; fused misses over all frames: {fused}\n")
+    print("Plots: " + ", ".join(str(p) for p in plots) + f"; numbers: {out / 'summary.json'}")
+    return 0
