@@ -15,8 +15,9 @@ cameras is crucial").
 What it counts, per layout, method and case (``shadow``, ``hidden_hand``), over (frame, control point) pairs:
 
 - false alarms: the reported distance is below rho while the truth is at least rho plus the tolerance;
-- misses: the reported distance is above the truth plus the tolerance. A single camera may miss only what hides
-  behind the robot, and then flags ``robot_blind_spot``; the fused result must never miss.
+- misses: the reported distance, taken as rho when it is larger ("nothing within rho" is right when the truth is
+  beyond rho), is above the truth plus the tolerance. A single camera may miss only what hides behind the robot,
+  and then flags ``robot_blind_spot``; the fused result must never miss.
 
     depthguard fusion-workcell [--out DIR] [--scene SCENE.yaml ...] [--all-frames]
 """
@@ -153,19 +154,25 @@ def counts(episode: Episode, k: int, rows: np.ndarray) -> dict:
     """Method ``k`` over the frames ``rows``: false alarms and misses among the (frame, control point) pairs.
 
     - ``false_alarms``: pairs whose truth is at least rho + tolerance (``far_pairs``) reported below rho;
-    - ``misses``: pairs reported above truth + tolerance, split into ``flagged_misses`` (``robot_blind_spot`` set: a
-      single camera says it cannot see there) and ``unflagged_misses``.
+    - ``misses``: pairs whose min(reported, rho) is above truth + tolerance, split into ``flagged_misses``
+      (``robot_blind_spot`` set: a single camera says it cannot see there) and ``unflagged_misses``;
+    - ``largest_excess_m``: the largest min(reported, rho) - truth;
+    - ``blind_as_occupied_false_alarms``: the false alarms of min(reported, blind distance), a single camera that
+      counts the space hidden behind the robot as occupied, as fusion counts what no camera sees (the same as
+      ``false_alarms`` for the fused result).
     """
     truth, reported, tol = episode.truth[rows], episode.reported[k][rows], episode.tolerance[k][rows]
     flagged = (episode.flags[k][rows] & int(dg.Flag.ROBOT_BLIND_SPOT)) != 0
     far = truth >= RHO + tol
     alarms = far & (reported < RHO)
-    above = reported > truth + tol
+    blind_alarms = far & (np.minimum(reported, episode.blind[k][rows]) < RHO)
+    above = np.minimum(reported, RHO) > truth + tol
     return {"pairs": int(truth.size), "far_pairs": int(far.sum()), "false_alarms": int(alarms.sum()),
             "false_alarm_fraction": float(alarms.sum() / far.sum()) if far.any() else 0.0,
+            "blind_as_occupied_false_alarms": int(blind_alarms.sum()),
             "misses": int(above.sum()), "flagged_misses": int((above & flagged).sum()),
             "unflagged_misses": int((above & ~flagged).sum()),
-            "largest_excess_m": float(np.max(reported - truth, initial=-np.inf)),
+            "largest_excess_m": float(np.max(np.minimum(reported, RHO) - truth, initial=-np.inf)),
             "min_truth": float(truth.min(initial=np.inf)), "min_reported": float(reported.min(initial=np.inf))}
 
 
@@ -293,14 +300,14 @@ def main(out="out/fusion-workcell", duration: float | None = None, scenes=None, 
     for layout, figures in result["layouts"].items():
         eyes = "; ".join(f"{c} at ({', '.join(f'{x:g}' for x in eye)})" for c, eye in figures["eyes"].items())
         print(f"{layout}: {eyes}; {figures['frames']} frames in {figures['seconds']:.1f} s")
-        print(f"  {'case':12s} {'method':10s} {'min truth':>9s} {'min rep.':>9s} {'false alarms':>20s} "
-              f"{'misses (flagged)':>17s}")
+        print(f"  {'case':12s} {'method':10s} {'min truth':>9s} {'min rep.':>9s} {'false alarms':>17s} "
+              f"{'(blind spot occupied)':>21s} {'misses (flagged)':>17s}")
         for kind in CASES:
             for method, numbers in figures["methods"].items():
                 row = numbers["by_case"][kind]
                 alarms = f"{row['false_alarms']}/{row['far_pairs']} {row['false_alarm_fraction']:6.1%}"
-                print(f"  {kind:12s} {method:10s} {row['min_truth']:9.3f} {row['min_reported']:9.3f} {alarms:>20s} "
-                      f"{row['misses']:>8d} ({row['flagged_misses']})")
+                print(f"  {kind:12s} {method:10s} {row['min_truth']:9.3f} {row['min_reported']:9.3f} {alarms:>17s} "
+                      f"{row['blind_as_occupied_false_alarms']:>21d} {row['misses']:>8d} ({row['flagged_misses']})")
         removed = figures["false_alarms_removed"]
         removed = "n/a (the principal camera alone has none)" if removed is None else f"{removed:.1%}"
         fused = figures["methods"][FUSED]["all_frames"]["misses"]
