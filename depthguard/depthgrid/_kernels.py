@@ -268,10 +268,13 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
 
     The distance from P along one convex frustum is unimodal in depth, so the nearest occupied part is the one
     holding the nearest point z* of [lo, hi] if that part is occupied, else the first occupied part met walking
-    down from z*, or the first walking up. Only cells close enough to z* to come nearer than bound2 are looked at;
-    the run of cells found free is kept in free_run, so that the next control point whose cells in reach that run
-    covers skips the pixel at once (the space behind the robot, which every point on the robot looks at, is mostly
-    free). Returns (squared distance, z*), (inf, 0) if nothing occupied comes nearer than bound2.
+    down from z*, or the first walking up.
+
+    A range of candidate cells alone (no certain part) is walked whole, and the run of cells found free is kept in
+    free_run, so that the next control point whose range that run covers skips the pixel at once: the space behind
+    the robot, which every point on the robot looks at, is mostly such a range. Elsewhere only cells close enough
+    to z* to come nearer than bound2 are looked at. Returns (squared distance, z*), (inf, 0) if nothing occupied
+    comes nearer than bound2.
     """
     if lo > hi:
         return np.inf, 0.0
@@ -279,6 +282,12 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
     # Occupied as they stand: [lo, below] when below > lo, and [above, hi] (beyond the grid) when hi > above.
     below = max(certain_to, min(d_min, hi)) if lo < d_min else certain_to
     above = max(d_max, below)
+    candidates_only = below <= lo and hi <= above
+    if candidates_only:
+        if known_free(lo, hi, u, v, d_min, delta_d, n_cells, free_run):
+            return np.inf, 0.0
+        k_lo = int((lo - d_min) / delta_d)
+        k_hi = min(int((hi - d_min) / delta_d), n_cells - 1)
     run = free_run[v, u]
     run_lo = run >> 32
     run_hi = run & 0xFFFFFFFF
@@ -287,11 +296,12 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
         return np.inf, 0.0
     if (below > lo and z <= below) or (hi > above and z >= above):
         return d2, z
-    # g(z), the squared distance from P to the frustum's slice at depth z, is convex with g'' >= 2, so
-    # g(z) >= d2 + (z - z*)^2 and only cells within reach of z* can come nearer than bound2.
-    reach = np.sqrt(bound2 - d2)
-    k_lo = max(int((max(below, lo) - d_min) / delta_d), int((max(z - reach, d_min) - d_min) / delta_d))
-    k_hi = min(int((min(hi, d_max, z + reach) - d_min) / delta_d), n_cells - 1)
+    if not candidates_only:
+        # g(z), the squared distance from P to the frustum's slice at depth z, is convex with g'' >= 2, so
+        # g(z) >= d2 + (z - z*)^2 and only cells within reach of z* can come nearer than bound2.
+        reach = np.sqrt(bound2 - d2)
+        k_lo = max(int((max(below, lo) - d_min) / delta_d), int((max(z - reach, d_min) - d_min) / delta_d))
+        k_hi = min(int((min(hi, d_max, z + reach) - d_min) / delta_d), n_cells - 1)
     k_star = min(max(int((z - d_min) / delta_d), k_lo), k_hi)
     # Skip the run of cells already known free around z*, if there is one; else start at z*'s own cell.
     in_run = run_lo <= k_star <= run_hi
@@ -413,6 +423,8 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
             bf = np.float64(blind_from[v, u])
             if min(zs, bf) > z_far:
                 continue
+            if zs > z_far and known_free(bf, z_far, u, v, d_min, delta_d, n_cells, free_run):
+                continue  # the space behind the robot, every cell in reach known free
             z_in[m] = min(zs, bf)
             z_hi_in[m] = min(np.float64(z_end[v, u]), z_far) if (certain[v, u] and bf > z_far) else z_far
             u_in[m] = u
@@ -444,12 +456,6 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
             answered = one_piece and (zs >= Z or z <= surface_cell_end(zs, d_min, delta_d))
             if not answered and (one_piece or zs > z_far) and d_min <= z < d_max:
                 answered = cells[v, u, min(int((z - d_min) / delta_d), n_cells - 1)] == 2
-                if not answered and zs > z_far:
-                    # Only the space behind the robot: nothing here if every cell near enough is known free.
-                    reach = np.sqrt(bound2 - d2)
-                    if known_free(max(bf, z - reach), min(z_far, z + reach), u, v, d_min, delta_d, n_cells,
-                                  free_run):
-                        continue
             if not answered:
                 d2, z, from_invalid = pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, np.float64(z_end[v, u]),
                                                      certain[v, u], bf, bound2, d_min, delta_d, n_cells, corners,
