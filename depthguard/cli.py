@@ -4,6 +4,7 @@
     depthguard build-map --rig RIG.yaml [--principal NAME] [--d-min M --d-max M --delta-d M] --out MAP
     depthguard simulate [SCENE.yaml] --out DIR [--seed N] [--duration S]
     depthguard demo [--out DIR] [--duration S]
+    depthguard fusion-workcell [--out DIR] [--scene SCENE.yaml ...] [--all-frames]
     depthguard scenario-a [--out DIR]
     depthguard real-room [--out DIR] [--data FOLDER]
 
@@ -82,6 +83,15 @@ def _build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="out/demo", help="output folder for plots and summary.json")
     demo.add_argument("--duration", type=float, default=None, help="only the first S seconds (default: all 12)")
 
+    fusion = commands.add_parser("fusion-workcell", help="issue 4: scenario B's shadow and hidden-hand cases, each "
+                                                         "camera alone against both fused through the depth grid")
+    fusion.add_argument("--out", default="out/fusion-workcell", help="output folder for plots and summary.json")
+    fusion.add_argument("--scene", action="append", metavar="SCENE", help="a camera layout (scene YAML) to run "
+                                                                           "(repeatable; default: scenario_b.yaml and "
+                                                                           "scenario_b_across.yaml)")
+    fusion.add_argument("--all-frames", action="store_true", help="simulate the whole episode (default: the two "
+                                                                  "cases and 0.5 s around them)")
+
     room = commands.add_parser("real-room", help="real data: three calibrated views of a room fused through the "
                                                  "depth grid; the calibration error and the fusion margin it needs")
     room.add_argument("--out", default="out/real-room", help="output folder for plots and summary.json")
@@ -111,6 +121,10 @@ def main(argv=None) -> int:
             from depthguard.experiments import workcell
 
             return workcell.main(out=args.out, duration=_positive(args.duration, "--duration"))
+        if args.command == "fusion-workcell":
+            from depthguard.experiments import fusion_workcell
+
+            return fusion_workcell.main(out=args.out, scenes=args.scene, all_frames=args.all_frames)
         from depthguard.experiments import scenario_a
 
         return scenario_a.main(out=args.out, repeats=args.repeats)

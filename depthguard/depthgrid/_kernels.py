@@ -140,6 +140,7 @@ def box_seen_through(eroded, width, height, x_lo, x_hi, y_lo, y_hi, need):
     return True
 
 
+_ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
 CLASSIFY_RUN = 8  # cells classified together: neighbours share a face, projected once
 
 
@@ -147,13 +148,27 @@ CLASSIFY_RUN = 8  # cells classified together: neighbours share a face, projecte
 def classify_run(u, v, k_a, k_b, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin, cells):
     """Classify cells k_a..k_b (at most 64) of principal pixel (u, v) into cells[v, u, k]: 1 when some secondary
     camera saw through the whole cell, else 2 (occupied, or hidden from every camera). Each face between two cells is
-    projected once per camera."""
+    projected once per camera.
+
+    A camera is first asked about the whole run at once: the run's footprint lies within the box of its two end
+    faces' corners and its largest depth at one of them (depth is linear along each corner ray), so if the camera
+    saw beyond that over that box, it saw through every cell, and the per-cell tests would all agree. Behind the
+    robot, where a secondary camera sees the room far beyond, that settles a run with one test."""
+    n = k_b - k_a + 1
+    everything = _ALL if n == 64 else (np.uint64(1) << np.uint64(n)) - np.uint64(1)
     cleared = np.uint64(0)
     for j in range(corners.shape[0]):
         width = sizes[j, 0]
         height = sizes[j, 1]
         ok0, x_lo0, x_hi0, y_lo0, y_hi0, far0 = face_box(corners[j], offsets[j], u, v, d_min + k_a * delta_d,
                                                          z_near[j])
+        if n > 1:
+            ok1, x_lo1, x_hi1, y_lo1, y_hi1, far1 = face_box(corners[j], offsets[j], u, v,
+                                                             d_min + (k_b + 1) * delta_d, z_near[j])
+            if ok0 and ok1 and box_seen_through(eroded[j], width, height, min(x_lo0, x_lo1), max(x_hi0, x_hi1),
+                                                min(y_lo0, y_lo1), max(y_hi0, y_hi1), max(far0, far1) + margin):
+                cleared = everything
+                break
         for i in range(k_b - k_a + 1):
             k = k_a + i
             ok1, x_lo1, x_hi1, y_lo1, y_hi1, far1 = face_box(corners[j], offsets[j], u, v, d_min + (k + 1) * delta_d,

@@ -1,0 +1,184 @@
+"""Issue 4's workcell experiment (depthguard.experiments.fusion_workcell): one depth camera against two fused through
+the depth grid, in reference scenario B's shadow and hidden-hand cases, with the second camera across the robot
+(scenario_b_across.yaml). The fused result never misses; in the shadow case two cameras remove at least 90 % of the
+principal camera's false alarms; in the hidden-hand case the fused result finds the hand the principal camera
+cannot see. Plus the summary and plots on a small hand-made episode, and the command line."""
+
+import json
+
+import numpy as np
+import pytest
+
+import depthguard as dg
+from depthguard.experiments import fusion_workcell as fw
+from depthguard.simulation import load_workcell, simulate
+
+RHO = fw.RHO
+FRAMES_PER_CASE = 4
+
+
+@pytest.fixture(scope="module")
+def across():
+    (path,) = [p for p in fw.scene_paths() if p.name == "scenario_b_across.yaml"]
+    return load_workcell(path)
+
+
+def _hold_times(workcell, kind):
+    """(start, end) seconds of the part of action ``kind`` where the person is in place (after walking there)."""
+    (span,) = [s for s in workcell.timeline() if s.kind == kind]
+    return span.hold_start, span.end
+
+
+@pytest.fixture(scope="module")
+def episode(across):
+    # The scene's own 640x480 cameras (the sensor's dropouts depend on the resolution). A few frames spread over each
+    # case while the person is in place: the shadow case, and the hidden hand fully held out (after its 0.25 s ramp).
+    frames = []
+    for kind in fw.CASES:
+        start, end = _hold_times(across, kind)
+        times = np.linspace(start + 0.3, end - 0.3, FRAMES_PER_CASE)
+        frames += [int(round(t * across.rate)) for t in times]
+    return fw.run(across, layout="scenario_b_across", frames=frames, progress=False)
+
+
+def _case(episode, kind):
+    rows = fw.case_rows(episode, kind)
+    assert rows.sum() == FRAMES_PER_CASE
+    return rows
+
+
+def _method(episode, name, rows):
+    """(reported, tolerance, flags) of one method over the frames ``rows``: (t, m) each."""
+    k = episode.methods.index(name)
+    return episode.reported[k][rows], episode.tolerance[k][rows], episode.flags[k][rows]
+
+
+def test_the_across_layout_moves_only_the_second_camera(across):
+    from depthguard.simulation import default_workcell
+
+    reference = default_workcell()
+    a, b = dict(reference.scene), dict(across.scene)
+    (a_principal, a_second), (b_principal, b_second) = a.pop("cameras"), b.pop("cameras")
+    assert a == b and a_principal == b_principal
+    a_second, b_second = dict(a_second), dict(b_second)
+    assert a_second.pop("look_at")["target"] == b_second.pop("look_at")["target"] and a_second == b_second
+    eyes = {name: cam.T_world_camera[:3, 3] for name, cam in across.rig.cameras.items()}
+    assert 3.5 < np.linalg.norm(eyes["second"] - eyes["principal"]) < 4.5  # SPEC: about 4 m apart
+    # Inside the room (walls at x = -2.2, y = +-3.0, up to z = 2.0), and across the robot: seen from the point both
+    # cameras look at, more than 150 degrees apart (the reference layout: 114).
+    assert -2.2 < eyes["second"][0] and abs(eyes["second"][1]) < 3.0 and eyes["second"][2] < 2.0
+    target = np.array(b_principal["look_at"]["target"][:2])
+    ways = [(eyes[name][:2] - target) / np.linalg.norm(eyes[name][:2] - target) for name in ("principal", "second")]
+    assert np.degrees(np.arccos(np.dot(*ways))) > 150
+
+
+def test_the_second_camera_sees_the_hidden_hand(across):
+    start, end = _hold_times(across, "hidden_hand")
+    (frame,) = simulate(across, frames=[int(round((start + end) / 2 * across.rate))])
+    hand = [name for name, _ in across.labels()].index("worker/hand_right")
+    assert np.count_nonzero(frame.label["principal"] == hand) == 0
+    assert np.count_nonzero(frame.label["second"] == hand) > 200
+
+
+def test_fused_distances_never_exceed_the_truth(episode):
+    reported, tolerance, _ = _method(episode, fw.FUSED, np.ones(len(episode.times), dtype=bool))
+    # inf ("nothing within rho") is right when the truth is beyond rho: compare min(reported, rho).
+    excess = np.minimum(reported, RHO) - (episode.truth + tolerance)
+    assert np.all(excess <= 0), f"largest excess over truth + tolerance: {excess.max() * 1e3:.1f} mm"
+
+
+def test_shadow_case_two_cameras_remove_nine_tenths_of_the_false_alarms(episode):
+    """A person between the principal camera and the robot, 1.3 m or more from every control point: the principal
+    camera alone reports them all near (false alarms); fused with the second camera, at least 90 % of those go."""
+    rows = _case(episode, "shadow")
+    truth = episode.truth[rows]
+    alarms = {}
+    for name in (episode.methods[0], fw.FUSED):
+        reported, tolerance, _ = _method(episode, name, rows)
+        alarms[name] = int(np.count_nonzero((truth >= RHO + tolerance) & (reported < RHO)))
+    principal = alarms[episode.methods[0]]
+    assert principal >= FRAMES_PER_CASE * len(episode.control_points) // 2  # else this test proves nothing
+    assert alarms[fw.FUSED] <= 0.1 * principal, alarms
+
+
+def test_hidden_hand_case_fused_finds_the_hand(episode):
+    """The hand behind the elbow as the principal camera sees it: the principal camera alone reports the control
+    points near the hand farther than they are (flagged robot_blind_spot); fused with the second camera, not."""
+    rows = _case(episode, "hidden_hand")
+    truth = episode.truth[rows]
+    principal, p_tolerance, p_flags = _method(episode, episode.methods[0], rows)
+    fused, f_tolerance, _ = _method(episode, fw.FUSED, rows)
+    near = truth < RHO
+    hidden = near & (np.minimum(principal, RHO) > truth + p_tolerance)
+    assert hidden.sum() >= FRAMES_PER_CASE  # the hand is hidden from the principal camera, at each frame
+    assert np.all((p_flags[hidden] & int(dg.Flag.ROBOT_BLIND_SPOT)) != 0)
+    assert np.all(fused[near] <= truth[near] + f_tolerance[near])
+
+
+def _fake_episode():
+    """Two control points, 8 frames at 1 Hz: frames 1-3 are the shadow case, 4-6 the hidden-hand case."""
+    t = np.arange(8.0)
+    far, near = 1.0, 0.2
+    truth = np.array([[far, far]] * 4 + [[near, far]] * 4)
+    inf = np.inf
+    principal = np.array([[inf, inf], [0.1, 0.1], [0.1, 0.1], [0.1, inf], [0.3, inf], [inf, inf], [0.19, inf],
+                          [inf, inf]])
+    second = np.array([[inf, inf], [inf, inf], [inf, inf], [inf, 0.3], [0.2, inf], [0.2, inf], [0.2, inf],
+                       [0.2, inf]])
+    fused = np.array([[inf, inf], [inf, inf], [0.1, inf], [inf, inf], [0.2, inf], [0.19, inf], [0.2, inf],
+                      [0.2, inf]])
+    reported = np.stack([principal, second, fused])
+    flags = np.zeros(reported.shape, dtype=np.int64)
+    flags[0, 4:7, 0] = int(dg.Flag.ROBOT_BLIND_SPOT)
+    blind = np.full(reported.shape, np.inf)
+    blind[0, 4:7, 0] = 0.15
+    return fw.Episode(layout="fake", times=t, control_points=("a", "b"), methods=("principal", "second", fw.FUSED),
+                      eyes={"principal": np.zeros(3), "second": np.ones(3)}, truth=truth, reported=reported,
+                      blind=blind, flags=flags, tolerance=np.full(reported.shape, 0.01),
+                      spans=[("walk", 0.0, 1.0), ("shadow", 1.0, 4.0), ("hidden_hand", 4.0, 7.0)], seconds=1.0)
+
+
+def test_summary_counts_on_a_hand_made_episode():
+    layout = fw.summary([_fake_episode()])["layouts"]["fake"]
+    principal, second, fused = (layout["methods"][m]["by_case"] for m in ("principal", "second", fw.FUSED))
+    # Shadow (frames 1-3, truth far everywhere): the principal camera's 5 readings below rho are false alarms.
+    assert principal["shadow"]["far_pairs"] == 6 and principal["shadow"]["false_alarms"] == 5
+    assert second["shadow"]["false_alarms"] == 1 and fused["shadow"]["false_alarms"] == 1
+    assert layout["false_alarms_removed"] == pytest.approx(1 - 1 / 5)
+    # Hidden hand (frames 4-6, point a 0.2 m from the hand): the principal camera reports a at 0.3 and inf (misses,
+    # flagged) and at 0.19 (right); inf for b, 1 m from everything, is right.
+    assert principal["hidden_hand"]["misses"] == 2 and principal["hidden_hand"]["flagged_misses"] == 2
+    assert principal["hidden_hand"]["unflagged_misses"] == 0
+    assert fused["hidden_hand"]["misses"] == 0 and fused["hidden_hand"]["min_reported"] == pytest.approx(0.19)
+    assert layout["methods"][fw.FUSED]["all_frames"]["misses"] == 0
+
+
+def test_plots_and_the_command_line(tmp_path, capsys, monkeypatch):
+    written = fw.plot(_fake_episode(), tmp_path)
+    assert [p.name for p in written] == ["fake_shadow.png", "fake_hidden_hand.png"]
+    assert all(p.stat().st_size > 5000 for p in written)
+
+    from depthguard import cli
+
+    calls = []
+    monkeypatch.setattr(fw, "main", lambda **kwargs: calls.append(kwargs) or 0)
+    assert cli.main(["fusion-workcell", "--out", str(tmp_path), "--scene", "a.yaml", "--scene", "b.yaml",
+                     "--all-frames"]) == 0
+    assert calls == [dict(out=str(tmp_path), scenes=["a.yaml", "b.yaml"], all_frames=True)]
+    monkeypatch.undo()
+    assert cli.main(["fusion-workcell", "--out", str(tmp_path / "bad"), "--scene", str(tmp_path / "none.yaml")]) == 2
+    assert "cannot read scene file" in capsys.readouterr().err
+    assert not (tmp_path / "bad").exists()
+
+
+def test_main_writes_plots_and_summary(tmp_path, capsys, across):
+    # The first 0.2 s of a layout saved under another name (before either case: no plots): the file's name keys the
+    # outputs.
+    from depthguard.simulation import save_workcell
+
+    scene = tmp_path / "tiny.yaml"
+    save_workcell(across, scene)
+    assert fw.main(tmp_path, duration=0.2, scenes=[scene], progress=False) == 0
+    assert "tiny:" in capsys.readouterr().out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["layouts"]["tiny"]["frames"] == 6
