@@ -128,13 +128,13 @@ class DistanceMonitor:
                                  "joint positions at the frame's capture time (query(..., joints=...))")
             joints = self.robot.joint_vector(joints)
             robot_near = self._silhouette.render(camera, joints)
-            if len(self.rig.cameras) > 1 and name in self.principals:
-                # A principal of the depth grid needs where the robot ends (case iv); with it, what the camera saw
-                # past the padded robot also stays a surface rather than blind space.
+            if len(self.rig.cameras) > 1:
+                # The depth grid needs where the robot ends (case iv); with it, what a camera saw past the padded
+                # robot also stays a surface rather than blind space, and a secondary camera clears the space there.
                 robot_far = self._silhouette.render_far(camera, joints)
         occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels, robot_near=robot_near,
                                   robot_tolerance=self.self_filter_tolerance, robot_far=robot_far)
-        state = _CameraFrame(self, camera, image, occupancy, joints, robot_far)
+        state = _CameraFrame(self, camera, image, occupancy, joints, robot_near, robot_far)
         if isinstance(frame, DepthImage):
             self._prepared[name] = (frame, state)
         return state
@@ -201,7 +201,7 @@ class DistanceMonitor:
                 state = usable[name]
                 cached = self._fused_frames[name] = (key, FusedFrames(
                     grid, self.rig, state.occupancy, secondaries, robot_far=state.robot_far,
-                    margin=self.fusion_margin, pad=self.fusion_pixels, check=False))
+                    margin=self.fusion_margin, pad=self.fusion_pixels, check=False, robot_near=state.robot_near))
             results.append(cached[1].distances(points, self.rho, self.aggregate, self.unseen, check=False))
         if not results:
             flag = Flag.STALE_CAMERA if any(n in stale for n in self.principals) else Flag.MISSING_CAMERA
@@ -233,12 +233,13 @@ class _CameraFrame:
     where the robot's body ends along each pixel (for a principal) and how far it saw (for a secondary)."""
 
     def __init__(self, monitor: DistanceMonitor, camera, image: DepthImage, occupancy: OccupancyImage, joints,
-                 robot_far=None):
+                 robot_near=None, robot_far=None):
         self._monitor = monitor
         self.camera = camera
         self.image = image
         self.occupancy = occupancy
         self._joints = joints
+        self.robot_near = robot_near
         self._robot_far = robot_far
         self._free = None
 
@@ -253,9 +254,9 @@ class _CameraFrame:
     @property
     def free(self) -> np.ndarray:
         if self._free is None:
-            from depthguard.depthgrid import free_image
+            from depthguard.depthgrid import seen_free
 
-            self._free = free_image(self.image, self.camera)
+            self._free = seen_free(self.occupancy)
         return self._free
 
 

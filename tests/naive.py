@@ -281,7 +281,7 @@ def camera_clears_reference(corners_j, offset_j, free_j, z_near_j, z0, z1, u, v,
 
 
 def fused_query_reference(grid, principal, frees, z_nears, points_world, rho, unseen, robot_far=None, margin=0.01,
-                          pad=1, inside_tol=1e-12, robot_slack=0.0):
+                          pad=1, inside_tol=1e-12, robot_slack=0.0, robot_near=None):
     """The fused query of SPEC section 8 by brute force: for every principal pixel, every grid cell that comes
     within rho is classified (certain, candidate confirmed by all secondaries, or cleared) and the pixel's distance
     is the smallest over its occupied pieces.
@@ -301,6 +301,10 @@ def fused_query_reference(grid, principal, frees, z_nears, points_world, rho, un
                              np.inf)
     else:
         blind_img = np.full(camera.shape, np.inf)
+    if robot_near is not None:  # a surface in front of the robot: its gray area stops at the robot's body
+        hides = np.isinf(principal.blind) & (robot_far > 0) & certain_img & (zs_img < robot_near)
+        ze_img = np.where(hides, np.minimum(ze_img, robot_near), ze_img)
+        blind_img = np.where(hides, robot_far + robot_slack, blind_img)
     out = {a: (np.full(len(points_world), np.inf), np.zeros(len(points_world), dtype=np.int64))
            for a in ("min", "mean", "hybrid")}
     for i, P in enumerate(camera.world_to_camera(points_world)):

@@ -231,22 +231,23 @@ def robot_scene_frames(width=80, height=60):
     depth[np.random.default_rng(5).random(depth.shape) < 0.03] = 0
     principal = dg.prepare_depth(dg.depth_image(depth, p), p, robot_near=robot_near, robot_far=robot_far)
     frees = {"s": free_image(dg.depth_image(render_depth(s, scene), s), s)}
-    return r, build_map(r), principal, frees, robot_far
+    return r, build_map(r), principal, frees, robot_far, robot_near
 
 
 @pytest.mark.parametrize("aggregate", ["min", "hybrid", "mean"])
 def test_cells_kept_for_the_frame_change_no_answer(aggregate):
     """A FusedFrames keeps the cells its queries classified, and the runs of cells found free, for later queries on
     the same frames. Whatever came before, a query's answer is the one a fresh FusedFrames gives."""
-    r, grid, principal, frees, robot_far = robot_scene_frames()
+    r, grid, principal, frees, robot_far, robot_near = robot_scene_frames()
     rng = np.random.default_rng(7)
     points = rng.uniform([-0.5, -0.6, 0.1], [1.3, 0.6, 1.3], (12, 3))
     points[:4] = [[0.0, 0.0, 0.35], [0.0, 0.0, 0.6], [0.15, 0.15, 0.8], [-0.1, 0.0, 0.5]]  # on the arm
 
     def fresh(pts):
-        return FusedFrames(grid, r, principal, frees, robot_far=robot_far).distances(pts, 0.4, aggregate)
+        return FusedFrames(grid, r, principal, frees, robot_far=robot_far, robot_near=robot_near).distances(
+            pts, 0.4, aggregate)
 
-    kept = FusedFrames(grid, r, principal, frees, robot_far=robot_far)
+    kept = FusedFrames(grid, r, principal, frees, robot_far=robot_far, robot_near=robot_near)
     for order in (rng.permutation(12), rng.permutation(12)):
         for i in order:  # one point at a time, in random orders: each sees what the earlier ones left
             again = kept.distances(points[i:i + 1], 0.4, aggregate)
@@ -263,7 +264,7 @@ def test_threads_and_row_chunks_change_no_answer(monkeypatch):
 
     from depthguard import config
 
-    r, grid, principal, frees, robot_far = robot_scene_frames()
+    r, grid, principal, frees, robot_far, robot_near = robot_scene_frames()
     points = np.random.default_rng(8).uniform([-0.5, -0.6, 0.1], [1.3, 0.6, 1.3], (10, 3))
     answers = []
     for threads, chunks in ((1, 1), (2, 1), (2, 4), (1, 3)):
@@ -279,13 +280,17 @@ def test_threads_and_row_chunks_change_no_answer(monkeypatch):
 
 
 def test_fused_kernel_equals_twin_with_robot_far_and_holes():
-    r, grid, principal, frees, robot_far = robot_scene_frames(40, 30)
+    r, grid, principal, frees, robot_far, robot_near = robot_scene_frames(40, 30)
     p = r.cameras["p"]
     points = np.random.default_rng(9).uniform([-0.5, -0.6, 0.1], [1.3, 0.6, 1.3], (6, 3))
     slack = 0.02 + p.noise.margin(robot_far.astype(np.float64))
-    reference = naive.fused_query_reference(grid, principal, [frees["s"]], [0.3], points, 0.4, "occupied",
-                                            robot_far=robot_far, robot_slack=slack)
-    for aggregate in ("min", "hybrid", "mean"):
-        result = fused_distances(grid, r, principal, frees, points, 0.4, aggregate, robot_far=robot_far)
-        assert np.allclose(result.distance, reference[aggregate][0], atol=1e-10), aggregate
-        assert np.array_equal(result.count, reference[aggregate][1]), aggregate
+    hidden_arm = np.isinf(principal.blind) & (robot_far > 0) & (principal.z_start < robot_near)
+    assert hidden_arm.sum() >= 3  # the person hides part of the arm from p
+    for near in (None, robot_near):  # with robot_near, the arm's body hidden behind the person is not an obstacle
+        reference = naive.fused_query_reference(grid, principal, [frees["s"]], [0.3], points, 0.4, "occupied",
+                                                robot_far=robot_far, robot_slack=slack, robot_near=near)
+        for aggregate in ("min", "hybrid", "mean"):
+            result = fused_distances(grid, r, principal, frees, points, 0.4, aggregate, robot_far=robot_far,
+                                     robot_near=near)
+            assert np.allclose(result.distance, reference[aggregate][0], atol=1e-10), aggregate
+            assert np.array_equal(result.count, reference[aggregate][1]), aggregate

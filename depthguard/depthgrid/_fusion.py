@@ -25,15 +25,29 @@ def free_image(depth: DepthImage, camera: PinholeCamera) -> np.ndarray:
     return free
 
 
+def seen_free(occupancy: OccupancyImage) -> np.ndarray:
+    """(h, w) float32 metres: how far a secondary camera saw along each pixel, from its prepared frame
+    (:func:`depthguard.prepare_depth`, with its invalid-pixel policy and the robot filtered out): like
+    :func:`free_image`, but small holes the ``neighbors`` policy filled (the lines sensors drop along depth edges,
+    such as the robot's silhouette) see as far as the nearest surface around them, and a pixel showing the robot
+    sees up to the robot's rendered (padded) surface."""
+    free = np.empty(occupancy.camera.shape, dtype=np.float32)
+    invalid_start = np.float32(occupancy.camera.depth_range[0]) if occupancy.invalid_policy != "free" else np.inf
+    _kernels.seen_free_depths(occupancy.z_start, occupancy.invalid, np.float32(invalid_start), occupancy.blind, free)
+    return free
+
+
 def fused_distances(grid: DepthGridMap, rig: Rig, principal: OccupancyImage, secondaries: dict,
                     points_world, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
                     unseen: str = config.DEFAULT_UNSEEN, robot_far: np.ndarray | None = None,
                     margin: float = config.DEFAULT_FUSION_MARGIN, pad: int = config.DEFAULT_FUSION_PIXELS,
-                    robot_tolerance: float = config.SELF_FILTER_TOLERANCE, check: bool = True) -> DistanceResult:
+                    robot_tolerance: float = config.SELF_FILTER_TOLERANCE, check: bool = True,
+                    robot_near: np.ndarray | None = None) -> DistanceResult:
     """Distances from control points to what the principal camera says is possibly occupied and no other camera
     clears (SPEC section 8, cases i-iv, with the corrected confirmation rule): one query of a :class:`FusedFrames`.
     To query the same frames again (a controller faster than its cameras), keep the :class:`FusedFrames`."""
-    frames = FusedFrames(grid, rig, principal, secondaries, robot_far, margin, pad, robot_tolerance, check)
+    frames = FusedFrames(grid, rig, principal, secondaries, robot_far, margin, pad, robot_tolerance, check,
+                         robot_near)
     return frames.distances(points_world, rho, aggregate, unseen, check)
 
 
@@ -54,6 +68,10 @@ class FusedFrames:
         robot_far: (h, w) float32 metres, the principal's rendered robot: where its body ends along each pixel
             (0 where it is not). The space behind the robot (case iv) starts there; the robot's own volume is
             not an obstacle. Needed when ``principal`` was self-filtered.
+        robot_near: (h, w) float32 metres, where the rendered robot starts along each pixel (0 where it is not).
+            Optional: with it, the robot's body is not an obstacle where a surface in front of it hides it either
+            (a person between the principal camera and the robot), so the cameras need not clear the space inside
+            the robot, which none of them can.
         margin: metres a secondary camera must have seen beyond a cell (calibration error; on top of its noise
             margin). pad: pixels by which a cell's footprint grows in a secondary camera.
         robot_tolerance: the self-filter's tolerance. Self-filtering counts a measurement up to this (plus the noise
@@ -66,7 +84,7 @@ class FusedFrames:
     def __init__(self, grid: DepthGridMap, rig: Rig, principal: OccupancyImage, secondaries: dict,
                  robot_far: np.ndarray | None = None, margin: float = config.DEFAULT_FUSION_MARGIN,
                  pad: int = config.DEFAULT_FUSION_PIXELS, robot_tolerance: float = config.SELF_FILTER_TOLERANCE,
-                 check: bool = True):
+                 check: bool = True, robot_near: np.ndarray | None = None):
         if check:
             grid.check_rig(rig)
             if principal.camera.name != grid.principal:
@@ -81,6 +99,8 @@ class FusedFrames:
                                  f"{pad}")
             if principal.robot_pixels and robot_far is None:
                 raise InputError("the principal frame was self-filtered: pass robot_far, where the robot's body ends")
+            if robot_near is not None and robot_far is None:
+                raise InputError("robot_near needs robot_far: where the robot's body ends")
         self.grid = grid
         self.principal = principal
         camera = principal.camera
@@ -105,11 +125,15 @@ class FusedFrames:
         self._eroded = np.empty_like(free)
         _kernels.erode_free(free, self._sizes, int(pad), self._eroded)
         self._certain = np.empty(camera.shape, dtype=np.uint8)
+        self._z_end = np.empty(camera.shape, dtype=np.float32)
         self._blind_from = np.empty(camera.shape, dtype=np.float32)
-        far = np.zeros(camera.shape, dtype=np.float32) if robot_far is None else robot_far
-        _kernels.principal_arrays(principal.z_start, principal.invalid, np.float32(camera.depth_range[0]),
-                                  principal.blind, far, float(robot_tolerance), *camera.noise.coefficients(),
-                                  self._certain, self._blind_from)
+        none = np.zeros(camera.shape, dtype=np.float32)
+        far = none if robot_far is None else np.ascontiguousarray(robot_far, dtype=np.float32)
+        near = none if robot_near is None else np.ascontiguousarray(robot_near, dtype=np.float32)
+        _kernels.principal_arrays(principal.z_start, principal.z_end, principal.invalid,
+                                  np.float32(camera.depth_range[0]), principal.blind, near, far,
+                                  float(robot_tolerance), *camera.noise.coefficients(), self._certain, self._z_end,
+                                  self._blind_from)
         # The cells' classes so far, a byte each: 0 unknown, 1 free, 2 occupied. The zeroed pages come from the
         # operating system as they are first touched, so memory grows with the cells looked at, not with the grid.
         self._cells = np.zeros(camera.shape + (grid.n_cells,), dtype=np.uint8)
@@ -131,7 +155,7 @@ class FusedFrames:
         points_camera, distance, direction_camera, count, invalid_count, flags = query_arrays(camera, points_world)
         if len(points_world):
             z_min, z_max = camera.depth_range
-            common = (principal.z_start, principal.z_end, self._certain, self._blind_from, camera.fx, camera.fy,
+            common = (principal.z_start, self._z_end, self._certain, self._blind_from, camera.fx, camera.fy,
                       camera.cx, camera.cy, z_min, z_max)
             near_inside = (config.NEAR_PLANE_EPSILON, config.INSIDE_TOLERANCE)
             cells = (grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets, self._eroded, self._sizes,

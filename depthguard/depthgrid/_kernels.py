@@ -51,19 +51,53 @@ def surface_cell_end(zs, d_min, delta_d):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def principal_arrays(z_start, invalid, invalid_start, blind, robot_far, slack, m0, m1, m2, certain, blind_from):
-    """Per pixel of the principal frame: certain = 1 where its possibly-occupied segment starts at a measured
-    surface (a valid pixel, or an invalid one whose segment starts elsewhere than the invalid start depth), and
-    blind_from = where the space behind the robot starts: past the robot's body (robot_far) by the self-filter's
-    slack plus the noise margin there, and never before ``blind``; inf where no robot is seen."""
+def seen_free_depths(z_start, invalid, invalid_start, blind, free):
+    """Per pixel of a secondary camera's prepared frame, how far it saw the ray free: where its possibly-occupied
+    set starts (the measurement minus its noise margin, or the smallest depth around a small hole the
+    ``neighbors`` policy filled); up to the rendered robot where the pixel shows the robot; 0 where nothing was
+    measured (nor filled), and where the policy made a pixel free without a measurement. Writes free (h, w)."""
     h, w = z_start.shape
     for v in prange(h):
         for u in range(w):
-            certain[v, u] = 1 if (invalid[v, u] == 0 or z_start[v, u] != invalid_start) else 0
+            zs = z_start[v, u]
+            if invalid[v, u] and zs == invalid_start:
+                free[v, u] = 0.0
+            elif np.isfinite(zs):
+                free[v, u] = zs
+            elif np.isfinite(blind[v, u]):
+                free[v, u] = blind[v, u]
+            else:
+                free[v, u] = 0.0
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def principal_arrays(z_start, z_end, invalid, invalid_start, blind, robot_near, robot_far, slack, m0, m1, m2, certain,
+                     z_end_fused, blind_from):
+    """Per pixel of the principal frame, what fusion starts from:
+
+    - certain = 1 where the possibly-occupied segment starts at a measured surface (a valid pixel, or an invalid one
+      whose segment starts elsewhere than the invalid start depth);
+    - blind_from: where the space behind the robot starts, past the robot's body (robot_far) by the self-filter's
+      slack plus the noise margin there, never before ``blind``; inf where no robot is seen;
+    - z_end_fused: z_end, except that a surface in front of the robot does not hide the robot's own body from
+      fusion: its gray area stops where the rendered robot starts (robot_near), and the space behind the body is
+      blind space again (blind_from). The body is the robot, whatever hides it; a secondary camera that sees the
+      robot's surface could never clear the space inside it.
+    """
+    h, w = z_start.shape
+    for v in prange(h):
+        for u in range(w):
+            zs = z_start[v, u]
+            certain[v, u] = 1 if (invalid[v, u] == 0 or zs != invalid_start) else 0
+            z_end_fused[v, u] = z_end[v, u]
+            far = np.float64(robot_far[v, u])
+            behind = far + slack + max(m0 + (m1 + m2 * far) * far, 0.0)
             b = np.float64(blind[v, u])
             if np.isfinite(b):
-                far = np.float64(robot_far[v, u])
-                blind_from[v, u] = max(b, far + slack + max(m0 + (m1 + m2 * far) * far, 0.0))
+                blind_from[v, u] = max(b, behind)
+            elif far > 0.0 and certain[v, u] and zs < robot_near[v, u]:
+                z_end_fused[v, u] = min(z_end[v, u], robot_near[v, u])
+                blind_from[v, u] = behind
             else:
                 blind_from[v, u] = np.inf
 
