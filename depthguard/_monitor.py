@@ -256,7 +256,7 @@ class _CameraFrame:
         if self._free is None:
             from depthguard.depthgrid import seen_free
 
-            self._free = seen_free(self.occupancy)
+            self._free = seen_free(self.image, self.occupancy)
         return self._free
 
 

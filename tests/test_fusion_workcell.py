@@ -1,8 +1,8 @@
 """Issue 4's workcell experiment (depthguard.experiments.fusion_workcell): one depth camera against two fused through
 the depth grid, in reference scenario B's shadow and hidden-hand cases, with the second camera across the robot
-(scenario_b_across.yaml). The fused result never misses; in the shadow case two cameras remove at least 90 % of the
-principal camera's false alarms; in the hidden-hand case the fused result finds the hand the principal camera
-cannot see. Plus the summary and plots on a small hand-made episode, and the command line."""
+(scenario_b_across.yaml). The fused result never misses and never reports less than the principal camera alone; in
+the hidden-hand case it finds the hand the principal camera cannot see. In the shadow case it cannot remove the
+principal camera's false alarms: what the shadow hides next to the robot, the links hide from the second camera. Plus the summary and plots on a small hand-made episode, and the command line."""
 
 import json
 
@@ -87,18 +87,25 @@ def test_fused_distances_never_exceed_the_truth(episode):
     assert np.all(excess <= 0), f"largest excess over truth + tolerance: {excess.max() * 1e3:.1f} mm"
 
 
-def test_shadow_case_two_cameras_remove_nine_tenths_of_the_false_alarms(episode):
-    """A person between the principal camera and the robot, 1.3 m or more from every control point: the principal
-    camera alone reports them all near (false alarms); fused with the second camera, at least 90 % of those go."""
+def test_shadow_case_fusion_removes_only_what_a_camera_saw(episode):
+    """A person between the principal camera and the robot, standing so near the principal camera that it measures
+    nothing where the person is: that camera alone then counts everything in front of the robot as occupied and
+    puts every point on the robot within about 0.1 m of it (false alarms), the end-effector inside it. Fused with the
+    second camera, which sees the end-effector from the other side, no point is inside the shadow, and none is
+    reported above the truth.
+
+    The issue's "two cameras remove at least 90 % of the single camera's false alarms" fails here: the side of the
+    links that faces the principal camera is hidden from the second camera by the links themselves, so no camera
+    sees it and it stays occupied (README, "Several cameras"; the closing note of issue 4). The 90 % holds where no
+    robot hides anything: tests/test_judge_fusion.py."""
     rows = _case(episode, "shadow")
     truth = episode.truth[rows]
-    alarms = {}
-    for name in (episode.methods[0], fw.FUSED):
-        reported, tolerance, _ = _method(episode, name, rows)
-        alarms[name] = int(np.count_nonzero((truth >= RHO + tolerance) & (reported < RHO)))
-    principal = alarms[episode.methods[0]]
-    assert principal >= FRAMES_PER_CASE * len(episode.control_points) // 2  # else this test proves nothing
-    assert alarms[fw.FUSED] <= 0.1 * principal, alarms
+    principal, _, _ = _method(episode, episode.methods[0], rows)
+    fused, tolerance, _ = _method(episode, fw.FUSED, rows)
+    assert np.mean((principal < RHO) & (truth >= RHO)) >= 0.9  # the shadow's false alarms, else this proves nothing
+    assert np.any(principal < 0.01)
+    assert np.all(fused > 0.02), fused.min()
+    assert np.all(np.minimum(fused, RHO) <= truth + tolerance)
 
 
 def test_hidden_hand_case_fused_finds_the_hand(episode):

@@ -25,15 +25,17 @@ def free_image(depth: DepthImage, camera: PinholeCamera) -> np.ndarray:
     return free
 
 
-def seen_free(occupancy: OccupancyImage) -> np.ndarray:
-    """(h, w) float32 metres: how far a secondary camera saw along each pixel, from its prepared frame
-    (:func:`depthguard.prepare_depth`, with its invalid-pixel policy and the robot filtered out): like
-    :func:`free_image`, but small holes the ``neighbors`` policy filled (the lines sensors drop along depth edges,
-    such as the robot's silhouette) see as far as the nearest surface around them, and a pixel showing the robot
-    sees up to the robot's rendered (padded) surface."""
-    free = np.empty(occupancy.camera.shape, dtype=np.float32)
-    invalid_start = np.float32(occupancy.camera.depth_range[0]) if occupancy.invalid_policy != "free" else np.inf
-    _kernels.seen_free_depths(occupancy.z_start, occupancy.invalid, np.float32(invalid_start), occupancy.blind, free)
+def seen_free(depth: DepthImage, occupancy: OccupancyImage) -> np.ndarray:
+    """(h, w) float32 metres: how far a secondary camera saw along each pixel, like :func:`free_image`, except that
+    small holes its ``neighbors`` policy filled (``occupancy``: the frame prepared by
+    :func:`depthguard.prepare_depth`) see as far as the nearest surface around them: the lines sensors drop along
+    depth edges, such as the robot's silhouette, then do not stop it clearing the cells they touch."""
+    camera = occupancy.camera
+    free = np.empty(camera.shape, dtype=np.float32)
+    z_min, z_max = camera.depth_range
+    invalid_start = np.float32(z_min) if occupancy.invalid_policy != "free" else np.float32(np.inf)
+    _kernels.seen_free_depths(depth.data, float(depth.depth_scale), z_min, z_max, *camera.noise.coefficients(),
+                              occupancy.z_start, occupancy.invalid, invalid_start, occupancy.blind, free)
     return free
 
 

@@ -51,20 +51,21 @@ def surface_cell_end(zs, d_min, delta_d):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def seen_free_depths(z_start, invalid, invalid_start, blind, free):
-    """Per pixel of a secondary camera's prepared frame, how far it saw the ray free: where its possibly-occupied
-    set starts (the measurement minus its noise margin, or the smallest depth around a small hole the
-    ``neighbors`` policy filled); up to the rendered robot where the pixel shows the robot; 0 where nothing was
-    measured (nor filled), and where the policy made a pixel free without a measurement. Writes free (h, w)."""
-    h, w = z_start.shape
+def seen_free_depths(raw, scale, z_min, z_max, m0, m1, m2, z_start, invalid, invalid_start, blind, free):
+    """Per pixel of a secondary camera's frame, how far it saw the ray free: its measurement minus the noise margin
+    (:func:`free_depths`; the robot's own surface included: the ray is free up to it); where it measured nothing,
+    the depth its prepared frame starts at when the ``neighbors`` policy filled the small hole (the nearest surface
+    around it, or the rendered robot when that surface is the robot), else 0. raw: (h, w) measurements, ``scale``
+    metres per unit; z_start, invalid, blind: its :class:`OccupancyImage`. Writes free (h, w) float32."""
+    h, w = raw.shape
     for v in prange(h):
         for u in range(w):
-            zs = z_start[v, u]
-            if invalid[v, u] and zs == invalid_start:
-                free[v, u] = 0.0
-            elif np.isfinite(zs):
-                free[v, u] = zs
-            elif np.isfinite(blind[v, u]):
+            d = np.float64(raw[v, u]) * scale
+            if np.isfinite(d) and d > 0.0 and d >= z_min and d <= z_max:
+                free[v, u] = max(d - max(m0 + (m1 + m2 * d) * d, 0.0), 0.0)
+            elif invalid[v, u] and z_start[v, u] != invalid_start and np.isfinite(z_start[v, u]):
+                free[v, u] = z_start[v, u]
+            elif invalid[v, u] and z_start[v, u] != invalid_start and np.isfinite(blind[v, u]):
                 free[v, u] = blind[v, u]
             else:
                 free[v, u] = 0.0
