@@ -503,7 +503,10 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
             # occupied (a pixel with one piece of candidates only: a surface's gray area, or the space behind the
             # robot). Otherwise ask the grid.
             one_piece = certain[v, u] and bf > z_far  # a measured surface and its gray area, the span gathered
-            answered = one_piece and (zs >= Z or z <= surface_cell_end(zs, d_min, delta_d))
+            answered = False
+            if certain[v, u] and zs <= z_far:  # the surface's certain part: the frustum on (case ii), or its cell
+                ze = np.float64(z_end[v, u])
+                answered = z <= (ze if zs >= Z else min(surface_cell_end(zs, d_min, delta_d), ze))
             if not answered and (one_piece or zs > z_far) and d_min <= z < d_max:
                 answered = cells[v, u, min(int((z - d_min) / delta_d), n_cells - 1)] == 2
             if not answered:
