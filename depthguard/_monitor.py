@@ -56,7 +56,8 @@ class DistanceMonitor:
                  method: str = config.DEFAULT_METHOD, max_age: float | None = None,
                  hole_pixels: int = config.DEFAULT_NEIGHBOR_HOLE_PIXELS, robot=None, self_filter: str = "hulls",
                  self_filter_tolerance: float = config.SELF_FILTER_TOLERANCE, principals=None, maps=None,
-                 fusion_margin: float = config.DEFAULT_FUSION_MARGIN, fusion_pixels: int = config.DEFAULT_FUSION_PIXELS):
+                 fusion_margin: float = config.DEFAULT_FUSION_MARGIN,
+                 fusion_pixels: int = config.DEFAULT_FUSION_PIXELS):
         if not isinstance(rig, Rig):
             raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}")
         check_options(rho, aggregate, unseen, method)
@@ -121,7 +122,7 @@ class DistanceMonitor:
             image = frame if frame.data.shape == camera.shape else depth_image(frame.data, camera, frame.timestamp)
         else:
             image = depth_image(frame, camera)
-        robot_near = robot_far = None
+        robot_near = robot_far = robot_exit = None
         if self._silhouette is not None:
             if joints is None:
                 raise InputError(f"camera {name!r}: this monitor filters the robot out of its frames: pass the robot's "
@@ -132,9 +133,11 @@ class DistanceMonitor:
                 # The depth grid needs where the robot ends (case iv); with it, what a camera saw past the padded
                 # robot also stays a surface rather than blind space, and a secondary camera clears the space there.
                 robot_far = self._silhouette.render_far(camera, joints)
+                if name in self.principals:
+                    robot_exit = self._silhouette.render_first_exit(camera, joints)
         occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels, robot_near=robot_near,
                                   robot_tolerance=self.self_filter_tolerance, robot_far=robot_far)
-        state = _CameraFrame(self, camera, image, occupancy, joints, robot_near, robot_far)
+        state = _CameraFrame(self, camera, image, occupancy, joints, robot_near, robot_far, robot_exit)
         if isinstance(frame, DepthImage):
             self._prepared[name] = (frame, state)
         return state
@@ -201,7 +204,8 @@ class DistanceMonitor:
                 state = usable[name]
                 cached = self._fused_frames[name] = (key, FusedFrames(
                     grid, self.rig, state.occupancy, secondaries, robot_far=state.robot_far,
-                    margin=self.fusion_margin, pad=self.fusion_pixels, check=False, robot_near=state.robot_near))
+                    margin=self.fusion_margin, pad=self.fusion_pixels, check=False, robot_near=state.robot_near,
+                    robot_exit=state.robot_exit))
             results.append(cached[1].distances(points, self.rho, self.aggregate, self.unseen, check=False))
         if not results:
             flag = Flag.STALE_CAMERA if any(n in stale for n in self.principals) else Flag.MISSING_CAMERA
@@ -212,7 +216,7 @@ class DistanceMonitor:
         if len(results) == 1:
             (result,) = results
             return DistanceResult(distance=result.distance, direction=result.direction, count=result.count,
-                                  invalid_count=result.invalid_count,
+                                  invalid_count=result.invalid_count, blind_distance=result.blind_distance,
                                   flags=tuple(f | stale_flag for f in result.flags) if stale else result.flags,
                                   timestamps=timestamps, cameras=tuple(usable), invalid_pixels=invalid_pixels,
                                   principal=(result.cameras[0],) * len(points))
@@ -224,6 +228,7 @@ class DistanceMonitor:
         flags = tuple(results[c].flags[i] | stale_flag for i, c in enumerate(chosen))
         return DistanceResult(distance=pick("distance"), direction=pick("direction").reshape(-1, 3),
                               count=pick("count"), invalid_count=pick("invalid_count"), flags=flags,
+                              blind_distance=pick("blind_distance"),
                               timestamps=timestamps, cameras=tuple(usable), invalid_pixels=invalid_pixels,
                               principal=tuple(results[c].cameras[0] for c in chosen))
 
@@ -233,13 +238,14 @@ class _CameraFrame:
     where the robot's body ends along each pixel (for a principal) and how far it saw (for a secondary)."""
 
     def __init__(self, monitor: DistanceMonitor, camera, image: DepthImage, occupancy: OccupancyImage, joints,
-                 robot_near=None, robot_far=None):
+                 robot_near=None, robot_far=None, robot_exit=None):
         self._monitor = monitor
         self.camera = camera
         self.image = image
         self.occupancy = occupancy
         self._joints = joints
         self.robot_near = robot_near
+        self.robot_exit = robot_exit
         self._robot_far = robot_far
         self._free = None
 

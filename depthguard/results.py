@@ -60,7 +60,8 @@ class DistanceResult:
         blind_distance: (n,) float64 metres, the distance to the space hidden behind the robot (single camera:
             from the robot's rendered surface on), inf when it is farther than rho or there is no robot. The fully
             conservative distance is ``min(distance, blind_distance)``. With several cameras the depth grid checks
-            that space with the other cameras, and this stays inf.
+            that space with the other cameras; this is then the distance to what it could not check: space along a
+            principal pixel that may lie between two links of the robot, which it takes for the robot.
         principal: with several cameras, per point the principal camera whose fused answer is reported; empty for
             a single camera.
     """

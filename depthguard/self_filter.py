@@ -105,6 +105,12 @@ class RobotSilhouette:
         surface), 0 where the robot is not. The depth grid checks the space behind it (SPEC section 8, case iv)."""
         return self.renderer.render_depth_max(camera, self.instances(q))
 
+    def render_first_exit(self, camera: PinholeCamera, q) -> np.ndarray:
+        """(h, w) float32 metres: where each pixel's ray of ``camera`` first leaves the robot's padded geometry, 0
+        where the robot is not. Up to :meth:`render_far` the ray may pass between two links: space the depth grid
+        leaves unchecked and flags."""
+        return self.renderer.render_depth_first_exit(camera, self.instances(q))
+
     def triangles(self) -> int:
         """Triangles drawn per camera."""
         return sum(self.renderer._mesh(mesh_id).n_faces for _, mesh_id in self._meshes)

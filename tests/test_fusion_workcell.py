@@ -2,7 +2,8 @@
 the depth grid, in reference scenario B's shadow and hidden-hand cases, with the second camera across the robot
 (scenario_b_across.yaml). The fused result never misses and never reports less than the principal camera alone; in
 the hidden-hand case it finds the hand the principal camera cannot see. In the shadow case it cannot remove the
-principal camera's false alarms: what the shadow hides next to the robot, the links hide from the second camera. Plus the summary and plots on a small hand-made episode, and the command line."""
+principal camera's false alarms: what the shadow hides next to the robot, the links hide from the second camera.
+Plus the summary and plots on a small hand-made episode, and the command line."""
 
 import json
 

@@ -67,9 +67,9 @@ def robot_filter(z_start, invalid, policy_start, robot_near, robot_far, has_far,
     front of the robot keeps its obstacle, which hides everything behind it anyway. With ``has_far``, robot_far
     (h, w) float32 is where the rendered robot ends along each pixel: a measurement beyond the farthest end in the
     3x3 neighbourhood (plus the tolerance and the noise margin) saw past the robot's padded geometry, through
-    space the real robot does not fill, and stays what it is: a surface, with nothing hidden in front of it. A pixel whose occupied set the
-    invalid-pixel policy made (z_start == policy_start, invalid) is occupied only up to the robot:
-    z_end = d_r - tolerance - m(d_r), with the blind spot from the robot on.
+    space the real robot does not fill, and stays what it is: a surface, with nothing hidden in front of it. A
+    pixel whose occupied set the invalid-pixel policy made (z_start == policy_start, invalid) is occupied only up to
+    the robot: z_end = d_r - tolerance - m(d_r), with the blind spot from the robot on.
     Edits z_start, and z_end and blind (h, w) float32 metres (inf = none), in place on the robot's pixels.
     """
     h, w = z_start.shape

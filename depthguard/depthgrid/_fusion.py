@@ -44,12 +44,12 @@ def fused_distances(grid: DepthGridMap, rig: Rig, principal: OccupancyImage, sec
                     unseen: str = config.DEFAULT_UNSEEN, robot_far: np.ndarray | None = None,
                     margin: float = config.DEFAULT_FUSION_MARGIN, pad: int = config.DEFAULT_FUSION_PIXELS,
                     robot_tolerance: float = config.SELF_FILTER_TOLERANCE, check: bool = True,
-                    robot_near: np.ndarray | None = None) -> DistanceResult:
+                    robot_near: np.ndarray | None = None, robot_exit: np.ndarray | None = None) -> DistanceResult:
     """Distances from control points to what the principal camera says is possibly occupied and no other camera
     clears (SPEC section 8, cases i-iv, with the corrected confirmation rule): one query of a :class:`FusedFrames`.
     To query the same frames again (a controller faster than its cameras), keep the :class:`FusedFrames`."""
     frames = FusedFrames(grid, rig, principal, secondaries, robot_far, margin, pad, robot_tolerance, check,
-                         robot_near)
+                         robot_near, robot_exit)
     return frames.distances(points_world, rho, aggregate, unseen, check)
 
 
@@ -74,6 +74,11 @@ class FusedFrames:
             Optional: with it, the robot's body is not an obstacle where a surface in front of it hides it either
             (a person between the principal camera and the robot), so the cameras need not clear the space inside
             the robot, which none of them can.
+        robot_exit: (h, w) float32 metres, where each pixel's ray first leaves the robot's padded geometry
+            (:meth:`depthguard.self_filter.RobotSilhouette.render_first_exit`). Optional: with it, the space
+            between that and robot_far, which may lie between two links and which fusion takes for the robot, is
+            reported: ``blind_distance`` and the flag ``robot_blind_spot`` when it comes nearer than the
+            distance.
         margin: metres a secondary camera must have seen beyond a cell (calibration error; on top of its noise
             margin). pad: pixels by which a cell's footprint grows in a secondary camera.
         robot_tolerance: the self-filter's tolerance. Self-filtering counts a measurement up to this (plus the noise
@@ -86,7 +91,8 @@ class FusedFrames:
     def __init__(self, grid: DepthGridMap, rig: Rig, principal: OccupancyImage, secondaries: dict,
                  robot_far: np.ndarray | None = None, margin: float = config.DEFAULT_FUSION_MARGIN,
                  pad: int = config.DEFAULT_FUSION_PIXELS, robot_tolerance: float = config.SELF_FILTER_TOLERANCE,
-                 check: bool = True, robot_near: np.ndarray | None = None):
+                 check: bool = True, robot_near: np.ndarray | None = None,
+                 robot_exit: np.ndarray | None = None):
         if check:
             grid.check_rig(rig)
             if principal.camera.name != grid.principal:
@@ -129,13 +135,15 @@ class FusedFrames:
         self._certain = np.empty(camera.shape, dtype=np.uint8)
         self._z_end = np.empty(camera.shape, dtype=np.float32)
         self._blind_from = np.empty(camera.shape, dtype=np.float32)
+        self._unchecked_from = np.empty(camera.shape, dtype=np.float32)
         none = np.zeros(camera.shape, dtype=np.float32)
         far = none if robot_far is None else np.ascontiguousarray(robot_far, dtype=np.float32)
         near = none if robot_near is None else np.ascontiguousarray(robot_near, dtype=np.float32)
+        exit_ = none if robot_exit is None else np.ascontiguousarray(robot_exit, dtype=np.float32)
         _kernels.principal_arrays(principal.z_start, principal.z_end, principal.invalid,
-                                  np.float32(camera.depth_range[0]), principal.blind, near, far,
+                                  np.float32(camera.depth_range[0]), principal.blind, near, far, exit_,
                                   float(robot_tolerance), *camera.noise.coefficients(), self._certain, self._z_end,
-                                  self._blind_from)
+                                  self._blind_from, self._unchecked_from)
         # The cells' classes so far, a byte each: 0 unknown, 1 free, 2 occupied. The zeroed pages come from the
         # operating system as they are first touched, so memory grows with the cells looked at, not with the grid.
         self._cells = np.zeros(camera.shape + (grid.n_cells,), dtype=np.uint8)
@@ -155,17 +163,18 @@ class FusedFrames:
         camera = principal.camera
         grid = self.grid
         points_camera, distance, direction_camera, count, invalid_count, flags = query_arrays(camera, points_world)
+        unchecked = np.full(len(points_world), np.inf)
         if len(points_world):
             z_min, z_max = camera.depth_range
-            common = (principal.z_start, self._z_end, self._certain, self._blind_from, camera.fx, camera.fy,
-                      camera.cx, camera.cy, z_min, z_max)
+            common = (principal.z_start, self._z_end, self._certain, self._blind_from, self._unchecked_from, camera.fx,
+                      camera.fy, camera.cx, camera.cy, z_min, z_max)
             near_inside = (config.NEAR_PLANE_EPSILON, config.INSIDE_TOLERANCE)
             cells = (grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets, self._eroded, self._sizes,
                      self._z_near, self._margin, self._cells, self._free_run, config.FUSION_ROW_CHUNKS)
             with parallel_chunksize(1):
                 _kernels.fused_query_points(points_camera, float(rho), *common, config.AGGREGATES.index(aggregate),
                                             unseen == "occupied", *near_inside, config.MIN_DIRECTION_NORM, *cells,
-                                            distance, direction_camera, count, invalid_count, flags)
+                                            distance, direction_camera, count, invalid_count, flags, unchecked)
         stale = Flag.STALE_CAMERA if self._stale else Flag(0)
         return DistanceResult(
             distance=distance,
@@ -176,4 +185,5 @@ class FusedFrames:
             timestamps={camera.name: principal.timestamp},
             cameras=(camera.name,) + self.secondaries,
             invalid_pixels={camera.name: principal.invalid_pixels},
+            blind_distance=unchecked,
         )

@@ -20,6 +20,7 @@ from numba import njit, prange
 
 from depthguard.depthspace._kernels import (
     AGG_MIN,
+    FLAG_ROBOT_BLIND_SPOT,
     _finish_min_at_pixel,
     _finish_sum,
     _guess_piece_row,
@@ -72,8 +73,8 @@ def seen_free_depths(raw, scale, z_min, z_max, m0, m1, m2, z_start, invalid, inv
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def principal_arrays(z_start, z_end, invalid, invalid_start, blind, robot_near, robot_far, slack, m0, m1, m2, certain,
-                     z_end_fused, blind_from):
+def principal_arrays(z_start, z_end, invalid, invalid_start, blind, robot_near, robot_far, robot_exit, slack, m0, m1,
+                     m2, certain, z_end_fused, blind_from, unchecked_from):
     """Per pixel of the principal frame, what fusion starts from:
 
     - certain = 1 where the possibly-occupied segment starts at a measured surface (a valid pixel, or an invalid one
@@ -83,7 +84,10 @@ def principal_arrays(z_start, z_end, invalid, invalid_start, blind, robot_near, 
     - z_end_fused: z_end, except that a surface in front of the robot does not hide the robot's own body from
       fusion: its gray area stops where the rendered robot starts (robot_near), and the space behind the body is
       blind space again (blind_from). The body is the robot, whatever hides it; a secondary camera that sees the
-      robot's surface could never clear the space inside it.
+      robot's surface could never clear the space inside it;
+    - unchecked_from: where, along a pixel whose ray may leave one link and meet another (robot_exit, where it first
+      leaves the padded geometry, is nearer than robot_far), the space between them starts; it ends at
+      blind_from. Fusion takes it for the robot and does not check it, but flags it. inf for none.
     """
     h, w = z_start.shape
     for v in prange(h):
@@ -101,6 +105,12 @@ def principal_arrays(z_start, z_end, invalid, invalid_start, blind, robot_near, 
                 blind_from[v, u] = behind
             else:
                 blind_from[v, u] = np.inf
+            unchecked_from[v, u] = np.inf
+            exit_ = np.float64(robot_exit[v, u])
+            if exit_ > 0.0 and np.isfinite(blind_from[v, u]):
+                start = max(exit_ + slack + max(m0 + (m1 + m2 * exit_) * exit_, 0.0), np.float64(robot_near[v, u]))
+                if start < blind_from[v, u]:
+                    unchecked_from[v, u] = start
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -407,7 +417,8 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
                 if best2 >= bound2:
                     best2 = np.inf
             else:  # case (iii): the surface's own cell is certain, the gray area behind it is a candidate
-                best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs, surface_cell_end(zs, d_min, delta_d),
+                best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs,
+                                                  surface_cell_end(zs, d_min, delta_d),
                                                   min(ze, z_far), bound2, u, v, d_min, delta_d, n_cells, corners,
                                                   offsets, eroded, sizes, z_near, margin, cells, free_run)
         else:  # no measurement: the whole segment is a candidate
@@ -429,19 +440,20 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
 
 # The sums over one control point's contributing pixels (:func:`fused_rows`), in a float64 array of this length.
 ACC_COUNT, ACC_INVALID, ACC_INSIDE, ACC_SUM_D, ACC_SX, ACC_SY, ACC_SZ, ACC_BEST2, ACC_BEST_U, ACC_BEST_V, ACC_BEST_Z, \
-    ACC_BEST_INVALID = range(12)
-N_ACC = 12
+    ACC_BEST_INVALID, ACC_UNCHECKED2 = range(13)
+N_ACC = 13
 
 
 @njit(cache=True, error_model="numpy")
-def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, certain, blind_from, fx, fy, cx, cy,
-               prune_min, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, free_run,
-               scratch, acc):
+def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, certain, blind_from, unchecked_from, fx,
+               fy, cx, cy, prune_min, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells,
+               free_run, scratch, acc):
     """One control point P = (X, Y, Z) (metres, principal optical frame) against the rows v_first, v_first + v_step,
     ... <= v_last of its surveillance region (``spans``): what the principal camera says is possibly occupied and
     the secondary cameras do not clear. Writes into acc (N_ACC,) the count of contributing pixels, those from pixels
     without a measurement, whether P is inside, the sums of their distances and unit directions, and the nearest
-    one (squared distance, pixel, depth, from a pixel without a measurement?). ``scratch`` (5, width) float64."""
+    one (squared distance, pixel, depth, from a pixel without a measurement?), and the squared distance to the
+    space between links that fusion did not check (``unchecked_from``). ``scratch`` (5, width) float64."""
     rho2 = rho * rho
     z_far = Z + rho
     d_max = d_min + n_cells * delta_d
@@ -457,6 +469,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
     sx = 0.0
     sy = 0.0
     sz = 0.0
+    unchecked2 = np.inf
     inv_fx = 1.0 / fx
     z_in = scratch[0]
     u_in = scratch[1]
@@ -471,6 +484,11 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
         for u in range(spans[v, 0], spans[v, 1] + 1):
             zs = np.float64(z_start[v, u])
             bf = np.float64(blind_from[v, u])
+            uf = np.float64(unchecked_from[v, u])
+            if uf <= z_far:
+                d2u, _ = frustum_nearest(X, Y, Z, (u - 0.5 - cx) * inv_fx, (u + 0.5 - cx) * inv_fx, b0, b1, uf,
+                                         min(bf, z_far))
+                unchecked2 = min(unchecked2, d2u)
             if min(zs, bf) > z_far:
                 continue
             if zs > z_far and known_free(bf, z_far, u, v, d_min, delta_d, n_cells, free_run):
@@ -545,17 +563,20 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
     acc[ACC_BEST_V] = best_v
     acc[ACC_BEST_Z] = best_z
     acc[ACC_BEST_INVALID] = best_invalid
+    acc[ACC_UNCHECKED2] = unchecked2
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, fx, fy, cx, cy, z_min, z_max,
-                       aggregate, unseen_occupied, near_eps, inside_tol, min_direction, d_min, delta_d, n_cells, corners,
-                       offsets, eroded, sizes, z_near, margin, cells, free_run, row_chunks, distance, direction,
-                       count, invalid_count, flags):
+def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, unchecked_from, fx, fy, cx, cy, z_min,
+                       z_max, aggregate, unseen_occupied, near_eps, inside_tol, min_direction, d_min, delta_d, n_cells,
+                       corners, offsets, eroded, sizes, z_near, margin, cells, free_run, row_chunks, distance,
+                       direction, count, invalid_count, flags, unchecked):
     """Distances from the (n, 3) control points (metres, principal optical frame) to what the principal camera says
     is possibly occupied and the secondary cameras do not clear, aggregated as ``aggregate``; the fused counterpart
     of :func:`depthguard.depthspace._kernels.query_points`. Writes distance (n,), the unit direction (n, 3) (from
-    the obstacle towards P, principal optical frame), count, invalid_count and flags.
+    the obstacle towards P, principal optical frame), count, invalid_count and flags, and into unchecked (n,) the
+    distance to the space between links fusion did not check (inf beyond rho); ROBOT_BLIND_SPOT flags it when it
+    comes nearer than the distance.
 
     Each point's region is split into ``row_chunks`` interleaved sets of rows, and the n * row_chunks tasks run in
     parallel: a point near much clutter does not leave the other threads idle. Their sums are then added in a fixed
@@ -584,14 +605,15 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
         i = t // row_chunks
         c = t % row_chunks
         fused_rows(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, int(region[i, 6]) + c,
-                   int(region[i, 7]), row_chunks, spans[i], z_start, z_end, certain, blind_from, fx, fy, cx, cy,
-                   prune_min, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells,
-                   free_run, scratch[t], acc[i, c])
+                   int(region[i, 7]), row_chunks, spans[i], z_start, z_end, certain, blind_from, unchecked_from, fx,
+                   fy, cx, cy, prune_min, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin,
+                   cells, free_run, scratch[t], acc[i, c])
     for i in range(n):
         X, Y, Z = points_camera[i, 0], points_camera[i, 1], points_camera[i, 2]
         f = int(region[i, 0])
         if region[i, 1] != 0.0:
             distance[i], count[i], invalid_count[i], flags[i] = 0.0, 1, 0, f
+            unchecked[i] = np.inf
             continue
         total = acc[i, 0].copy()
         for c in range(1, row_chunks):
@@ -599,6 +621,7 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
             for a in (ACC_COUNT, ACC_INVALID, ACC_SUM_D, ACC_SX, ACC_SY, ACC_SZ):
                 total[a] += part[a]
             total[ACC_INSIDE] = max(total[ACC_INSIDE], part[ACC_INSIDE])
+            total[ACC_UNCHECKED2] = min(total[ACC_UNCHECKED2], part[ACC_UNCHECKED2])
             # The nearest pixel; among equals, the first in (v, u) order, as one scan of the rows would find.
             if part[ACC_BEST2] < total[ACC_BEST2] or (part[ACC_BEST2] == total[ACC_BEST2] and (
                     part[ACC_BEST_V] < total[ACC_BEST_V] or (part[ACC_BEST_V] == total[ACC_BEST_V]
@@ -618,4 +641,6 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
         distance[i] = d
         count[i] = k
         invalid_count[i] = m
-        flags[i] = g
+        u2 = total[ACC_UNCHECKED2]
+        unchecked[i] = np.sqrt(u2) if u2 < rho * rho else np.inf
+        flags[i] = g | (FLAG_ROBOT_BLIND_SPOT if unchecked[i] < d else 0)

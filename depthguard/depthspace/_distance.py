@@ -78,7 +78,8 @@ def single_camera_distances(occupancy: OccupancyImage, points_world, rho: float 
     if n:
         z_min, z_max = camera.depth_range
         args = (points_camera, float(rho), occupancy.z_start, occupancy.z_end, occupancy.invalid, occupancy.block_min,
-                occupancy.blind, occupancy.blind_block_min, occupancy.robot_pixels > 0, config.BLOCK_SIZE, camera.fx, camera.fy, camera.cx, camera.cy, z_min, z_max,
+                occupancy.blind, occupancy.blind_block_min, occupancy.robot_pixels > 0, config.BLOCK_SIZE, camera.fx,
+                camera.fy, camera.cx, camera.cy, z_min, z_max,
                 config.AGGREGATES.index(aggregate), unseen == "occupied", method == "paper", config.NEAR_PLANE_EPSILON,
                 config.INSIDE_TOLERANCE, config.MIN_DIRECTION_NORM, distance, direction_camera, count, invalid_count,
                 flags, blind_distance)

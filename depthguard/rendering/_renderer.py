@@ -300,17 +300,24 @@ class Renderer:
         last exit point; it is >= :meth:`render_depth` everywhere."""
         return self._depth_pass(camera, instances, nearest=False)
 
-    def _depth_pass(self, camera, instances, nearest: bool) -> np.ndarray:
+    def render_depth_first_exit(self, camera, instances) -> np.ndarray:
+        """(h, w) float32 metres: optical z where each pixel's centre ray first leaves a closed mesh of
+        ``instances`` (its nearest back face), 0 where nothing is drawn. Where it is nearer than
+        :meth:`render_depth_max`, the ray leaves one body and then, after a gap or not, is inside another."""
+        return self._depth_pass(camera, instances, nearest=True, back_faces=True)
+
+    def _depth_pass(self, camera, instances, nearest: bool, back_faces: bool = False) -> np.ndarray:
         instances = self._check_instances(camera, instances)
         ctx = self._context()
         with ctx:
             fbo = self._targets_for(camera.width, camera.height).depth_only
-            self._draw(fbo, self._depth_program, camera, instances, nearest=nearest, full=False)
+            self._draw(fbo, self._depth_program, camera, instances, nearest=nearest, full=False,
+                       back_faces=back_faces)
             depth = np.empty((camera.height, camera.width), dtype=np.float32)
             fbo.read_into(depth, components=1, attachment=0, dtype="f4")
         return depth
 
-    def _draw(self, fbo, program, camera, instances, nearest: bool, full: bool) -> None:
+    def _draw(self, fbo, program, camera, instances, nearest: bool, full: bool, back_faces: bool = False) -> None:
         ctx = self._gl.ctx
         fbo.use()
         # The depth buffer holds near / z: 1 at the near plane, 0 at infinity (see _gl.py).
@@ -320,7 +327,7 @@ class Renderer:
         # The image is OpenGL's mirror image (module docstring), so a triangle wound counter-clockwise seen from
         # outside turns clockwise in window coordinates when it faces the camera.
         ctx.front_face = "cw"
-        ctx.cull_face = "back" if nearest else "front"
+        ctx.cull_face = "back" if nearest and not back_faces else "front"
         culling = False
         W, H = camera.width, camera.height
         program["projection"].value = (2.0 * camera.fx / W, (2.0 * camera.cx + 1.0) / W - 1.0,
@@ -331,7 +338,7 @@ class Renderer:
             T_camera_mesh = T_camera_world @ instance.T_world_mesh
             transform.write(T_camera_mesh.T.astype(np.float32).tobytes())  # GLSL matrices are column-major
             mesh = self._meshes[instance.mesh_id]  # checked by _check_instances
-            cull = mesh.closed and (not nearest or self._beyond_near_plane(mesh, T_camera_mesh))
+            cull = mesh.closed and (not nearest or back_faces or self._beyond_near_plane(mesh, T_camera_mesh))
             if cull != culling:
                 if cull:
                     ctx.enable(moderngl.CULL_FACE)
