@@ -8,6 +8,7 @@ from numba import parallel_chunksize
 from depthguard import config
 from depthguard.cameras import PinholeCamera, Rig
 from depthguard.depth import DepthImage, OccupancyImage
+from depthguard.depth._kernels import block_minimum
 from depthguard.depthgrid import _kernels
 from depthguard.depthgrid._map import DepthGridMap
 from depthguard.depthspace._distance import check_options, check_points, query_arrays
@@ -144,6 +145,10 @@ class FusedFrames:
                                   np.float32(camera.depth_range[0]), principal.blind, near, far, exit_,
                                   float(robot_tolerance), *camera.noise.coefficients(), self._certain, self._z_end,
                                   self._blind_from, self._unchecked_from)
+        block = config.BLOCK_SIZE
+        blocks = ((camera.height + block - 1) // block, (camera.width + block - 1) // block)
+        self._unchecked_block_min = np.empty(blocks, dtype=np.float32)
+        block_minimum(self._unchecked_from, block, self._unchecked_block_min)
         # The cells' classes so far, a byte each: 0 unknown, 1 free, 2 occupied. The zeroed pages come from the
         # operating system as they are first touched, so memory grows with the cells looked at, not with the grid.
         self._cells = np.zeros(camera.shape + (grid.n_cells,), dtype=np.uint8)
@@ -166,8 +171,9 @@ class FusedFrames:
         unchecked = np.full(len(points_world), np.inf)
         if len(points_world):
             z_min, z_max = camera.depth_range
-            common = (principal.z_start, self._z_end, self._certain, self._blind_from, self._unchecked_from, camera.fx,
-                      camera.fy, camera.cx, camera.cy, z_min, z_max)
+            common = (principal.z_start, self._z_end, self._certain, self._blind_from, self._unchecked_from,
+                      self._unchecked_block_min, config.BLOCK_SIZE, camera.fx, camera.fy, camera.cx, camera.cy, z_min,
+                      z_max)
             near_inside = (config.NEAR_PLANE_EPSILON, config.INSIDE_TOLERANCE)
             cells = (grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets, self._eroded, self._sizes,
                      self._z_near, self._margin, self._cells, self._free_run, config.FUSION_ROW_CHUNKS)

@@ -24,6 +24,7 @@ from depthguard.depthspace._kernels import (
     _finish_min_at_pixel,
     _finish_sum,
     _guess_piece_row,
+    _nearest_in_blocks,
     frustum_nearest,
     surveillance_region,
 )
@@ -440,20 +441,19 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
 
 # The sums over one control point's contributing pixels (:func:`fused_rows`), in a float64 array of this length.
 ACC_COUNT, ACC_INVALID, ACC_INSIDE, ACC_SUM_D, ACC_SX, ACC_SY, ACC_SZ, ACC_BEST2, ACC_BEST_U, ACC_BEST_V, ACC_BEST_Z, \
-    ACC_BEST_INVALID, ACC_UNCHECKED2 = range(13)
-N_ACC = 13
+    ACC_BEST_INVALID = range(12)
+N_ACC = 12
 
 
 @njit(cache=True, error_model="numpy")
-def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, certain, blind_from, unchecked_from, fx,
-               fy, cx, cy, prune_min, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells,
-               free_run, scratch, acc):
+def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, certain, blind_from, fx, fy, cx, cy,
+               prune_min, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, free_run,
+               scratch, acc):
     """One control point P = (X, Y, Z) (metres, principal optical frame) against the rows v_first, v_first + v_step,
     ... <= v_last of its surveillance region (``spans``): what the principal camera says is possibly occupied and
     the secondary cameras do not clear. Writes into acc (N_ACC,) the count of contributing pixels, those from pixels
     without a measurement, whether P is inside, the sums of their distances and unit directions, and the nearest
-    one (squared distance, pixel, depth, from a pixel without a measurement?), and the squared distance to the
-    space between links that fusion did not check (``unchecked_from``). ``scratch`` (5, width) float64."""
+    one (squared distance, pixel, depth, from a pixel without a measurement?). ``scratch`` (5, width) float64."""
     rho2 = rho * rho
     z_far = Z + rho
     d_max = d_min + n_cells * delta_d
@@ -469,7 +469,6 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
     sx = 0.0
     sy = 0.0
     sz = 0.0
-    unchecked2 = np.inf
     inv_fx = 1.0 / fx
     z_in = scratch[0]
     u_in = scratch[1]
@@ -484,11 +483,6 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
         for u in range(spans[v, 0], spans[v, 1] + 1):
             zs = np.float64(z_start[v, u])
             bf = np.float64(blind_from[v, u])
-            uf = np.float64(unchecked_from[v, u])
-            if uf <= z_far:
-                d2u, _ = frustum_nearest(X, Y, Z, (u - 0.5 - cx) * inv_fx, (u + 0.5 - cx) * inv_fx, b0, b1, uf,
-                                         min(bf, z_far))
-                unchecked2 = min(unchecked2, d2u)
             if min(zs, bf) > z_far:
                 continue
             if zs > z_far and known_free(bf, z_far, u, v, d_min, delta_d, n_cells, free_run):
@@ -563,14 +557,13 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
     acc[ACC_BEST_V] = best_v
     acc[ACC_BEST_Z] = best_z
     acc[ACC_BEST_INVALID] = best_invalid
-    acc[ACC_UNCHECKED2] = unchecked2
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, unchecked_from, fx, fy, cx, cy, z_min,
-                       z_max, aggregate, unseen_occupied, near_eps, inside_tol, min_direction, d_min, delta_d, n_cells,
-                       corners, offsets, eroded, sizes, z_near, margin, cells, free_run, row_chunks, distance,
-                       direction, count, invalid_count, flags, unchecked):
+def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, unchecked_from, unchecked_block_min,
+                       block, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, near_eps, inside_tol,
+                       min_direction, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells,
+                       free_run, row_chunks, distance, direction, count, invalid_count, flags, unchecked):
     """Distances from the (n, 3) control points (metres, principal optical frame) to what the principal camera says
     is possibly occupied and the secondary cameras do not clear, aggregated as ``aggregate``; the fused counterpart
     of :func:`depthguard.depthspace._kernels.query_points`. Writes distance (n,), the unit direction (n, 3) (from
@@ -587,9 +580,19 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
     spans = np.empty((n, height, 2), dtype=np.int64)
     region = np.empty((n, 8))  # flags, P unseen?, unseen_d, nx, ny, nz, v_lo, v_hi
     for i in prange(n):
-        f, unseen_here, unseen_d, nx, ny, nz, _, _, v_lo, v_hi = surveillance_region(
-            points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, width, height, fx, fy, cx, cy, z_min,
-            z_max, unseen_occupied, near_eps, inside_tol, spans[i], direction[i])
+        X, Y, Z = points_camera[i, 0], points_camera[i, 1], points_camera[i, 2]
+        f, unseen_here, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi = surveillance_region(
+            X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_max, unseen_occupied, near_eps, inside_tol, spans[i],
+            direction[i])
+        unchecked[i] = np.inf
+        if v_lo <= v_hi and not unseen_here:
+            # The space between links that fusion takes for the robot: the nearest of it, as the single camera finds
+            # its blind spot (blocks in rings round P's pixel, skipped by their nearest start depth).
+            # (``certain`` stands in for its per-pixel "invalid" array, whose answer is not used here.)
+            u2 = _nearest_in_blocks(X, Y, Z, rho, unchecked_from, blind_from, True, certain, unchecked_block_min,
+                                    block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi, near_eps, spans[i])[0]
+            if u2 < rho * rho:
+                unchecked[i] = np.sqrt(u2)
         region[i, 0] = f
         region[i, 1] = 1.0 if unseen_here else 0.0
         region[i, 2] = unseen_d
@@ -605,15 +608,14 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
         i = t // row_chunks
         c = t % row_chunks
         fused_rows(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, int(region[i, 6]) + c,
-                   int(region[i, 7]), row_chunks, spans[i], z_start, z_end, certain, blind_from, unchecked_from, fx,
-                   fy, cx, cy, prune_min, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin,
+                   int(region[i, 7]), row_chunks, spans[i], z_start, z_end, certain, blind_from, fx, fy, cx, cy,
+                   prune_min, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin,
                    cells, free_run, scratch[t], acc[i, c])
     for i in range(n):
         X, Y, Z = points_camera[i, 0], points_camera[i, 1], points_camera[i, 2]
         f = int(region[i, 0])
         if region[i, 1] != 0.0:
             distance[i], count[i], invalid_count[i], flags[i] = 0.0, 1, 0, f
-            unchecked[i] = np.inf
             continue
         total = acc[i, 0].copy()
         for c in range(1, row_chunks):
@@ -621,7 +623,6 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
             for a in (ACC_COUNT, ACC_INVALID, ACC_SUM_D, ACC_SX, ACC_SY, ACC_SZ):
                 total[a] += part[a]
             total[ACC_INSIDE] = max(total[ACC_INSIDE], part[ACC_INSIDE])
-            total[ACC_UNCHECKED2] = min(total[ACC_UNCHECKED2], part[ACC_UNCHECKED2])
             # The nearest pixel; among equals, the first in (v, u) order, as one scan of the rows would find.
             if part[ACC_BEST2] < total[ACC_BEST2] or (part[ACC_BEST2] == total[ACC_BEST2] and (
                     part[ACC_BEST_V] < total[ACC_BEST_V] or (part[ACC_BEST_V] == total[ACC_BEST_V]
@@ -641,6 +642,4 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
         distance[i] = d
         count[i] = k
         invalid_count[i] = m
-        u2 = total[ACC_UNCHECKED2]
-        unchecked[i] = np.sqrt(u2) if u2 < rho * rho else np.inf
         flags[i] = g | (FLAG_ROBOT_BLIND_SPOT if unchecked[i] < d else 0)
