@@ -326,3 +326,29 @@ def test_space_between_two_links_is_flagged_not_checked():
     assert flagged.distance[0] == kept_for_robot.distance[0]
     assert dg.Flag.ROBOT_BLIND_SPOT in flagged.flags[0]
     assert flagged.blind_distance[0] <= truth + tolerance
+
+
+def test_seen_free_fills_edge_dropouts_and_nothing_else():
+    """A secondary camera's free depths from its prepared frame: its measurements minus their noise margin (as
+    free_image), the thin lines sensors drop along depth edges filled from the nearest surface around them under
+    "neighbors", and nothing where a large hole stays unmeasured or the policy is "occupied"."""
+    from depthguard.depthgrid import seen_free
+
+    r = rig(80, 60)
+    s = r.cameras["s"]
+    depth = render_depth(s, ROOM + [Capsule((0.0, 0.0, 0.2), (0.0, 0.0, 1.2), 0.2)])
+    holes = np.zeros(depth.shape, bool)
+    holes[20:40, 30] = True  # a one-pixel line
+    holes[45:55, 5:25] = True  # a large hole
+    depth[holes] = 0
+    image = dg.depth_image(depth, s)
+    reference = free_image(image, s)
+    filled = seen_free(image, dg.prepare_depth(image, s, "neighbors"))
+    kept = seen_free(image, dg.prepare_depth(image, s, "occupied"))
+    assert np.array_equal(filled[~holes], reference[~holes]) and np.array_equal(kept, reference)
+    line = holes.copy()
+    line[45:55, 5:25] = False
+    assert np.all(filled[line] > 0)
+    around = np.minimum(reference[line.nonzero()[0], 29], reference[line.nonzero()[0], 31])
+    assert np.all(filled[line] <= around + 1e-6)  # never farther than the surface around the line
+    assert np.all(filled[45:55, 5:25] == 0)

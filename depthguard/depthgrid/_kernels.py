@@ -30,6 +30,16 @@ from depthguard.depthspace._kernels import (
 )
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def measured_free(raw, scale, z_min, z_max, m0, m1, m2):
+    """How far one pixel saw its ray free: its measurement (raw * scale metres) minus the noise margin, at least 0;
+    -1 where it measured nothing (or outside [z_min, z_max])."""
+    d = np.float64(raw) * scale
+    if np.isfinite(d) and d > 0.0 and d >= z_min and d <= z_max:
+        return max(d - max(m0 + (m1 + m2 * d) * d, 0.0), 0.0)
+    return -1.0
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
 def free_depths(raw, scale, z_min, z_max, m0, m1, m2, free):
     """Per pixel of a secondary frame, the depth up to which the camera saw the ray free: the measured depth minus
@@ -37,11 +47,7 @@ def free_depths(raw, scale, z_min, z_max, m0, m1, m2, free):
     h, w = raw.shape
     for v in prange(h):
         for u in range(w):
-            d = np.float64(raw[v, u]) * scale
-            if np.isfinite(d) and d > 0.0 and d >= z_min and d <= z_max:
-                free[v, u] = max(d - max(m0 + (m1 + m2 * d) * d, 0.0), 0.0)
-            else:
-                free[v, u] = 0.0
+            free[v, u] = max(measured_free(raw[v, u], scale, z_min, z_max, m0, m1, m2), 0.0)
 
 
 @njit(cache=True, error_model="numpy")
@@ -62,9 +68,9 @@ def seen_free_depths(raw, scale, z_min, z_max, m0, m1, m2, z_start, invalid, inv
     h, w = raw.shape
     for v in prange(h):
         for u in range(w):
-            d = np.float64(raw[v, u]) * scale
-            if np.isfinite(d) and d > 0.0 and d >= z_min and d <= z_max:
-                free[v, u] = max(d - max(m0 + (m1 + m2 * d) * d, 0.0), 0.0)
+            seen = measured_free(raw[v, u], scale, z_min, z_max, m0, m1, m2)
+            if seen >= 0.0:
+                free[v, u] = seen
             elif invalid[v, u] and z_start[v, u] != invalid_start and np.isfinite(z_start[v, u]):
                 free[v, u] = z_start[v, u]
             elif invalid[v, u] and z_start[v, u] != invalid_start and np.isfinite(blind[v, u]):
