@@ -380,22 +380,19 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
                                     offsets, eroded, sizes, z_near, margin, cells, free_run)
         if k_left == -2:  # z*'s own cell is occupied
             return d2, z
-    best2 = np.inf
-    best_z = 0.0
-    k = k_left
-    if k >= 0:
-        best2, best_z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, max(below, lo, d_min + k * delta_d),
-                                        min(hi, d_min + (k + 1) * delta_d))
+    # Down: the occupied cell found, else the part occupied as it stands below; up alike.
+    best2, best_z = np.inf, 0.0
+    if k_left >= 0:
+        best2, best_z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, max(below, lo, d_min + k_left * delta_d),
+                                        min(hi, d_min + (k_left + 1) * delta_d))
     elif below > lo:
         best2, best_z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, lo, below)
-    k = k_right
-    if k >= 0:
-        d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, max(below, lo, d_min + k * delta_d),
-                                min(hi, d_min + (k + 1) * delta_d))
+    d2, z = np.inf, 0.0
+    if k_right >= 0:
+        d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, max(below, lo, d_min + k_right * delta_d),
+                                min(hi, d_min + (k_right + 1) * delta_d))
     elif hi > above:
         d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, above, hi)
-    else:
-        d2 = np.inf
     if d2 < best2:
         best2, best_z = d2, z
     if best2 >= bound2:

@@ -36,7 +36,6 @@ from tqdm import tqdm
 import depthguard as dg
 from depthguard.errors import InputError
 from depthguard.experiments import workcell as single
-from depthguard.scenes import scene_distance
 
 RHO = single.RHO
 #: The person's actions this experiment is about, in the order they happen.
@@ -121,12 +120,7 @@ def run(workcell=None, layout: str | None = None, frames=None, duration: float |
         points = robot.control_point_positions(frame.joints)
         results = [monitors[c].query({c: frame.depth[c]}, points, joints=frame.joints) for c in cameras]
         results.append(fused.query({c: frame.depth[c] for c in cameras}, points, joints=frame.joints))
-        rows["times"].append(frame.time)
-        rows["truth"].append(np.minimum(frame.truth.distance, scene_distance(background, points)))
-        rows["reported"].append([r.distance for r in results])
-        rows["blind"].append([r.blind_distance for r in results])
-        rows["flags"].append([[int(f) for f in r.flags] for r in results])
-        rows["depth"].append([workcell.rig.cameras[c].world_to_camera(points)[:, 2] for c in cameras])
+        single.record(rows, frame, points, results, workcell, cameras, background)
     seconds = time.perf_counter() - start
     per_method = {key: np.moveaxis(np.array(rows[key]), 1, 0) for key in ("reported", "blind", "flags", "depth")}
     # Each camera alone: the demo's tolerance (2.5 pixel footprints at the point's depth, 1 mm). Fused: the larger

@@ -80,12 +80,7 @@ def run(workcell=None, duration: float | None = None, seed: int | None = None, p
                       desc="simulating and watching", unit="frame"):
         points = robot.control_point_positions(frame.joints)
         results = [monitors[c].query({c: frame.depth[c]}, points, joints=frame.joints) for c in cameras]
-        rows["times"].append(frame.time)
-        rows["truth"].append(np.minimum(frame.truth.distance, scene_distance(background, points)))
-        rows["reported"].append([r.distance for r in results])
-        rows["blind"].append([r.blind_distance for r in results])
-        rows["flags"].append([[int(f) for f in r.flags] for r in results])
-        rows["depth"].append([workcell.rig.cameras[c].world_to_camera(points)[:, 2] for c in cameras])
+        record(rows, frame, points, results, workcell, cameras, background)
     seconds = time.perf_counter() - start
     per_camera = {key: np.moveaxis(np.array(rows[key]), 1, 0) for key in ("reported", "blind", "flags", "depth")}
     return Episode(times=np.array(rows["times"]), control_points=robot.control_point_names, cameras=cameras,
@@ -93,6 +88,18 @@ def run(workcell=None, duration: float | None = None, seed: int | None = None, p
                    flags=per_camera["flags"], depth_of_truth=per_camera["depth"],
                    fx=np.array([workcell.rig.cameras[c].fx for c in cameras]),
                    spans=[(s.kind, s.start, s.end) for s in workcell.timeline()], seconds=seconds)
+
+
+def record(rows: dict, frame, points, results, workcell, cameras, background) -> None:
+    """Append one simulated frame to ``rows``: its time, the exact truth at ``points`` (the frame's obstacles and
+    the ``background`` primitives), and per result its distances, blind distances and flags, and per camera the
+    points' optical depths (for the tolerance)."""
+    rows["times"].append(frame.time)
+    rows["truth"].append(np.minimum(frame.truth.distance, scene_distance(background, points)))
+    rows["reported"].append([r.distance for r in results])
+    rows["blind"].append([r.blind_distance for r in results])
+    rows["flags"].append([[int(f) for f in r.flags] for r in results])
+    rows["depth"].append([workcell.rig.cameras[c].world_to_camera(points)[:, 2] for c in cameras])
 
 
 def summary(episode: Episode) -> dict:
