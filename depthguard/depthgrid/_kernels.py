@@ -25,6 +25,7 @@ from depthguard.depthspace._kernels import (
     _finish_sum,
     _guess_piece_row,
     _nearest_in_blocks,
+    frustum_direction,
     frustum_nearest,
     surveillance_region,
 )
@@ -544,10 +545,11 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
                 inside = True
                 continue
             d = np.sqrt(d2)
+            ex, ey, ez = frustum_direction(X, Y, Z, a0, a1, b0, b1, z, d)
             sum_d += d
-            sx += (X - min(max(X, a0 * z), a1 * z)) / d
-            sy += (Y - min(max(Y, b0 * z), b1 * z)) / d
-            sz += (Z - z) / d
+            sx += ex
+            sy += ey
+            sz += ez
     acc[ACC_COUNT] = count
     acc[ACC_INVALID] = n_invalid
     acc[ACC_INSIDE] = 1.0 if inside else 0.0

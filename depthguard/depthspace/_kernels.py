@@ -46,6 +46,15 @@ def frustum_nearest(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def frustum_direction(X, Y, Z, a0, a1, b0, b1, z, d):
+    """The unit vector from the nearest point of a pixel frustum's slice at depth z, (clamp(X, a0 z, a1 z),
+    clamp(Y, b0 z, b1 z), z), towards P = (X, Y, Z), which lies d > 0 metres from it."""
+    inv_d = 1.0 / d
+    return ((X - min(max(X, a0 * z), a1 * z)) * inv_d, (Y - min(max(Y, b0 * z), b1 * z)) * inv_d,
+            (Z - z) * inv_d)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def guessed_piece(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
     """The minimiser of g on the piece that holds z_g = clamp(Z, z_lo, z_hi), clamped to [z_lo, z_hi].
 
@@ -398,11 +407,11 @@ def _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, v_lo, v_
                 inside = True
                 continue
             d = np.sqrt(d2)
-            inv_d = 1.0 / d
+            ex, ey, ez = frustum_direction(X, Y, Z, a0, a1, b0, b1, z_star, d)
             sum_d += d
-            sx += (X - min(max(X, a0 * z_star), a1 * z_star)) * inv_d
-            sy += (Y - min(max(Y, b0 * z_star), b1 * z_star)) * inv_d
-            sz += (Z - z_star) * inv_d
+            sx += ex
+            sy += ey
+            sz += ez
     return count, n_invalid, inside, sum_d, sx, sy, sz, best2
 
 
@@ -527,10 +536,8 @@ def _finish_min_at_pixel(X, Y, Z, best2, best_u, best_v, best_z, best_invalid, f
     direction towards P is derived here."""
     ex = ey = ez = 0.0
     if inside_tol * inside_tol < best2 < np.inf:
-        d = np.sqrt(best2)
-        ex = (X - min(max(X, (best_u - 0.5 - cx) / fx * best_z), (best_u + 0.5 - cx) / fx * best_z)) / d
-        ey = (Y - min(max(Y, (best_v - 0.5 - cy) / fy * best_z), (best_v + 0.5 - cy) / fy * best_z)) / d
-        ez = (Z - best_z) / d
+        ex, ey, ez = frustum_direction(X, Y, Z, (best_u - 0.5 - cx) / fx, (best_u + 0.5 - cx) / fx,
+                                       (best_v - 0.5 - cy) / fy, (best_v + 0.5 - cy) / fy, best_z, np.sqrt(best2))
     return _finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, inside_tol, out_direction)
 
 
@@ -627,9 +634,7 @@ def query_point_paper(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, z_m
             if d <= inside_tol:
                 inside = True
                 continue
-            ex = (X - min(max(X, a0 * z), a1 * z)) / d
-            ey = (Y - min(max(Y, b0 * z), b1 * z)) / d
-            ez = (Z - z) / d
+            ex, ey, ez = frustum_direction(X, Y, Z, a0, a1, b0, b1, z, d)
             if d2 < best2:
                 best2 = d2
                 best_dx, best_dy, best_dz = ex, ey, ez
