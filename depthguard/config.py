@@ -216,3 +216,35 @@ DEFAULT_FUSION_PIXELS = 1
 # Each control point's rows are shared among this many parallel tasks (every n-th row), so that one point near much
 # clutter does not leave the other threads idle.
 FUSION_ROW_CHUNKS = 4
+
+# ------------------------------------------------------------------------------------------------------- input files
+
+#: Size caps of the files depthguard reads (depthguard._files), bytes. A larger file is refused unread: a device or
+#: a runaway file cannot make a monitor read forever or exhaust memory.
+MAX_TEXT_FILE_BYTES = 1 << 20  # rig, camera_info and scene YAML files: 1 MiB
+MAX_POINTS_FILE_BYTES = 16 << 20  # control-point CSV or JSON: 16 MiB (about half a million points)
+MAX_DEPTH_FILE_BYTES = 256 << 20  # one depth image file: 256 MiB
+MAX_MAP_FILE_BYTES = 2 << 30  # one depth-grid map: 2 GiB
+
+#: Deepest nesting of lists and mappings accepted in a YAML file (a rig needs 5 levels, a scene about 8).
+MAX_NESTING = 32
+
+# ------------------------------------------------------------------------------------------- ranges of input values
+# Values outside these ranges are refused with a named error (README, "Bad input and faults"): inside them, the
+# kernels' float64 arithmetic represents every quantity they form (squares of coordinates, projections) exactly
+# enough; outside them it might not, and a wrong number is never an answer.
+
+#: Surveillance radius rho, metres: [RHO_MIN, RHO_MAX].
+RHO_MIN = 1e-6
+RHO_MAX = 100.0
+
+#: Largest |x|, |y|, |z| of a control point or a camera position, metres (world frame).
+COORDINATE_LIMIT = 1e4
+
+#: Largest image side, pixels, of a camera or a depth image.
+MAX_IMAGE_SIDE = 16384
+
+#: Time: ``max_age`` at most this many seconds; a frame stamped later than ``now`` by more than CLOCK_SKEW_TOLERANCE
+#: seconds (clocks of cameras and host disagree a little) is treated as stale and flagged, since its time is wrong.
+MAX_AGE_LIMIT = 1e6
+CLOCK_SKEW_TOLERANCE = 0.01

@@ -1,0 +1,185 @@
+"""Reading files from outside, bounded: the one place depthguard opens a user's file.
+
+Every reader here:
+
+- reads only regular files (a FIFO, a device such as ``/dev/zero`` or ``/dev/stdin``, a socket or a folder is refused
+  before it is opened, so nothing blocks or reads forever);
+- reads at most a size cap (``config.MAX_*_BYTES``), and refuses a larger file without reading it;
+- raises the caller's :class:`~depthguard.errors.DepthguardError` subclass, naming the file.
+
+Text formats are parsed without running code and within bounds:
+
+- YAML (:func:`load_yaml`): PyYAML's safe constructors; anchors and aliases are refused (an alias can expand a small
+  file into gigabytes), so are duplicate keys (a typo's second value must not silently win) and nesting deeper than
+  ``config.MAX_NESTING``.
+- JSON (:func:`load_json`): numbers are read as floats (a 400-digit integer becomes inf, which the caller's range
+  check refuses, instead of an integer no float can hold); nesting too deep for the parser is an error.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import stat
+from pathlib import Path
+
+import yaml
+
+from depthguard import config
+from depthguard.errors import DepthguardError, InputError
+
+
+def read_bytes(path, *, what: str, max_bytes: int, error: type[DepthguardError] = InputError, **context) -> bytes:
+    """The whole content of the regular file ``path``, at most ``max_bytes`` bytes.
+
+    ``what`` names the file's role in messages ("rig file", "points file"); ``context`` (``camera=``, ``field=``) is
+    passed to ``error``. Raises ``error`` for a missing, unreadable, non-regular or too large file.
+    """
+    path = Path(path)
+    try:
+        info = os.stat(path)  # follows symlinks: a link to a regular file is fine
+    except OSError as exc:
+        raise error(f"cannot read {what} ({exc.strerror or exc})", source=str(path), **context) from None
+    _check_regular(info, path, what, max_bytes, error, context)
+    try:
+        # O_NONBLOCK: should the path have been swapped for a FIFO since the check, opening it does not wait for a
+        # writer; fstat below then refuses it.
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except OSError as exc:
+        raise error(f"cannot read {what} ({exc.strerror or exc})", source=str(path), **context) from None
+    try:
+        _check_regular(os.fstat(fd), path, what, max_bytes, error, context)
+        chunks = []
+        remaining = max_bytes + 1
+        while remaining > 0:
+            chunk = os.read(fd, min(remaining, 1 << 20))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            remaining -= len(chunk)
+    except OSError as exc:
+        raise error(f"cannot read {what} ({exc.strerror or exc})", source=str(path), **context) from None
+    finally:
+        os.close(fd)
+    data = b"".join(chunks)
+    if len(data) > max_bytes:  # the file grew while it was read
+        raise error(f"{what} is larger than {max_bytes} bytes", source=str(path), **context)
+    return data
+
+
+def check_regular_file(path, *, what: str, max_bytes: int, error: type[DepthguardError] = InputError,
+                       **context) -> Path:
+    """``path`` as a :class:`Path` after checking that it is a regular file of at most ``max_bytes`` bytes, for a
+    library that opens the file itself (Pillow, trimesh). Raises ``error`` otherwise."""
+    path = Path(path)
+    try:
+        info = os.stat(path)
+    except OSError as exc:
+        raise error(f"cannot read {what} ({exc.strerror or exc})", source=str(path), **context) from None
+    _check_regular(info, path, what, max_bytes, error, context)
+    return path
+
+
+def read_text(path, *, what: str, max_bytes: int, error: type[DepthguardError] = InputError, **context) -> str:
+    """:func:`read_bytes` decoded as UTF-8 (a leading byte-order mark, as spreadsheets write, is dropped)."""
+    data = read_bytes(path, what=what, max_bytes=max_bytes, error=error, **context)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise error(f"{what} is not UTF-8 text", source=str(path), **context) from None
+
+
+def _check_regular(info: os.stat_result, path: Path, what: str, max_bytes: int, error, context) -> None:
+    if stat.S_ISDIR(info.st_mode):
+        raise error(f"{what} is a folder, not a file", source=str(path), **context)
+    if not stat.S_ISREG(info.st_mode):
+        raise error(f"{what} is not a regular file (a device, pipe or socket is never read)", source=str(path),
+                    **context)
+    if info.st_size > max_bytes:
+        raise error(f"{what} is {info.st_size} bytes, more than the {max_bytes} allowed", source=str(path),
+                    **context)
+
+
+# ------------------------------------------------------------------------------------------------------------- YAML
+
+
+class _BoundedSafeLoader(yaml.SafeLoader):
+    """PyYAML's safe loader without aliases, duplicate keys or deep nesting."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._depth = 0
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            raise yaml.composer.ComposerError(None, None, "YAML aliases (*name) are not accepted: write the value out",
+                                              event.start_mark)
+        event = self.peek_event()
+        if getattr(event, "anchor", None) is not None:
+            raise yaml.composer.ComposerError(None, None, "YAML anchors (&name) are not accepted: write the value out",
+                                              event.start_mark)
+        self._depth += 1
+        try:
+            if self._depth > config.MAX_NESTING:
+                raise yaml.composer.ComposerError(None, None, f"nested deeper than {config.MAX_NESTING} levels",
+                                                  event.start_mark)
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            seen = set()
+            for key_node, _ in node.value:
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    duplicate = key in seen
+                    seen.add(key)
+                except TypeError:  # an unhashable key: the base class reports it
+                    continue
+                if duplicate:
+                    raise yaml.constructor.ConstructorError(None, None, f"duplicate key {key!r}",
+                                                            key_node.start_mark)
+        return super().construct_mapping(node, deep=deep)
+
+
+def load_yaml(text: str, *, source, error: type[DepthguardError] = InputError, **context):
+    """Parse YAML ``text`` with safe constructors only; ``error`` naming ``source`` if it is malformed, uses anchors
+    or aliases, repeats a key or nests deeper than ``config.MAX_NESTING``."""
+    try:
+        return yaml.load(text, Loader=_BoundedSafeLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as exc:
+        raise error(f"malformed YAML ({_one_line(exc)})", source=str(source), **context) from None
+    except RecursionError:  # nesting inside a single scalar flow cannot get here, but stay safe
+        raise error(f"YAML nested deeper than {config.MAX_NESTING} levels", source=str(source), **context) from None
+
+
+def read_yaml(path, *, what: str, max_bytes: int = config.MAX_TEXT_FILE_BYTES,
+              error: type[DepthguardError] = InputError, **context):
+    """:func:`read_text` then :func:`load_yaml`."""
+    return load_yaml(read_text(path, what=what, max_bytes=max_bytes, error=error, **context), source=path,
+                     error=error, **context)
+
+
+# ------------------------------------------------------------------------------------------------------------- JSON
+
+
+def _json_number(text: str) -> float:
+    return float(text)  # a huge literal becomes inf (or 0.0), never an int that no float holds
+
+
+def load_json(text: str, *, source, error: type[DepthguardError] = InputError, **context):
+    """Parse JSON ``text`` with every number read as a float; ``error`` naming ``source`` if it is malformed or nested
+    too deep for the parser (Python's recursion limit; the C parser reports it as RecursionError, never crashes).
+    NaN and Infinity literals are read as floats: callers check ranges."""
+    try:
+        return json.loads(text, parse_int=_json_number, parse_float=_json_number)
+    except json.JSONDecodeError as exc:
+        raise error(f"malformed JSON ({exc.msg} at line {exc.lineno})", source=str(source), **context) from None
+    except RecursionError:
+        raise error("JSON nested too deeply", source=str(source), **context) from None
+
+
+def _one_line(exc: Exception) -> str:
+    return " ".join(str(exc).split())
