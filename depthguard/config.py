@@ -248,3 +248,34 @@ MAX_IMAGE_SIDE = 16384
 #: seconds (clocks of cameras and host disagree a little) is treated as stale and flagged, since its time is wrong.
 MAX_AGE_LIMIT = 1e6
 CLOCK_SKEW_TOLERANCE = 0.01
+
+#: Camera intrinsics, pixels: focal lengths fx, fy in [FOCAL_LENGTH_MIN, INTRINSICS_LIMIT], principal point
+#: |cx|, |cy| <= INTRINSICS_LIMIT (a pixel's frustum slopes (u - cx) / fx then stay far from overflow).
+FOCAL_LENGTH_MIN = 1e-3
+INTRINSICS_LIMIT = 1e7
+
+#: Largest depth_scale, metres per uint16 unit (ROS 16UC1 images use 0.001).
+DEPTH_SCALE_MAX = 1.0
+
+#: Noise model sigma(d) = a + b*d + c*d**2: |a| (m), |b| (m/m), |c| (1/m) at most NOISE_COEFFICIENT_LIMIT, k in
+#: [0, NOISE_K_MAX]. Real sensors' coefficients are millimetres; the bounds keep k*a + k*b*d + k*c*d**2 finite.
+NOISE_COEFFICIENT_LIMIT = 1.0
+NOISE_K_MAX = 100.0
+
+#: Camera names: at most this many printable characters (names appear in one-line error messages).
+MAX_NAME_LENGTH = 200
+
+#: DistanceMonitor options: self_filter_tolerance in [0, SELF_FILTER_TOLERANCE_MAX] metres (more would let the
+#: robot's filter swallow an obstacle that far in front of it); hole_pixels in [0, MAX_IMAGE_SIDE**2];
+#: fusion_pixels in [0, MAX_IMAGE_SIDE]; fusion_margin finite and >= 0 metres.
+SELF_FILTER_TOLERANCE_MAX = 1.0
+MAX_HOLE_PIXELS = MAX_IMAGE_SIDE * MAX_IMAGE_SIDE
+MAX_FUSION_PIXELS = MAX_IMAGE_SIDE
+
+#: Depth grid from the command line (build-map): at most this many cells along each principal pixel (a query's cell
+#: cache holds a byte per cell and pixel: 4096 cells at 640x480 is 1.3 GB at most).
+DEPTH_GRID_MAX_CELLS = 4096
+
+#: Command line: --seed in [0, MAX_SEED]; --repeats in [1, MAX_REPEATS].
+MAX_SEED = 2**63 - 1
+MAX_REPEATS = 10_000

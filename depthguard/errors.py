@@ -63,3 +63,14 @@ class SceneError(DepthguardError, ValueError):
     """A simulation scene (depthguard.simulation) is malformed, names something that does not exist, or asks for
     the impossible (an unreachable trajectory). ``field`` is the path of the offending key, e.g.
     ``people[0].actions[2].reach.target``."""
+
+
+def short_repr(value, limit: int = 40) -> str:
+    """``repr(value)`` cut to ``limit`` characters, for one-line messages about a value the user gave (a 400-digit
+    number or a long string stays readable; an integer too long for Python to print is described)."""
+    try:
+        text = repr(value)
+    except ValueError:  # more digits than Python converts to text (sys.get_int_max_str_digits)
+        return f"an integer of about {int(value.bit_length() * 0.30103)} digits"
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from depthguard import config
+from depthguard.errors import RigError
+from depthguard.errors import short_repr as _short
 
 
 @dataclass(frozen=True)
@@ -15,6 +18,9 @@ class NoiseModel:
 
     The margin moves the start of each pixel's possibly-occupied set towards the camera (SPEC section 3), so a
     surface measured a little too far away is still counted. ``m(d)`` is clamped at 0 from below.
+
+    Ranges: |a| (m), |b| (m/m) and |c| (1/m) at most ``config.NOISE_COEFFICIENT_LIMIT``; k in
+    [0, ``config.NOISE_K_MAX``]. Anything else raises :class:`~depthguard.errors.RigError` (field ``noise``).
     """
 
     a: float = config.DEFAULT_NOISE_SIGMA[0]
@@ -25,10 +31,21 @@ class NoiseModel:
     def __post_init__(self):
         for name in ("a", "b", "c", "k"):
             value = getattr(self, name)
-            if not isinstance(value, (int, float)) or not np.isfinite(value):
-                raise ValueError(f"noise model field {name!r} must be a finite number, got {value!r}")
-        if self.k < 0:
-            raise ValueError(f"noise model field 'k' must be >= 0, got {self.k}")
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+                raise RigError(f"{name!r} must be a number, got {_short(value)}", field="noise")
+            try:
+                number = float(value)
+            except OverflowError:
+                number = math.inf
+            if not math.isfinite(number):
+                raise RigError(f"{name!r} must be a finite number, got {_short(value)}", field="noise")
+            if name == "k":
+                if not 0.0 <= number <= config.NOISE_K_MAX:
+                    raise RigError(f"'k' must be in [0, {config.NOISE_K_MAX:g}], got {number!r}", field="noise")
+            elif abs(number) > config.NOISE_COEFFICIENT_LIMIT:
+                raise RigError(f"{name!r} must be within +-{config.NOISE_COEFFICIENT_LIMIT:g} (metres-based "
+                               f"coefficient), got {number!r}", field="noise")
+            object.__setattr__(self, name, number)
 
     @classmethod
     def none(cls) -> "NoiseModel":
@@ -43,3 +60,4 @@ class NoiseModel:
     def coefficients(self) -> tuple[float, float, float]:
         """(k*a, k*b, k*c): the margin as one polynomial, for kernels."""
         return (self.k * self.a, self.k * self.b, self.k * self.c)
+

@@ -9,7 +9,7 @@ import numpy as np
 
 from depthguard import config
 from depthguard.cameras._noise import NoiseModel
-from depthguard.errors import RigError
+from depthguard.errors import RigError, short_repr
 from depthguard.transforms import check_transform, invert
 
 
@@ -31,6 +31,13 @@ class PinholeCamera:
             space counts as unseen. ``(0, inf)`` when the rig does not say.
         depth_scale: metres per unit of this camera's ``uint16`` depth images.
         noise: the depth noise model that gives the margin m(d).
+
+    Every field is checked on construction; a wrong type or a value out of range raises
+    :class:`~depthguard.errors.RigError` naming the camera and the field. Ranges (``depthguard.config``): name, at
+    most ``MAX_NAME_LENGTH`` printable characters; width, height in [1, ``MAX_IMAGE_SIDE``]; fx, fy in
+    [``FOCAL_LENGTH_MIN``, ``INTRINSICS_LIMIT``]; |cx|, |cy| <= ``INTRINSICS_LIMIT``; a rigid ``T_world_camera`` whose
+    position lies within ``COORDINATE_LIMIT`` metres on each axis; 0 <= depth_range min < max (max may be inf);
+    depth_scale in (0, ``DEPTH_SCALE_MAX``].
     """
 
     name: str
@@ -47,42 +54,51 @@ class PinholeCamera:
 
     def __post_init__(self):
         name = self.name
-        if not isinstance(name, str) or not name:
-            raise RigError("camera name must be a non-empty string", camera=repr(name), field="name")
+        if not isinstance(name, str) or not name or len(name) > config.MAX_NAME_LENGTH or not name.isprintable():
+            raise RigError(f"camera name must be a non-empty string of at most {config.MAX_NAME_LENGTH} printable "
+                           f"characters, got {short_repr(name)}", camera=short_repr(name), field="name")
         for key in ("width", "height"):
             value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
-                raise RigError(f"must be a positive integer, got {value!r}", camera=name, field=key)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or \
+                    not 0 < value <= config.MAX_IMAGE_SIDE:
+                raise RigError(f"must be a whole number of pixels in [1, {config.MAX_IMAGE_SIDE}], got "
+                               f"{short_repr(value)}", camera=name, field=key)
             object.__setattr__(self, key, int(value))
+        limit = config.INTRINSICS_LIMIT
         for key in ("fx", "fy", "cx", "cy"):
-            value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-                raise RigError(f"must be a number, got {value!r}", camera=name, field=key)
-            if not math.isfinite(value):
-                raise RigError(f"must be finite, got {value!r}", camera=name, field=key)
-            object.__setattr__(self, key, float(value))
-        for key in ("fx", "fy"):
-            if getattr(self, key) <= 0.0:
-                raise RigError(f"focal length must be positive, got {getattr(self, key)}", camera=name, field=key)
+            value = _number(getattr(self, key), name, key)
+            if key in ("fx", "fy") and not config.FOCAL_LENGTH_MIN <= value <= limit:
+                if value <= 0.0:
+                    raise RigError(f"focal length must be positive, got {value!r}", camera=name, field=key)
+                raise RigError(f"focal length must be in [{config.FOCAL_LENGTH_MIN:g}, {limit:g}] pixels, got "
+                               f"{value!r}", camera=name, field=key)
+            if key in ("cx", "cy") and not abs(value) <= limit:
+                raise RigError(f"principal point must be within +-{limit:g} pixels, got {value!r}", camera=name,
+                               field=key)
+            object.__setattr__(self, key, value)
         T = check_transform(self.T_world_camera, camera=name, field="T_world_camera")
+        if np.abs(T[:3, 3]).max() > config.COORDINATE_LIMIT:
+            raise RigError(f"camera position {T[:3, 3].tolist()} is beyond +-{config.COORDINATE_LIMIT:g} m",
+                           camera=name, field="T_world_camera")
         T.setflags(write=False)
         object.__setattr__(self, "T_world_camera", T)
         T_cw = invert(T)
         T_cw.setflags(write=False)
         object.__setattr__(self, "_T_camera_world", T_cw)
-        try:
-            lo, hi = (float(x) for x in self.depth_range)
-        except (TypeError, ValueError):
-            raise RigError(f"must be [min, max] in metres, got {self.depth_range!r}", camera=name,
-                           field="depth_range") from None
+        depth_range = self.depth_range
+        if isinstance(depth_range, (str, bytes)) or not hasattr(depth_range, "__len__") or len(depth_range) != 2:
+            raise RigError(f"must be [min, max] in metres, got {short_repr(depth_range)}", camera=name,
+                           field="depth_range")
+        lo, hi = (_number(x, name, "depth_range", finite=False) for x in depth_range)
         if not (math.isfinite(lo) and lo >= 0.0 and hi > lo) or math.isnan(hi):
-            raise RigError(f"must satisfy 0 <= min < max, got [{lo}, {hi}]", camera=name, field="depth_range")
+            raise RigError(f"must satisfy 0 <= min < max (min finite; max may be .inf), got [{lo}, {hi}]",
+                           camera=name, field="depth_range")
         object.__setattr__(self, "depth_range", (lo, hi))
-        scale = self.depth_scale
-        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not (math.isfinite(scale) and scale > 0):
-            raise RigError(f"must be a positive number of metres per unit, got {scale!r}", camera=name,
-                           field="depth_scale")
-        object.__setattr__(self, "depth_scale", float(scale))
+        scale = _number(self.depth_scale, name, "depth_scale")
+        if not 0.0 < scale <= config.DEPTH_SCALE_MAX:
+            raise RigError(f"must be a positive number of metres per unit, at most {config.DEPTH_SCALE_MAX:g}, got "
+                           f"{scale!r}", camera=name, field="depth_scale")
+        object.__setattr__(self, "depth_scale", scale)
         if not isinstance(self.noise, NoiseModel):
             raise RigError(f"must be a NoiseModel, got {type(self.noise).__name__}", camera=name, field="noise")
 
@@ -162,3 +178,17 @@ class PinholeCamera:
     def __repr__(self) -> str:
         return (f"PinholeCamera(name={self.name!r}, {self.width}x{self.height}, fx={self.fx:g}, fy={self.fy:g}, "
                 f"cx={self.cx:g}, cy={self.cy:g})")
+
+
+def _number(value, camera: str, field: str, finite: bool = True) -> float:
+    """``value`` as a float: a real number (not a bool, a string or a complex), finite unless ``finite`` is False
+    (then +-inf pass, NaN too: the caller's range check refuses it). :class:`RigError` naming the camera and field."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise RigError(f"must be a number, got {short_repr(value)}", camera=camera, field=field)
+    try:
+        number = float(value)
+    except OverflowError:  # an integer beyond float range
+        number = math.inf if value > 0 else -math.inf
+    if finite and not math.isfinite(number):
+        raise RigError(f"must be finite, got {short_repr(value)}", camera=camera, field=field)
+    return number
