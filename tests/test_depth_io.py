@@ -524,3 +524,300 @@ def test_prepare_depth_does_not_change_the_frame():
     frame = _frame(values, cam)
     dg.prepare_depth(frame, cam, invalid="neighbors")
     np.testing.assert_array_equal(frame.data, values)
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# hostile depth files (issue 12): decoded only as the suffix says, bounded, checked before allocating
+
+
+import io  # noqa: E402
+import stat  # noqa: E402
+import tracemalloc  # noqa: E402
+
+from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
+from PIL import EpsImagePlugin, ImageFile  # noqa: E402
+
+import hostile  # noqa: E402
+from depthguard.depth import _io as depth_io  # noqa: E402
+
+
+@pytest.mark.parametrize("name", ["ps.png", "ps.PNG", "ps.tif", "ps.tiff"])
+def test_postscript_under_an_image_name_starts_no_process(tmp_path, monkeypatch, name):
+    # Pillow decodes by content: this file would reach its EPS plugin, whose loader looks for Ghostscript (running
+    # ``gs --version``) and then runs it. Forget any earlier search so that a regression shows here.
+    monkeypatch.setattr(EpsImagePlugin, "gs_binary", None)
+    opened = []
+    original = EpsImagePlugin.EpsImageFile._open
+    monkeypatch.setattr(EpsImagePlugin.EpsImageFile, "_open", lambda self: (opened.append(1), original(self))[1])
+    path = tmp_path / name
+    path.write_bytes(hostile.EPS)
+    with hostile.no_process_started(), pytest.raises(dg.DepthImageError) as exc_info:
+        dg.read_depth_file(path)
+    assert str(path) in str(exc_info.value)
+    assert not opened, "the EPS plugin saw the file"
+
+
+@pytest.mark.parametrize("suffix, other", [(".png", "tif"), (".tif", "png"), (".tiff", "png")])
+def test_the_suffix_decides_the_format(tmp_path, suffix, other):
+    data = np.full((3, 4), 1234, np.uint16)
+    source = tmp_path / f"real.{other}"
+    Image.fromarray(data).save(source)  # a valid image of the other format
+    path = tmp_path / f"d{suffix}"
+    path.write_bytes(source.read_bytes())
+    with pytest.raises(dg.DepthImageError, match=f"d{suffix}"):
+        dg.read_depth_file(path)
+
+
+@pytest.mark.parametrize("name", ["fifo.png", "fifo.tif", "fifo.pgm", "fifo.npy"])
+def test_fifo_is_refused_promptly(tmp_path, name):
+    path = tmp_path / name
+    os.mkfifo(path)  # nobody writes: opening it for reading would wait forever
+    with hostile.deadline(5), pytest.raises(dg.DepthImageError) as exc_info:
+        dg.read_depth_file(path)
+    assert str(path) in str(exc_info.value) and "regular file" in str(exc_info.value)
+
+
+@pytest.mark.parametrize("device", ["/dev/zero", "/dev/urandom"])
+def test_device_behind_a_symlink_is_refused(tmp_path, device):
+    if not os.path.exists(device) or not stat.S_ISCHR(os.stat(device).st_mode):
+        pytest.skip(f"{device} is not available")
+    path = tmp_path / "frame.npy"
+    path.symlink_to(device)
+    with hostile.deadline(5), pytest.raises(dg.DepthImageError, match="regular file"):
+        dg.read_depth_file(path)
+
+
+def test_file_over_the_size_cap_is_refused(tmp_path, monkeypatch):
+    path = tmp_path / "d.png"
+    write_depth_png(path, np.ones((6, 8), np.uint16))
+    monkeypatch.setattr(config, "MAX_DEPTH_FILE_BYTES", path.stat().st_size - 1)
+    with pytest.raises(dg.DepthImageError, match="more than"):
+        dg.read_depth_file(path)
+    monkeypatch.setattr(config, "MAX_DEPTH_FILE_BYTES", path.stat().st_size)
+    np.testing.assert_array_equal(dg.read_depth_file(path), np.ones((6, 8), np.uint16))
+
+
+HUGE_SHAPES = [(10**12, 10**12), (2**62, 2), (-1, 5), (5, -1), (-(10**12), -(10**12)), (0, 5), (5, 0), (16385, 1),
+               (1, 16385)]
+
+
+@pytest.mark.parametrize("shape", HUGE_SHAPES)
+@pytest.mark.parametrize("descr", ["<u2", "<f4"])
+def test_npy_header_claiming_a_huge_or_negative_shape_allocates_nothing(tmp_path, shape, descr):
+    path = tmp_path / "claim.npy"
+    path.write_bytes(hostile.npy_bytes(descr, shape, payload=b"\x00" * 64))
+    tracemalloc.start()
+    try:
+        with pytest.raises(dg.DepthImageError) as exc_info:
+            dg.read_depth_file(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert "claim.npy" in str(exc_info.value)
+    assert peak < 4 << 20, f"{peak} bytes allocated for a refused header"  # read_bytes reads in 1 MiB chunks
+
+
+@pytest.mark.parametrize("claimed", [(480, 640), (16384, 16384)])
+def test_size_other_than_the_camera_is_refused_before_reading_pixels(tmp_path, monkeypatch, claimed):
+    """The header's size is compared with the camera before any pixel is decoded: nothing as large as the claimed
+    image is allocated (npy, pgm), and Pillow's decoder never runs (png)."""
+    camera = make_camera(8, 6, name="wrist")
+    h, w = claimed
+    files = {"claim.npy": hostile.npy_bytes("<u2", claimed, payload=b"\x00" * 64),
+             "claim.pgm": f"P5\n{w} {h}\n65535\n".encode() + b"\x00" * 64,
+             "claim.png": hostile.png_bytes(w, h)}
+    loads = []
+    monkeypatch.setattr(ImageFile.ImageFile, "load", lambda self: loads.append(1))
+    for name, content in files.items():
+        path = tmp_path / name
+        path.write_bytes(content)
+        tracemalloc.start()
+        try:
+            with pytest.raises(dg.DepthImageError) as exc_info:
+                dg.read_depth_file(path, camera)
+            _, peak = tracemalloc.get_traced_memory()
+        finally:
+            tracemalloc.stop()
+        exc = exc_info.value
+        assert exc.camera == "wrist" and exc.field == "width/height", str(exc)
+        assert name in str(exc) and f"{w}x{h}" in str(exc) and "8x6" in str(exc)
+        assert peak < 4 << 20  # 16384 x 16384 x 2 bytes would be 512 MiB
+    assert not loads, "the PNG decoder ran for an image of the wrong size"
+
+
+def test_read_depth_file_with_the_right_camera(tmp_path):
+    data = (np.arange(48, dtype=np.uint16) * 100).reshape(6, 8)
+    camera = make_camera(8, 6)
+    for name, write in (("d.png", write_depth_png), ("d.pgm", write_depth_pgm), ("d.npy", np.save)):
+        write(tmp_path / name, data)
+        np.testing.assert_array_equal(dg.read_depth_file(tmp_path / name, camera), data)
+
+
+@pytest.mark.filterwarnings("ignore::PIL.Image.DecompressionBombWarning")
+def test_image_within_the_side_limit_but_over_pillows_pixel_limit_is_refused(tmp_path, monkeypatch):
+    loads = []
+    monkeypatch.setattr(ImageFile.ImageFile, "load", lambda self: loads.append(1))
+    side = int((Image.MAX_IMAGE_PIXELS * 1.5) ** 0.5)  # above the limit, below twice it (where Pillow refuses)
+    assert side <= config.MAX_IMAGE_SIDE
+    path = tmp_path / "big.png"
+    path.write_bytes(hostile.png_bytes(side, side))
+    with pytest.raises(dg.DepthImageError, match="decompression-bomb"):
+        dg.read_depth_file(path)
+    assert not loads
+
+
+@pytest.mark.parametrize(
+    "descr, word",
+    [("|O", "object"), ([("a", "<u2")], "dtype"), ("<i4", "int32"), ("|b1", "bool"), ("<c8", "complex"),
+     ("<M8[s]", "datetime"), ("|V4", "V4"), ("|u1", "uint8"), ("<u4", "uint32"), ("<i2", "int16")],
+)
+def test_npy_dtypes_other_than_uint16_and_float_are_refused_from_the_header(tmp_path, descr, word):
+    path = tmp_path / "dtype.npy"
+    path.write_bytes(hostile.npy_bytes(descr, (2, 2), payload=b"\x00" * 64))
+    with pytest.raises(dg.DepthImageError) as exc_info:
+        dg.read_depth_file(path)
+    assert "dtype.npy" in str(exc_info.value) and word in str(exc_info.value)
+
+
+def test_npy_subarray_dtype_is_refused(tmp_path):
+    path = tmp_path / "sub.npy"
+    path.write_bytes(hostile.npy_bytes("<u2", (2, 2), header="{'descr': ('<u2', (2,)), 'fortran_order': False, "
+                                                            "'shape': (2, 2), }", payload=b"\x00" * 16))
+    with pytest.raises(dg.DepthImageError, match="sub.npy"):
+        dg.read_depth_file(path)
+
+
+@pytest.mark.parametrize(
+    "descr, values, expected",
+    [("<u2", b"\x01\x02\x03\x04", [[0x0201, 0x0403]]),
+     (">u2", b"\x01\x02\x03\x04", [[0x0102, 0x0304]]),
+     ("<f2", b"\x00\x3c\x00\x40", [[1.0, 2.0]]),  # IEEE half precision: 0x3c00 = 1.0, 0x4000 = 2.0
+     (">f4", b"\x3f\xc0\x00\x00\x7f\xc0\x00\x00", [[1.5, np.nan]]),
+     ("<f8", b"\x00" * 7 + b"\x40" + b"\x00" * 6 + b"\xf0\x7f", [[2.0, np.inf]])],
+)
+def test_npy_by_hand_is_read_by_value(tmp_path, descr, values, expected):
+    path = tmp_path / "hand.npy"
+    path.write_bytes(hostile.npy_bytes(descr, (1, 2), payload=values))
+    got = dg.read_depth_file(path)
+    assert got.dtype == (np.uint16 if descr[1] == "u" else np.float32)
+    np.testing.assert_array_equal(got, np.array(expected, dtype=got.dtype))
+
+
+def test_npy_fortran_order_is_read_by_index(tmp_path):
+    # shape (2, 3) in Fortran order: the data runs down the columns
+    payload = np.array([1, 4, 2, 5, 3, 6], dtype="<u2").tobytes()
+    path = tmp_path / "f.npy"
+    path.write_bytes(hostile.npy_bytes("<u2", (2, 3), fortran_order=True, payload=payload))
+    got = dg.read_depth_file(path)
+    np.testing.assert_array_equal(got, [[1, 2, 3], [4, 5, 6]])
+    assert got.flags.c_contiguous
+
+
+@pytest.mark.parametrize(
+    "content, word",
+    [(hostile.npy_bytes("<u2", (2, 3), payload=b"\x00" * 11), "truncated"),
+     (hostile.npy_bytes("<u2", (2, 3), payload=b"\x00" * 13), "trailing"),
+     (hostile.npy_bytes("<u2", (2, 3)), "truncated"),
+     (hostile.npy_bytes("<u2", (2, 3), payload=b"\x00" * 12, version=(2, 0))[:-1], "truncated"),
+     (hostile.npy_bytes("<u2", (2, 3), payload=b"\x00" * 12, version=(3, 0)), "version"),
+     (hostile.npy_bytes("<u2", (2, 3), payload=b"\x00" * 12, version=(9, 9)), "npy"),
+     (hostile.npy_bytes("", (), header="[1, 2, 3]", payload=b"\x00" * 12), "npy"),
+     (hostile.npy_bytes("", (), header="{'descr': '<u2', 'shape': (2, 3)}", payload=b"\x00" * 12), "npy"),
+     (hostile.npy_bytes("", (), header="{'descr': '<u2', 'fortran_order': False, 'shape': (2.0, 3), }",
+                        payload=b"\x00" * 12), "npy"),
+     (hostile.npy_bytes("", (), header="{'descr': 'not a dtype', 'fortran_order': False, 'shape': (2, 3), }",
+                        payload=b"\x00" * 12), "npy"),
+     (hostile.npy_bytes("", (), header="__import__('os').system('echo hacked')", payload=b"\x00" * 12), "npy"),
+     (hostile.npy_bytes("", (), header="{" * 5000, payload=b"\x00" * 12), "npy"),
+     (hostile.npy_bytes("", (), header="{'descr': '<u2', 'fortran_order': False, 'shape': (2, 3), }" + " " * 20000,
+                        version=(2, 0), payload=b"\x00" * 12), "npy"),
+     (b"\x93NUMPY\x01", "npy"),
+     (b"\x93NUMPY\x01\x00\xff\xff{", "npy"),
+     (b"\x93NUMPY\x02\x00\xff\xff\xff\xff{", "npy")],
+)
+def test_npy_malformed_or_truncated_is_refused(tmp_path, content, word):
+    path = tmp_path / "bad.npy"
+    path.write_bytes(content)
+    with hostile.no_process_started(), pytest.raises(dg.DepthImageError) as exc_info:
+        dg.read_depth_file(path)
+    assert "bad.npy" in str(exc_info.value) and word in str(exc_info.value)
+    assert "\n" not in str(exc_info.value)
+
+
+def _npz_bytes(tmp_path) -> bytes:
+    np.savez(tmp_path / "a.npz", depth=np.zeros((2, 2), np.uint16))
+    return (tmp_path / "a.npz").read_bytes()
+
+
+@pytest.mark.parametrize("cut", [None, 40, 4, 0])
+def test_npz_whole_or_truncated_under_an_npy_name_is_refused(tmp_path, cut):
+    content = _npz_bytes(tmp_path)
+    path = tmp_path / "z.npy"
+    path.write_bytes(content if cut is None else content[:cut])
+    with pytest.raises(dg.DepthImageError, match="z.npy"):
+        dg.read_depth_file(path)
+
+
+def _valid_files(tmp_path) -> dict[str, tuple[bytes, np.ndarray]]:
+    """name -> (bytes of a valid small depth file, the array it holds)."""
+    u16 = (np.arange(35, dtype=np.uint16) * 1234).reshape(5, 7)
+    f32 = np.linspace(0.25, 4.0, 35, dtype=np.float32).reshape(5, 7)
+    files = {}
+    for name, write, data in (("d.png", write_depth_png, u16), ("d.pgm", write_depth_pgm, u16),
+                              ("d.npy", np.save, u16), ("f.npy", np.save, f32),
+                              ("d.tif", lambda p, a: Image.fromarray(a).save(p), u16),
+                              ("f.tif", lambda p, a: Image.fromarray(a).save(p), f32)):
+        write(tmp_path / name, data)
+        files[name] = ((tmp_path / name).read_bytes(), data)
+    return files
+
+
+@pytest.mark.filterwarnings("ignore:Corrupt EXIF data", "ignore:Possibly corrupt EXIF", "ignore:Truncated File")
+def test_every_truncation_is_refused_or_reads_the_same_image(tmp_path):
+    """A file cut anywhere gives DepthImageError, or (a PNG missing only its end marker, a TIFF missing only unread
+    trailing bytes) the complete image: never another exception, never other values."""
+    for name, (content, data) in _valid_files(tmp_path).items():
+        path = tmp_path / f"cut_{name}"
+        for length in range(len(content)):
+            path.write_bytes(content[:length])
+            try:
+                got = dg.read_depth_file(path)
+            except dg.DepthImageError as exc:
+                assert str(path) in str(exc)
+                continue
+            np.testing.assert_array_equal(got, data, err_msg=f"{name} cut to {length} bytes")
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_corrupted_files_give_depth_image_error_or_an_image(tmp_path, data):
+    """Bytes flipped or overwritten anywhere: DepthImageError or a 2-D uint16/float32 array of the image's size
+    (raw formats hold no checksum, so changed pixel values are possible), never another exception."""
+    files = _valid_files(tmp_path)
+    name = data.draw(st.sampled_from(sorted(files)))
+    content = bytearray(files[name][0])
+    for _ in range(data.draw(st.integers(1, 4))):
+        where = data.draw(st.integers(0, len(content) - 1))
+        content[where] = data.draw(st.integers(0, 255))
+    path = tmp_path / f"fuzz_{name}"
+    path.write_bytes(bytes(content))
+    with hostile.no_process_started():
+        try:
+            got = dg.read_depth_file(path)
+        except dg.DepthImageError as exc:
+            assert str(path) in str(exc) and "\n" not in str(exc)
+            return
+    assert got.ndim == 2 and got.dtype in (np.uint16, np.float32)
+    assert got.size <= config.MAX_IMAGE_SIDE ** 2
+
+
+def test_npy_header_parser_reads_numpys_own_files():
+    for array in (np.zeros((3, 4), "<u2"), np.zeros((1, 1), ">f8"), np.zeros((2, 5), "<f4", order="F")):
+        buffer = io.BytesIO()
+        np.save(buffer, array)
+        raw = buffer.getvalue()
+        shape, fortran_order, dtype, offset = depth_io.npy_header(raw)
+        assert shape == array.shape and dtype == array.dtype
+        assert fortran_order == (array.flags.f_contiguous and not array.flags.c_contiguous)
+        assert len(raw) - offset == array.nbytes
