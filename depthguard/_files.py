@@ -149,6 +149,11 @@ def load_yaml(text: str, *, source, error: type[DepthguardError] = InputError, *
     or aliases, repeats a key or nests deeper than ``config.MAX_NESTING``."""
     try:
         return yaml.load(text, Loader=_BoundedSafeLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.constructor.ConstructorError as exc:
+        if "could not determine a constructor for the tag" in str(exc.problem):  # !!python/..., a custom !tag
+            raise error(f"a YAML tag that is not allowed ({_one_line(exc)})", source=str(source),
+                        **context) from None
+        raise error(f"malformed YAML ({_one_line(exc)})", source=str(source), **context) from None
     except yaml.YAMLError as exc:
         raise error(f"malformed YAML ({_one_line(exc)})", source=str(source), **context) from None
     except RecursionError:  # nesting inside a single scalar flow cannot get here, but stay safe

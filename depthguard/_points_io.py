@@ -1,70 +1,101 @@
-"""Reading control points from files: CSV with an ``x,y,z`` header, or JSON holding a list of [x, y, z]."""
+"""Reading control points from files: CSV with an ``x,y,z`` header, or JSON holding a list of [x, y, z].
+
+A points file is input from outside (issue 12). It is read through :mod:`depthguard._files`: a regular file of at most
+``config.MAX_POINTS_FILE_BYTES`` bytes, UTF-8 text (a leading byte-order mark is dropped). Every coordinate must be a
+finite number of metres with ``|x|, |y|, |z| <= config.COORDINATE_LIMIT``. Any problem is an
+:class:`~depthguard.errors.InputError` naming the file and the line (CSV) or entry (JSON).
+
+- CSV: the first line is a header naming the columns ``x``, ``y`` and ``z`` (case-insensitive, once each; other
+  columns are ignored). Each further line holds plain decimal numbers in those columns (``1``, ``-0.25``, ``1e-3``;
+  not ``nan``, ``inf``, ``1_000`` or non-ASCII digits). Blank lines are skipped. A file holding only the header has
+  no points; an empty file is an error (the header is missing).
+- JSON: a list of ``[x, y, z]`` lists of numbers; ``[]`` has no points. Numbers are read as floats (a 400-digit
+  integer is out of range, not an exact integer), ``NaN`` and ``Infinity`` are refused, so is nesting deeper than the
+  parser allows.
+"""
 
 from __future__ import annotations
 
 import csv
-import json
+import io
 import math
+import re
 from pathlib import Path
 
 import numpy as np
 
-from depthguard.errors import InputError
+from depthguard import config
+from depthguard._files import load_json, read_text
+from depthguard.errors import InputError, short_repr
+
+#: A plain decimal number: what the CSV reader accepts in a coordinate column.
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 
 
 def load_points(path) -> np.ndarray:
-    """(n, 3) float64 metres, world frame, from a ``.csv`` (header ``x,y,z``) or ``.json`` (list of [x, y, z]) file.
+    """(n, 3) float64 metres, world frame, from a ``.json`` (list of [x, y, z]) or any other-named CSV file
+    (header ``x,y,z``); see the module docstring for the formats and the checks.
 
     Raises :class:`InputError` naming the file and the line or entry at fault.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")  # tolerate the byte-order mark spreadsheets write
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read points file ({exc.strerror or exc})") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: points file is not text") from None
+    text = read_text(path, what="points file", max_bytes=config.MAX_POINTS_FILE_BYTES, error=InputError)
     if path.suffix.lower() == ".json":
         return _from_json(text, path)
     return _from_csv(text, path)
 
 
 def _from_json(text: str, path: Path) -> np.ndarray:
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: malformed JSON ({exc.msg} at line {exc.lineno})") from None
+    data = load_json(text, source=path, error=InputError)
     if not isinstance(data, list):
-        raise InputError(f"{path}: expected a JSON list of [x, y, z], got {type(data).__name__}")
-    points = []
+        raise InputError(f"expected a JSON list of [x, y, z], got {type(data).__name__}", source=str(path))
+    points = np.empty((len(data), 3))
     for i, entry in enumerate(data):
         if not (isinstance(entry, list) and len(entry) == 3 and all(_is_number(x) for x in entry)):
-            raise InputError(f"{path}: entry #{i} must be [x, y, z] of finite numbers, got {entry!r}")
-        points.append([float(x) for x in entry])
-    return np.array(points, dtype=np.float64).reshape(-1, 3)
+            raise InputError(f"entry #{i} must be [x, y, z] of numbers, got {short_repr(entry)}", source=str(path))
+        _check_range(entry, f"entry #{i}", path)
+        points[i] = entry
+    return points
 
 
 def _from_csv(text: str, path: Path) -> np.ndarray:
-    rows = list(csv.reader(text.splitlines()))
-    if not rows:
-        raise InputError(f"{path}: empty CSV file; expected a header x,y,z")
-    header = [h.strip().lower() for h in rows[0]]
-    if not {"x", "y", "z"} <= set(header):
-        raise InputError(f"{path}: line 1: CSV header must name columns x, y, z, got {rows[0]!r}")
-    columns = [header.index(k) for k in ("x", "y", "z")]
-    points = []
-    for line, row in enumerate(rows[1:], start=2):
-        if not row or all(not cell.strip() for cell in row):
-            continue
-        try:
-            values = [float(row[c]) for c in columns]
-        except (ValueError, IndexError):
-            raise InputError(f"{path}: line {line}: expected numbers in columns x, y, z, got {row!r}") from None
-        if not all(math.isfinite(v) for v in values):
-            raise InputError(f"{path}: line {line}: coordinates must be finite, got {row!r}")
-        points.append(values)
+    reader = csv.reader(io.StringIO(text, newline=""))
+    try:
+        header = next(reader, None)
+        if header is None:
+            raise InputError("empty CSV file; expected a header x,y,z", source=str(path))
+        names = [h.strip().lower() for h in header]
+        for name in ("x", "y", "z"):
+            if names.count(name) != 1:
+                raise InputError(f"line 1: CSV header must name each of the columns x, y, z once, got "
+                                 f"{short_repr(header, 80)}", source=str(path))
+        columns = [names.index(k) for k in ("x", "y", "z")]
+        points = []
+        for row in reader:
+            line = reader.line_num
+            if all(not cell.strip() for cell in row):
+                continue
+            cells = [row[c].strip() if c < len(row) else "" for c in columns]
+            if not all(_NUMBER.fullmatch(cell) for cell in cells):
+                raise InputError(f"line {line}: expected numbers in columns x, y, z, got {short_repr(row, 80)}",
+                                 source=str(path))
+            values = [float(cell) for cell in cells]
+            _check_range(values, f"line {line}", path)
+            points.append(values)
+    except csv.Error as exc:  # a field longer than csv.field_size_limit(), a quote left open
+        raise InputError(f"line {reader.line_num}: malformed CSV ({exc})", source=str(path)) from None
     return np.array(points, dtype=np.float64).reshape(-1, 3)
 
 
+def _check_range(values, where: str, path: Path) -> None:
+    for axis, value in zip("xyz", values):
+        if not math.isfinite(value):
+            raise InputError(f"{where}: coordinates must be finite numbers of metres, got {axis} = {value} (NaN, "
+                             "Infinity, or a number too large for a float)", source=str(path))
+        if abs(value) > config.COORDINATE_LIMIT:
+            raise InputError(f"{where}: |{axis}| = {abs(value):g} m is beyond the coordinate limit of "
+                             f"{config.COORDINATE_LIMIT:g} m", source=str(path))
+
+
 def _is_number(x) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+    return isinstance(x, (int, float)) and not isinstance(x, bool)

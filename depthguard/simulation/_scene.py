@@ -1,6 +1,8 @@
 """Scene files: a YAML description of a simulated workcell, read into a :class:`Workcell`.
 
-The file is read with ``yaml.safe_load`` (no tags that run code: ``!!python/...`` is refused). Every key is
+The file is read through ``depthguard._files``: a regular file of at most ``config.MAX_TEXT_FILE_BYTES`` bytes, parsed
+by a safe YAML loader (no tags that run code: ``!!python/...`` is refused; no anchors or aliases, no duplicate keys,
+nesting at most ``config.MAX_NESTING`` deep). Every key is
 checked: a missing, unknown or malformed key raises :class:`~depthguard.errors.SceneError` whose ``field`` is the
 key's path (``people[0].actions[2].reach.target``). Units are SI: metres, seconds, radians. Points are world-frame
 coordinates; the world's z axis points up.
@@ -77,6 +79,7 @@ import numpy as np
 import yaml
 
 from depthguard import config
+from depthguard._files import read_yaml
 from depthguard.cameras import PinholeCamera, Rig, rig_from_dict
 from depthguard.errors import InputError, RigError, RobotError, SceneError
 from depthguard.robots import RobotModel
@@ -283,17 +286,7 @@ def load_workcell(path) -> Workcell:
     """Read a scene YAML file (safe loader) into a :class:`Workcell`; a :class:`SceneError` names the file and the
     offending field."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise SceneError(f"cannot read scene file ({exc.strerror or exc})", source=str(path)) from None
-    except UnicodeDecodeError:
-        raise SceneError("scene file is not UTF-8 text", source=str(path)) from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise SceneError(f"malformed YAML or a tag that is not allowed ({' '.join(str(exc).split())})",
-                         source=str(path)) from None
+    data = read_yaml(path, what="scene file", max_bytes=config.MAX_TEXT_FILE_BYTES, error=SceneError)
     try:
         return workcell_from_dict(data, base_dir=path.parent)
     except SceneError as exc:
