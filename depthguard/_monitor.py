@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
 import numpy as np
@@ -9,9 +10,10 @@ import numpy as np
 from depthguard import config
 from depthguard.cameras import Rig
 from depthguard.depth import DepthImage, OccupancyImage, depth_image, prepare_depth
+from depthguard.depth._image import checked_frame
 from depthguard.depthspace import check_points, single_camera_distances
 from depthguard.depthspace._distance import check_options
-from depthguard.errors import InputError
+from depthguard.errors import InputError, check_real, short_repr
 from depthguard.results import DistanceResult, Flag
 
 
@@ -20,29 +22,35 @@ class DistanceMonitor:
 
     Args:
         rig: the cameras (:func:`depthguard.load_rig`).
-        rho: radius of each control point's surveillance region, metres; obstacles farther away are ignored.
+        rho: radius of each control point's surveillance region, metres, in [``config.RHO_MIN``,
+            ``config.RHO_MAX``]; obstacles farther away are ignored.
         aggregate: ``"min"``, ``"mean"`` or ``"hybrid"`` (SPEC section 6).
         invalid: policy for pixels without a valid measurement: ``"occupied"`` (fail-safe), ``"neighbors"`` or
             ``"free"`` (SPEC section 3).
         unseen: policy for space no camera observes: ``"occupied"`` (fail-safe) or ``"free"``.
         method: ``"exact"`` (SPEC) or ``"paper"`` (the 2015 paper's unsafe formulas, for comparison only).
-        max_age: seconds; a frame older than this at query time (``now``) makes its camera blind and the result
-            flagged. None: frames never go stale.
-        hole_pixels: largest hole filled by ``invalid="neighbors"``, pixels.
+        max_age: seconds, in (0, ``config.MAX_AGE_LIMIT``]; a frame older than this at query time (``now``) makes
+            its camera blind and the result flagged. None: frames do not go stale by age (see :meth:`query` for the
+            other rules of time).
+        hole_pixels: largest hole filled by ``invalid="neighbors"``, pixels, in [0, ``config.MAX_HOLE_PIXELS``].
         robot: a :class:`depthguard.robots.RobotModel` to filter out of every frame (SPEC section 7); then each new
             frame needs the robot's joint positions at its capture time (``query(..., joints=...)``).
         self_filter: the geometry rendered for self-filtering: ``"hulls"`` (default), ``"capsules"`` or
             ``"meshes"`` (:mod:`depthguard.self_filter`).
-        self_filter_tolerance: metres by which a measurement may lie in front of the rendered robot and still be the
-            robot (on top of the noise margin).
-        principals: with frames of several cameras, the principal cameras of the depth grid (SPEC section 8), names;
-            default: the rig's principal, else its first camera. Each point gets the largest of the principals'
-            fused distances among those whose view holds its whole surveillance region (each is a lower bound).
-        maps: principal name -> :class:`depthguard.depthgrid.DepthGridMap` (checked against the rig); maps not
-            given are built from the rig when first needed (milliseconds).
-        fusion_margin: metres a secondary camera must have seen beyond a cell to clear it (the rig's calibration
-            error, on top of the noise margin). fusion_pixels: pixels by which a cell's footprint grows in a
-            secondary camera.
+        self_filter_tolerance: metres, in [0, ``config.SELF_FILTER_TOLERANCE_MAX``], by which a measurement may lie
+            in front of the rendered robot and still be the robot (on top of the noise margin).
+        principals: with frames of several cameras, the principal cameras of the depth grid (SPEC section 8): a list
+            or tuple of camera names (a bare string is refused); default: the rig's principal, else its first
+            camera. Each point gets the largest of the principals' fused distances among those whose view holds
+            its whole surveillance region (each is a lower bound).
+        maps: principal name -> :class:`depthguard.depthgrid.DepthGridMap` of that principal (checked against the
+            rig); maps not given are built from the rig when first needed (milliseconds).
+        fusion_margin: metres (finite, >= 0) a secondary camera must have seen beyond a cell to clear it (the rig's
+            calibration error, on top of the noise margin). fusion_pixels: pixels, in [0,
+            ``config.MAX_FUSION_PIXELS``], by which a cell's footprint grows in a secondary camera.
+
+    Every argument is checked here, once: a wrong type or a value out of range raises
+    :class:`~depthguard.errors.InputError` naming it.
 
     A frame passed as a :class:`DepthImage` is prepared once (and filtered with the joints given with it) and reused
     while the same object is passed again; a plain array is checked and prepared on every query.
@@ -59,49 +67,79 @@ class DistanceMonitor:
                  fusion_margin: float = config.DEFAULT_FUSION_MARGIN,
                  fusion_pixels: int = config.DEFAULT_FUSION_PIXELS):
         if not isinstance(rig, Rig):
-            raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}")
-        check_options(rho, aggregate, unseen, method)
-        if invalid not in config.INVALID_POLICIES:
-            raise InputError(f"invalid must be one of {config.INVALID_POLICIES}, got {invalid!r}")
-        if max_age is not None and not (np.isfinite(max_age) and max_age > 0):
-            raise InputError(f"max_age must be a positive number of seconds or None, got {max_age!r}")
-        if isinstance(hole_pixels, bool) or not isinstance(hole_pixels, (int, np.integer)) or hole_pixels < 0:
-            raise InputError(f"hole_pixels must be a non-negative integer, got {hole_pixels!r}")
+            raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}", field="rig")
         self.rig = rig
-        self.rho = float(rho)
+        self.rho = check_options(rho, aggregate, unseen, method)
         self.aggregate = aggregate
-        self.invalid = invalid
         self.unseen = unseen
         self.method = method
-        self.max_age = None if max_age is None else float(max_age)
-        self.hole_pixels = int(hole_pixels)
+        self.invalid = _choice(invalid, "invalid", config.INVALID_POLICIES)
+        self.max_age = None if max_age is None else check_real(
+            max_age, "max_age", minimum=0.0, above_minimum=True, maximum=config.MAX_AGE_LIMIT, unit="seconds",
+            field="max_age")
+        self.hole_pixels = _whole(hole_pixels, "hole_pixels", config.MAX_HOLE_PIXELS)
+        self.self_filter = _choice(self_filter, "self_filter", config.SELF_FILTER_GEOMETRIES)
+        self.self_filter_tolerance = check_real(self_filter_tolerance, "self_filter_tolerance", minimum=0.0,
+                                                maximum=config.SELF_FILTER_TOLERANCE_MAX, unit="metres",
+                                                field="self_filter_tolerance")
+        self.fusion_margin = check_real(fusion_margin, "fusion_margin", minimum=0.0, unit="metres",
+                                        field="fusion_margin")
+        self.fusion_pixels = _whole(fusion_pixels, "fusion_pixels", config.MAX_FUSION_PIXELS)
+        self.principals = self._principals(principals)
+        self.maps = self._maps(maps)
         self.robot = robot
-        self.self_filter_tolerance = float(self_filter_tolerance)
         self._silhouette = None
         if robot is not None:
+            from depthguard.robots import RobotModel
+
+            if not isinstance(robot, RobotModel):
+                raise InputError(f"robot must be a depthguard.robots.RobotModel (e.g. RobotModel.default()), got "
+                                 f"{short_repr(robot)}", field="robot")
             from depthguard.self_filter import RobotSilhouette  # needs OpenGL: only with a robot
 
-            self._silhouette = RobotSilhouette(robot, geometry=self_filter)
+            self._silhouette = RobotSilhouette(robot, geometry=self.self_filter)
         self._prepared: dict[str, tuple[object, _CameraFrame]] = {}
         self._fused_frames: dict[str, tuple[tuple, object]] = {}  # principal -> (its frames, their FusedFrames)
-        names = list(rig.cameras)
+
+    def _principals(self, principals) -> tuple[str, ...]:
+        """The principal cameras' names: a list or tuple of names of the rig's cameras (a bare string is refused:
+        ``"cam"`` is not the three cameras 'c', 'a', 'm')."""
         if principals is None:
-            principals = [rig.principal or names[0]]
-        for name in principals:
-            rig.camera(name)
+            return (self.rig.principal or next(iter(self.rig.cameras)),)
+        if not isinstance(principals, (list, tuple)):
+            raise InputError(f"principals must be a list or tuple of camera names, got {short_repr(principals)}",
+                             field="principals")
         if not principals:
-            raise InputError("principals must name at least one camera")
-        self.principals = tuple(principals)
-        self.maps = {}
-        for name, grid in (maps or {}).items():
-            grid.check_rig(rig)
-            self.maps[name] = grid
-        if not (np.isfinite(fusion_margin) and fusion_margin >= 0):
-            raise InputError(f"fusion_margin must be a non-negative number of metres, got {fusion_margin!r}")
-        if isinstance(fusion_pixels, bool) or not isinstance(fusion_pixels, (int, np.integer)) or fusion_pixels < 0:
-            raise InputError(f"fusion_pixels must be a non-negative integer, got {fusion_pixels!r}")
-        self.fusion_margin = float(fusion_margin)
-        self.fusion_pixels = int(fusion_pixels)
+            raise InputError("principals must name at least one camera", field="principals")
+        for name in principals:
+            if not isinstance(name, str):
+                raise InputError(f"principals must be camera names (strings), got {short_repr(name)}",
+                                 field="principals")
+            self.rig.camera(name)
+        if len(set(principals)) != len(principals):
+            raise InputError(f"principals names a camera twice: {list(principals)}", field="principals")
+        return tuple(principals)
+
+    def _maps(self, maps) -> dict:
+        """Depth grid maps by principal name, each checked against the rig and filed under its own principal."""
+        if maps is None:
+            return {}
+        if not isinstance(maps, Mapping):
+            raise InputError(f"maps must map principal camera names to DepthGridMap objects, got "
+                             f"{short_repr(maps)}", field="maps")
+        from depthguard.depthgrid import DepthGridMap
+
+        checked = {}
+        for name, grid in maps.items():
+            if not isinstance(grid, DepthGridMap):
+                raise InputError(f"maps[{short_repr(name)}] must be a DepthGridMap (depthguard.depthgrid.build_map or "
+                                 f"load_map), got {type(grid).__name__}", field="maps")
+            grid.check_rig(self.rig)
+            if name != grid.principal:
+                raise InputError(f"maps[{short_repr(name)}] is the map of principal camera {grid.principal!r}",
+                                 field="maps")
+            checked[name] = grid
+        return checked
 
     def prepare(self, name: str, frame, joints=None) -> OccupancyImage:
         """Check a frame of camera ``name`` and prepare it (cached while the same :class:`DepthImage` comes back).
@@ -117,9 +155,9 @@ class DistanceMonitor:
         if cached is not None and cached[0] is frame:
             return cached[1]
         if isinstance(frame, DepthImage):
-            if frame.camera != name:
-                raise InputError(f"the frame given for camera {name!r} was taken by camera {frame.camera!r}")
-            image = frame if frame.data.shape == camera.shape else depth_image(frame.data, camera, frame.timestamp)
+            # A DepthImage is a plain dataclass: whoever built it may have bypassed depth_image. Its data is checked
+            # again and copied, so that nothing the caller does to its array can change the prepared frame.
+            image = checked_frame(frame, camera)
         else:
             image = depth_image(frame, camera)
         robot_near = robot_far = robot_exit = None
@@ -152,35 +190,60 @@ class DistanceMonitor:
             joints: with a robot: its joint positions when the new frames were captured (a dict by name or a
                 sequence in ``robot.joint_names`` order, radians), or a mapping camera name -> such joint positions
                 when the cameras' frames were captured at different times. Only frames not prepared before use it.
-            now: the current time in the frames' clock, seconds; needed when ``max_age`` is set.
+            now: the current time in the frames' clock, seconds (a finite number), or None; needed when ``max_age``
+                is set.
             check: validate the points (``False`` for a hot loop that passes a checked (n, 3) float64 array).
+
+        Time (SPEC section 8): a frame is stale, and counts as blind (it clears nothing, results flag
+        ``STALE_CAMERA``), when
+
+        - its timestamp is NaN or infinite (whatever ``max_age``);
+        - ``now`` is given and it is stamped later than ``now + config.CLOCK_SKEW_TOLERANCE`` (its time is wrong;
+          also without ``max_age``);
+        - ``max_age`` is set and it has no timestamp or is older than ``max_age`` at ``now``.
 
         With one frame, the single-camera method of SPEC sections 3-6 runs on it. With no usable frame (none given,
         or every one stale) each point gets distance 0 and the flag ``MISSING_CAMERA`` or ``STALE_CAMERA``.
         """
+        if not isinstance(check, bool):
+            raise InputError(f"check must be True or False, got {short_repr(check)}", field="check")
         points = check_points(points_world) if check else points_world
         if not isinstance(frames, Mapping):
-            raise InputError(f"frames must map camera names to depth images, got {type(frames).__name__}")
+            raise InputError(f"frames must map camera names to depth images, got {type(frames).__name__}",
+                             field="frames")
+        if now is not None:
+            now = check_real(now, "now", unit="seconds", field="now")
         if self.max_age is not None and now is None:
-            raise InputError("this monitor has max_age set: pass now= (seconds, the frames' clock) to query()")
+            raise InputError("this monitor has max_age set: pass now= (seconds, the frames' clock) to query()",
+                             field="now")
         usable: dict[str, _CameraFrame] = {}
-        stale: list[str] = []
+        stale: dict[str, float | None] = {}
         for name, frame in frames.items():
+            if not isinstance(name, str):
+                raise InputError(f"frames must be keyed by camera name, got {short_repr(name)}", field="frames")
             state = self._camera_frame(name, frame, _joints_for(name, joints, frames))
             timestamp = state.occupancy.timestamp
-            if self.max_age is not None and (timestamp is None or now - timestamp > self.max_age):
-                stale.append(name)
+            if self.is_stale(timestamp, now):
+                stale[name] = timestamp
                 continue
             usable[name] = state
         if not usable:
-            flag = Flag.STALE_CAMERA if stale else Flag.MISSING_CAMERA
-            return _blind_result(len(points), flag, {n: self._prepared[n][1].occupancy.timestamp for n in stale
-                                                     if n in self._prepared})
+            return DistanceResult.blind(len(points), Flag.STALE_CAMERA if stale else Flag.MISSING_CAMERA, stale)
         if len(usable) == 1 and not stale:
             (state,) = usable.values()
             return single_camera_distances(state.occupancy, points, self.rho, self.aggregate, self.unseen,
                                            self.method, check=False)
-        return self._fused(usable, points, stale)
+        return self._fused(usable, points, list(stale))
+
+    def is_stale(self, timestamp: float | None, now: float | None) -> bool:
+        """Whether a frame stamped ``timestamp`` (seconds, or None) counts as blind at ``now`` (see :meth:`query`)."""
+        if timestamp is None:
+            return self.max_age is not None
+        if not math.isfinite(timestamp):
+            return True
+        if now is not None and timestamp > now + config.CLOCK_SKEW_TOLERANCE:
+            return True
+        return self.max_age is not None and now - timestamp > self.max_age
 
     def _fused(self, usable: dict, points: np.ndarray, stale: list) -> DistanceResult:
         """The depth grid of every usable principal; per point, the largest answer among the principals whose view
@@ -209,7 +272,7 @@ class DistanceMonitor:
             results.append(cached[1].distances(points, self.rho, self.aggregate, self.unseen, check=False))
         if not results:
             flag = Flag.STALE_CAMERA if any(n in stale for n in self.principals) else Flag.MISSING_CAMERA
-            return _blind_result(len(points), flag, {})
+            return DistanceResult.blind(len(points), flag)
         timestamps = {name: state.occupancy.timestamp for name, state in usable.items()}
         invalid_pixels = {n: s.occupancy.invalid_pixels for n, s in usable.items()}
         stale_flag = Flag.STALE_CAMERA if stale else Flag(0)
@@ -274,14 +337,13 @@ def _joints_for(name: str, joints, frames):
     return joints
 
 
-def _blind_result(n: int, flag: Flag, timestamps: dict) -> DistanceResult:
-    """The conservative answer when no camera can see: distance 0 everywhere, flagged."""
-    return DistanceResult(
-        distance=np.zeros(n),
-        direction=np.zeros((n, 3)),
-        count=np.zeros(n, dtype=np.int64),
-        invalid_count=np.zeros(n, dtype=np.int64),
-        flags=tuple(flag for _ in range(n)),
-        timestamps=timestamps,
-        cameras=(),
-    )
+def _choice(value, name: str, allowed: tuple) -> str:
+    if not isinstance(value, str) or value not in allowed:
+        raise InputError(f"{name} must be one of {allowed}, got {short_repr(value)}", field=name)
+    return value
+
+
+def _whole(value, name: str, maximum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 <= value <= maximum:
+        raise InputError(f"{name} must be a whole number in [0, {maximum}], got {short_repr(value)}", field=name)
+    return int(value)

@@ -272,10 +272,13 @@ SELF_FILTER_TOLERANCE_MAX = 1.0
 MAX_HOLE_PIXELS = MAX_IMAGE_SIDE * MAX_IMAGE_SIDE
 MAX_FUSION_PIXELS = MAX_IMAGE_SIDE
 
-#: Depth grid from the command line (build-map): at most this many cells along each principal pixel (a query's cell
-#: cache holds a byte per cell and pixel: 4096 cells at 640x480 is 1.3 GB at most).
+#: A depth grid has at most this many cells along each principal pixel (fused queries keep a byte per cell and pixel,
+#: allocated as touched: 4096 cells at 640x480 is 1.3 GB at most). build-map's options and FusedFrames check it.
 DEPTH_GRID_MAX_CELLS = 4096
 
 #: Command line: --seed in [0, MAX_SEED]; --repeats in [1, MAX_REPEATS].
 MAX_SEED = 2**63 - 1
 MAX_REPEATS = 10_000
+
+#: Self-filtering geometries (depthguard.self_filter): padded convex hulls, capsules, or the meshes themselves.
+SELF_FILTER_GEOMETRIES = ("hulls", "capsules", "meshes")

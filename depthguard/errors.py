@@ -10,6 +10,9 @@ fix the rig or the driver::
     ├── RobotError        a robot description (URDF, meshes, control points) is missing, malformed or unsupported
     ├── RenderingError    no headless OpenGL (EGL) context, or its OpenGL lacks what rendering needs
     └── SceneError        a simulation scene file (depthguard.simulation) is malformed or describes the impossible
+
+Two helpers phrase such errors alike everywhere: :func:`short_repr` (a value the user gave, cut short for a one-line
+message) and :func:`check_real` (a real number within a range, with its unit).
 """
 
 from __future__ import annotations
@@ -74,3 +77,33 @@ def short_repr(value, limit: int = 40) -> str:
         return f"an integer of about {int(value.bit_length() * 0.30103)} digits"
     text = " ".join(text.split())
     return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def check_real(value, name: str, *, minimum: float | None = None, maximum: float | None = None,
+               above_minimum: bool = False, unit: str = "", error: type[DepthguardError] | None = None,
+               **context) -> float:
+    """``value`` as a float after checking that it is a real number (not a bool, string, complex or array), finite,
+    and in [``minimum``, ``maximum``] (``(minimum, maximum]`` with ``above_minimum``). Otherwise ``error`` (default
+    :class:`InputError`) saying "``name`` must be ...", with ``context`` (``camera=``, ``field=``) passed on."""
+    import math
+    import numbers
+
+    error = InputError if error is None else error
+    if minimum is not None and maximum is not None:
+        bounds = f" in {'(' if above_minimum else '['}{minimum:g}, {maximum:g}]"
+    elif minimum is not None:
+        bounds = f" {'>' if above_minimum else '>='} {minimum:g}"
+    else:
+        bounds = "" if maximum is None else f" <= {maximum:g}"
+    wanted = f"a finite number{' of ' + unit if unit else ''}{bounds}"
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise error(f"{name} must be {wanted}, got {short_repr(value)}", **context)
+    try:
+        number = float(value)
+    except (OverflowError, TypeError, ValueError):
+        number = math.nan
+    if not math.isfinite(number) or (minimum is not None and (number <= minimum if above_minimum else
+                                                               number < minimum)) or \
+            (maximum is not None and number > maximum):
+        raise error(f"{name} must be {wanted}, got {short_repr(value)}", **context)
+    return number

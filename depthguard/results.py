@@ -81,6 +81,14 @@ class DistanceResult:
         if self.blind_distance is None:
             object.__setattr__(self, "blind_distance", np.full(len(self.distance), np.inf))
 
+    @classmethod
+    def blind(cls, n: int, flag: "Flag", timestamps: dict | None = None) -> "DistanceResult":
+        """The conservative answer for n points when no camera can see (no usable frame): distance 0, zero
+        direction, no contributors, every point flagged ``flag`` (``STALE_CAMERA`` or ``MISSING_CAMERA``)."""
+        return cls(distance=np.zeros(n), direction=np.zeros((n, 3)), count=np.zeros(n, dtype=np.int64),
+                   invalid_count=np.zeros(n, dtype=np.int64), flags=tuple(flag for _ in range(n)),
+                   timestamps=dict(timestamps or {}), cameras=())
+
     def __len__(self) -> int:
         return len(self.distance)
 

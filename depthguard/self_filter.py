@@ -20,12 +20,12 @@ from scipy.spatial import HalfspaceIntersection
 
 from depthguard import config
 from depthguard.cameras import PinholeCamera
-from depthguard.errors import InputError
+from depthguard.errors import InputError, check_real, short_repr
 from depthguard.rendering import MeshInstance, Renderer, primitive_mesh
 from depthguard.robots import RobotModel
 from depthguard.scenes import Capsule
 
-GEOMETRIES = ("hulls", "capsules", "meshes")
+GEOMETRIES = config.SELF_FILTER_GEOMETRIES
 
 
 def padded_hull(vertices, padding: float, directions: int = config.SELF_FILTER_HULL_PLANES) -> tuple[np.ndarray,
@@ -70,12 +70,18 @@ class RobotSilhouette:
 
     def __init__(self, robot: RobotModel, renderer: Renderer | None = None, geometry: str = "hulls",
                  padding: float | None = None):
-        if geometry not in GEOMETRIES:
-            raise InputError(f"self-filter geometry must be one of {GEOMETRIES}, got {geometry!r}")
+        if not isinstance(geometry, str) or geometry not in GEOMETRIES:
+            raise InputError(f"self-filter geometry must be one of {GEOMETRIES}, got {short_repr(geometry)}",
+                             field="self_filter")
+        if not isinstance(robot, RobotModel):
+            raise InputError(f"robot must be a RobotModel, got {short_repr(robot)}", field="robot")
+        if renderer is not None and not isinstance(renderer, Renderer):
+            raise InputError(f"renderer must be a depthguard Renderer, got {short_repr(renderer)}", field="renderer")
         self.robot = robot
         self.renderer = renderer if renderer is not None else Renderer()
         self.geometry = geometry
-        self.padding = robot.padding if padding is None else float(padding)
+        self.padding = robot.padding if padding is None else check_real(padding, "padding", minimum=0.0,
+                                                                        unit="metres", field="padding")
         self._meshes: list[tuple[str, int]] = []  # (link, mesh id) with vertices in the link frame
         for link, capsule in zip(robot.link_names, robot.capsules):
             mesh = robot.collision_meshes[link]

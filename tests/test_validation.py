@@ -372,3 +372,345 @@ def test_camera_info_with_an_alias_is_refused(tmp_path):
     with pytest.raises(dg.RigError) as exc_info:
         dg.load_camera_info(path, camera="depth")
     assert exc_info.value.camera == "depth"
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# the monitor and the API: wrong types and ranges
+
+from depthguard import Flag  # noqa: E402
+from depthguard.depth import DepthImage  # noqa: E402
+from depthguard.scenes import Box, render_depth  # noqa: E402
+from depthguard.transforms import look_at  # noqa: E402
+
+SCENE = [Box.from_bounds([-3, -3, -0.1], [3, 3, 0.0]), Box.from_bounds([-0.2, -0.2, 0.0], [0.2, 0.2, 0.3])]
+IN_VIEW = [[0.0, 0.0, 1.0], [0.3, 0.1, 0.5]]
+
+
+@pytest.fixture(scope="module")
+def top():
+    # 2 m above the floor looking down; the box's top is 1.7 m away, the floor 2 m
+    return dg.PinholeCamera("top", 64, 48, 50.0, 50.0, 31.5, 23.5, look_at([0, 0, 2], [0, 0, 0], up=(0, 1, 0)),
+                            depth_range=(0.3, 4.0), noise=dg.NoiseModel.none())
+
+
+@pytest.fixture(scope="module")
+def side(top):
+    return top.replace(name="side", T_world_camera=look_at([2, 0, 1], [0, 0, 0.3]))
+
+
+@pytest.fixture(scope="module")
+def rig(top):
+    return dg.Rig({"top": top})
+
+
+@pytest.fixture(scope="module")
+def rig2(top, side):
+    return dg.Rig({"top": top, "side": side}, principal="top")
+
+
+@pytest.fixture(scope="module")
+def clean(top):
+    return render_depth(top, SCENE)
+
+
+@pytest.fixture(scope="module")
+def clean_side(side):
+    return render_depth(side, SCENE)
+
+
+@pytest.mark.parametrize(
+    "options",
+    [dict(rho=config.RHO_MIN / 2), dict(rho=config.RHO_MAX * 1.01), dict(rho=True), dict(rho=1j), dict(rho=[0.4]),
+     dict(rho=10**400), dict(aggregate=["min"]), dict(aggregate=np.array(["min", "mean"])), dict(unseen=None),
+     dict(method=1), dict(invalid=("occupied",)), dict(max_age="0.1"), dict(max_age=math.inf),
+     dict(max_age=config.MAX_AGE_LIMIT * 2), dict(max_age=True), dict(hole_pixels=config.MAX_HOLE_PIXELS + 1),
+     dict(hole_pixels=10**400), dict(hole_pixels="64"), dict(robot="iiwa"), dict(robot=object()),
+     dict(self_filter="boxes"), dict(self_filter=None), dict(self_filter_tolerance=-0.01),
+     dict(self_filter_tolerance=math.nan), dict(self_filter_tolerance=config.SELF_FILTER_TOLERANCE_MAX * 2),
+     dict(self_filter_tolerance="0.02"), dict(fusion_margin=math.inf), dict(fusion_margin=-1e-3),
+     dict(fusion_margin="0.01"), dict(fusion_pixels=-1), dict(fusion_pixels=1.0),
+     dict(fusion_pixels=config.MAX_FUSION_PIXELS + 1), dict(maps="map.npz"), dict(maps={"top": "map.npz"}),
+     dict(principals="top"), dict(principals="cam"), dict(principals=[]), dict(principals=[1]),
+     dict(principals=["top", "top"]), dict(principals={"top"})],
+    ids=lambda o: f"{next(iter(o))}={str(next(iter(o.values())))[:20]}",
+)
+def test_monitor_refuses_wrong_types_and_ranges_naming_the_option(rig, options):
+    name = next(iter(options))
+    with pytest.raises(dg.InputError) as exc_info:
+        dg.DistanceMonitor(rig, **options)
+    assert name in str(exc_info.value)
+
+
+def test_principals_string_is_not_read_as_letters(top):
+    rig = dg.Rig({"c": top.replace(name="c"), "a": top.replace(name="a"), "m": top.replace(name="m"),
+                  "cam": top.replace(name="cam")})
+    with pytest.raises(dg.InputError) as exc_info:
+        dg.DistanceMonitor(rig, principals="cam")
+    assert exc_info.value.field == "principals" and "list or tuple" in str(exc_info.value)
+    assert dg.DistanceMonitor(rig, principals=["cam"]).principals == ("cam",)
+
+
+def test_map_filed_under_another_principal_is_refused(rig2):
+    from depthguard.depthgrid import build_map
+
+    grid = build_map(rig2, "top")
+    with pytest.raises(dg.InputError) as exc_info:
+        dg.DistanceMonitor(rig2, maps={"side": grid})
+    assert "'top'" in str(exc_info.value)
+
+
+@pytest.mark.parametrize(
+    "points",
+    [
+        np.array([[0.0, 0.0, 1.0 + 0.1j]]),                     # complex: refused, not a warning
+        np.array([[True, False, True]]),
+        np.array([[0.0, 0.0, 1.0]], dtype=object),
+        np.array([["0", "0", "1"]]),
+        np.zeros((2, 0)),                                       # (n, 0)
+        np.zeros((0, 0)),
+        [[]],
+        np.ma.masked_array([[0.0, 0.0, 1.0]], mask=[[False, True, False]]),
+        np.ma.masked_array([[0.0, 0.0, 1.0]]),                  # masked arrays are refused even without a mask
+        b"0,0,1",
+        [[0.0, 0.0, config.COORDINATE_LIMIT * 1.5]],
+        [[10**400, 0.0, 1.0]],
+    ],
+    ids=["complex", "bool", "object", "text", "n by 0", "0 by 0", "list of empty", "masked", "masked unmasked",
+         "bytes", "too far", "huge int"],
+)
+def test_points_refused_before_conversion(rig, clean, points):
+    with pytest.raises(dg.InputError) as exc_info:
+        dg.DistanceMonitor(rig).query({"top": clean}, points)
+    assert exc_info.value.field == "points"
+
+
+def test_point_beyond_the_coordinate_limit_is_named_by_index(rig, clean):
+    points = [[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [-2 * config.COORDINATE_LIMIT, 0.0, 0.0]]
+    with pytest.raises(dg.InputError) as exc_info:
+        dg.DistanceMonitor(rig).query({"top": clean}, points)
+    assert "#2" in str(exc_info.value)
+    edge = [[config.COORDINATE_LIMIT, 0.0, 0.0]]  # the limit itself is a point
+    assert len(dg.DistanceMonitor(rig).query({"top": clean}, edge)) == 1
+
+
+def test_integer_points_are_accepted_as_metres(rig, clean):
+    ints = dg.DistanceMonitor(rig).query({"top": clean}, np.array([[0, 0, 1]], dtype=np.int32))
+    floats = dg.DistanceMonitor(rig).query({"top": clean}, [[0.0, 0.0, 1.0]])
+    np.testing.assert_array_equal(ints.distance, floats.distance)
+
+
+@pytest.mark.parametrize("frames", ["top", ["top"], None, 5])
+def test_frames_must_be_a_mapping(rig, frames):
+    with pytest.raises(dg.InputError):
+        dg.DistanceMonitor(rig).query(frames, IN_VIEW)
+
+
+def test_frame_keys_must_be_camera_names(rig, clean):
+    with pytest.raises(dg.DepthguardError):
+        dg.DistanceMonitor(rig).query({0: clean}, IN_VIEW)
+    with pytest.raises(dg.DepthguardError):
+        dg.DistanceMonitor(rig).query({("top",): clean}, IN_VIEW)
+
+
+@pytest.mark.parametrize("data", ["depth", None, [[1.0, 2.0], [3.0]], np.ones((48, 64), complex),
+                                  np.ones((48, 64), bool), np.ones((48, 64), object), np.ones((48, 64, 1), np.float32)])
+def test_depth_of_wrong_type_is_a_depth_image_error(rig, data):
+    with pytest.raises(dg.DepthImageError) as exc_info:
+        dg.DistanceMonitor(rig).query({"top": data}, IN_VIEW)
+    assert exc_info.value.camera == "top"
+
+
+def test_masked_depth_pixels_mean_no_measurement(rig, top, clean):
+    """Masked pixels over the box behave exactly as 0-valued pixels (uint16) or NaN (float), never as the value
+    underneath the mask."""
+    rows, cols = slice(20, 28), slice(28, 36)  # over the box
+    mask = np.zeros(top.shape, bool)
+    mask[rows, cols] = True
+    units = np.round(clean * 1000).astype(np.uint16)
+    zeroed = units.copy()
+    zeroed[mask] = 0
+    masked_units = np.ma.masked_array(units, mask=mask)
+    points = [[0.0, 0.0, 0.5], [0.1, 0.0, 0.35], [0.5, 0.5, 0.5]]
+    monitor = dg.DistanceMonitor(rig, aggregate="min")
+    expected = monitor.query({"top": zeroed}, points)
+    got = monitor.query({"top": masked_units}, points)
+    np.testing.assert_array_equal(got.distance, expected.distance)
+    assert got.flags == expected.flags and Flag.INVALID_PIXELS_USED in got.flags[0]
+    unmasked = monitor.query({"top": units}, points)
+    assert got.distance[0] < unmasked.distance[0]  # the mask matters: it is not read as the depth underneath
+    nan = clean.astype(np.float32)
+    nan[mask] = np.nan
+    masked_float = np.ma.masked_array(clean.astype(np.float32), mask=mask)
+    np.testing.assert_array_equal(monitor.query({"top": masked_float}, points).distance,
+                                  monitor.query({"top": nan}, points).distance)
+    frame = dg.depth_image(masked_float, top)
+    assert not isinstance(frame.data, np.ma.MaskedArray) and np.isnan(frame.data[mask]).all()
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# a DepthImage built by hand is checked again
+
+
+def test_hand_built_depth_image_with_wrong_dtype_or_shape_is_refused(rig, top, clean):
+    monitor = dg.DistanceMonitor(rig)
+    for data, field in [(clean.astype(np.int32), "dtype"), (clean.astype(complex), "dtype"),
+                        (clean[:, :10].astype(np.float32), "width/height"), (clean.tolist(), None)]:
+        frame = DepthImage(camera="top", data=data, depth_scale=1.0, timestamp=0.0)
+        if field is None:  # a list of lists is an image too, once checked
+            assert len(monitor.query({"top": frame}, IN_VIEW)) == 2
+            continue
+        with pytest.raises(dg.DepthImageError) as exc_info:
+            monitor.query({"top": frame}, IN_VIEW)
+        assert exc_info.value.camera == "top" and exc_info.value.field == field
+
+
+@pytest.mark.parametrize("scale", [0.0, -0.001, math.nan, math.inf, "0.001", None, 2.0])
+def test_hand_built_depth_image_with_bad_depth_scale_is_refused(rig, clean, scale):
+    frame = DepthImage(camera="top", data=np.round(clean * 1000).astype(np.uint16), depth_scale=scale)
+    with pytest.raises(dg.DepthImageError) as exc_info:
+        dg.DistanceMonitor(rig).query({"top": frame}, IN_VIEW)
+    assert exc_info.value.field == "depth_scale"
+
+
+@pytest.mark.parametrize("timestamp", ["0.0", [0.0], 1j, True])
+def test_hand_built_depth_image_with_a_timestamp_that_is_no_number_is_refused(rig, clean, timestamp):
+    frame = DepthImage(camera="top", data=clean.astype(np.float32), depth_scale=1.0, timestamp=timestamp)
+    with pytest.raises(dg.DepthImageError) as exc_info:
+        dg.DistanceMonitor(rig).query({"top": frame}, IN_VIEW)
+    assert exc_info.value.field == "timestamp"
+
+
+def test_writable_data_of_a_hand_built_frame_cannot_change_the_prepared_frame(rig2, top, side, clean, clean_side):
+    """The monitor copies the data of a DepthImage it did not make: the caller's later writes reach neither the
+    single-camera answer nor the fused one (whose secondary free depths are computed lazily)."""
+    monitor = dg.DistanceMonitor(rig2, aggregate="min")
+    buffers = {"top": clean.astype(np.float32), "side": clean_side.astype(np.float32)}
+    frames = {name: DepthImage(camera=name, data=buffer, depth_scale=1.0, timestamp=0.0)
+              for name, buffer in buffers.items()}
+    monitor.prepare("top", frames["top"])
+    monitor.prepare("side", frames["side"])  # prepared; its free depths not computed yet
+    for buffer in buffers.values():
+        buffer[:] = 9.0  # beyond the range: the whole view would be unseen
+    fused = monitor.query(frames, IN_VIEW)
+    expected = dg.DistanceMonitor(rig2, aggregate="min").query(
+        {"top": dg.depth_image(clean, top), "side": dg.depth_image(clean_side, side)}, IN_VIEW)
+    np.testing.assert_array_equal(fused.distance, expected.distance)
+    single = monitor.query({"top": frames["top"]}, IN_VIEW)
+    np.testing.assert_array_equal(single.distance, dg.DistanceMonitor(rig2, aggregate="min").query(
+        {"top": dg.depth_image(clean, top)}, IN_VIEW).distance)
+
+
+def test_depth_image_still_refuses_a_nan_timestamp_at_the_boundary(top, clean):
+    for bad in (math.nan, math.inf, -math.inf, 10**400, "1.0"):
+        with pytest.raises(dg.DepthImageError) as exc_info:
+            dg.depth_image(clean, top, timestamp=bad)
+        assert exc_info.value.field == "timestamp"
+
+
+def test_prepare_depth_refuses_what_its_kernels_cannot_take(top, clean):
+    good = dg.depth_image(clean, top)
+    for depth in (clean, DepthImage("top", clean.astype(np.float64), 1.0), DepthImage("top", clean.tolist(), 1.0),
+                  DepthImage("top", clean.astype(np.float32), math.nan)):
+        with pytest.raises(dg.InputError):
+            dg.prepare_depth(depth, top)
+    for kwargs in (dict(invalid=["occupied"]), dict(hole_pixels=-1), dict(hole_pixels=2.5)):
+        with pytest.raises(dg.InputError):
+            dg.prepare_depth(good, top, **kwargs)
+    with pytest.raises(dg.InputError):
+        dg.single_camera_distances("occupancy", IN_VIEW)
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# time (SPEC section 8 "Time")
+
+
+def hand_frame(data, name, timestamp):
+    """A frame built directly, as a driver might, bypassing depth_image's timestamp check."""
+    return DepthImage(camera=name, data=np.asarray(data, np.float32), depth_scale=1.0, timestamp=timestamp)
+
+
+def assert_blind(result, flag):
+    np.testing.assert_array_equal(result.distance, 0.0)
+    np.testing.assert_array_equal(result.direction, 0.0)
+    assert all(flag in f for f in result.flags)
+
+
+@pytest.mark.parametrize("timestamp", [math.nan, math.inf, -math.inf])
+@pytest.mark.parametrize("max_age", [None, 0.1])
+def test_non_finite_timestamp_makes_the_frame_stale_whatever_max_age(rig, clean, timestamp, max_age):
+    monitor = dg.DistanceMonitor(rig, max_age=max_age)
+    result = monitor.query({"top": hand_frame(clean, "top", timestamp)}, IN_VIEW, now=None if max_age is None else 1.0)
+    assert_blind(result, Flag.STALE_CAMERA)
+    if max_age is None:  # also with now given
+        assert_blind(monitor.query({"top": hand_frame(clean, "top", timestamp)}, IN_VIEW, now=1.0), Flag.STALE_CAMERA)
+
+
+@pytest.mark.parametrize("timestamp", [math.nan, math.inf])
+def test_non_finite_timestamp_is_stale_in_the_fused_path_too(rig2, clean, clean_side, timestamp):
+    monitor = dg.DistanceMonitor(rig2, max_age=None)
+    fresh = monitor.query({"top": hand_frame(clean, "top", 1.0), "side": hand_frame(clean_side, "side", 1.0)},
+                          IN_VIEW, now=1.0)
+    assert not any(Flag.STALE_CAMERA in f for f in fresh.flags)
+    # the principal stale: no usable principal, distance 0 flagged
+    blind = monitor.query({"top": hand_frame(clean, "top", timestamp), "side": hand_frame(clean_side, "side", 1.0)},
+                          IN_VIEW, now=1.0)
+    assert_blind(blind, Flag.STALE_CAMERA)
+    # the secondary stale: it clears nothing (the principal's own answer at most) and the result is flagged
+    single = dg.DistanceMonitor(rig2).query({"top": hand_frame(clean, "top", 1.0)}, IN_VIEW)
+    stale_side = monitor.query({"top": hand_frame(clean, "top", 1.0), "side": hand_frame(clean_side, "side",
+                                                                                      timestamp)}, IN_VIEW, now=1.0)
+    assert all(Flag.STALE_CAMERA in f for f in stale_side.flags)
+    assert np.all(stale_side.distance <= single.distance + 1e-12)
+    assert stale_side.cameras == ("top",)
+
+
+def test_non_finite_timestamp_is_stale_without_the_monitor(rig2, top, clean, clean_side):
+    from depthguard.depthgrid import FusedFrames, build_map
+
+    occupancy = dg.prepare_depth(hand_frame(clean, "top", math.nan), top)
+    assert_blind(dg.single_camera_distances(occupancy, IN_VIEW), Flag.STALE_CAMERA)
+    frames = FusedFrames(build_map(rig2, "top"), rig2, occupancy, {"side": None})
+    assert_blind(frames.distances(IN_VIEW), Flag.STALE_CAMERA)
+
+
+@pytest.mark.parametrize("max_age", [None, 0.1])
+def test_frame_from_the_future_beyond_the_skew_tolerance_is_stale(rig, top, clean, max_age):
+    monitor = dg.DistanceMonitor(rig, max_age=max_age)
+    future = dg.depth_image(clean, top, timestamp=100.0)
+    assert_blind(monitor.query({"top": future}, IN_VIEW, now=0.0), Flag.STALE_CAMERA)
+    # within the tolerance a frame a little ahead of now is used
+    ahead = dg.depth_image(clean, top, timestamp=0.5 * config.CLOCK_SKEW_TOLERANCE)
+    used = monitor.query({"top": ahead}, IN_VIEW, now=0.0)
+    assert np.all(used.distance > 0.1) and not any(Flag.STALE_CAMERA in f for f in used.flags)
+    beyond = dg.depth_image(clean, top, timestamp=2 * config.CLOCK_SKEW_TOLERANCE)
+    assert_blind(monitor.query({"top": beyond}, IN_VIEW, now=0.0), Flag.STALE_CAMERA)
+
+
+def test_future_secondary_frame_clears_nothing(rig2, top, side, clean, clean_side):
+    monitor = dg.DistanceMonitor(rig2, max_age=0.1)
+    principal = dg.depth_image(clean, top, timestamp=10.0)
+    good = monitor.query({"top": principal, "side": dg.depth_image(clean_side, side, timestamp=10.0)}, IN_VIEW,
+                         now=10.0)
+    future = monitor.query({"top": principal, "side": dg.depth_image(clean_side, side, timestamp=110.0)}, IN_VIEW,
+                           now=10.0)
+    assert all(Flag.STALE_CAMERA in f for f in future.flags)
+    assert not any(Flag.STALE_CAMERA in f for f in good.flags)
+    single = dg.DistanceMonitor(dg.Rig({"top": top})).query({"top": clean}, IN_VIEW)
+    assert np.all(future.distance <= single.distance + 1e-12)
+
+
+@pytest.mark.parametrize("now", [math.nan, math.inf, -math.inf, "1.0", True, [1.0], 1j, 10**400])
+def test_now_must_be_a_finite_number(rig, top, clean, now):
+    for max_age in (None, 0.1):
+        with pytest.raises(dg.InputError) as exc_info:
+            dg.DistanceMonitor(rig, max_age=max_age).query({"top": dg.depth_image(clean, top, timestamp=0.0)},
+                                                           IN_VIEW, now=now)
+        assert exc_info.value.field == "now"
+
+
+def test_age_rule_at_its_edges(rig, top, clean):
+    monitor = dg.DistanceMonitor(rig, max_age=0.1)
+    frame = dg.depth_image(clean, top, timestamp=5.0)
+    assert not any(Flag.STALE_CAMERA in f for f in monitor.query({"top": frame}, IN_VIEW, now=5.1).flags)
+    assert_blind(monitor.query({"top": frame}, IN_VIEW, now=5.1 + 1e-6), Flag.STALE_CAMERA)
+    assert dg.DistanceMonitor(rig, max_age=config.MAX_AGE_LIMIT).max_age == config.MAX_AGE_LIMIT

@@ -7,9 +7,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from depthguard import config
 from depthguard.cameras import PinholeCamera
 from depthguard.depth._io import read_depth_file
-from depthguard.errors import DepthImageError
+from depthguard.errors import DepthImageError, InputError, short_repr
 
 
 @dataclass(frozen=True, eq=False)
@@ -24,7 +25,9 @@ class DepthImage:
         depth_scale: metres per unit of ``data`` (1.0 for ``float32``).
         timestamp: capture time in seconds (any clock shared with the caller's ``now``), or None if unknown.
 
-    Build it with :func:`depth_image` or :func:`load_depth`, which check it against its camera.
+    Build it with :func:`depth_image` or :func:`load_depth`, which check it against its camera. One built directly
+    is not trusted: :class:`depthguard.DistanceMonitor` checks it again (:func:`checked_frame`) and reads a private
+    copy of its data.
     """
 
     camera: str
@@ -53,12 +56,59 @@ def depth_image(data, camera: PinholeCamera, timestamp: float | None = None) -> 
     """Check ``data`` against ``camera`` and wrap it as a :class:`DepthImage`.
 
     ``data``: (camera.height, camera.width) ``uint16`` (units of ``camera.depth_scale``) or floating point metres
-    (converted to ``float32``). The array is copied once and made read-only, so later changes by the caller cannot
-    alter a frame that a monitor has already prepared. Raises :class:`DepthImageError` naming the camera and field.
+    (converted to ``float32``). A masked array (``numpy.ma``) is read with its masked pixels as "no measurement"
+    (0 for ``uint16``, NaN for float). The array is copied once and made read-only, so later changes by the caller
+    cannot alter a frame that a monitor has already prepared. ``timestamp``: None or a finite number of seconds.
+    Raises :class:`DepthImageError` naming the camera and field (``shape``, ``width/height``, ``dtype``,
+    ``timestamp``).
     """
+    if not isinstance(camera, PinholeCamera):
+        raise InputError(f"camera must be a PinholeCamera, got {type(camera).__name__}", field="camera")
     if isinstance(data, DepthImage):
         data = data.data
-    array = np.asarray(data)
+    array = _checked_data(data, camera)
+    if timestamp is not None:
+        timestamp = _seconds(timestamp, camera.name)
+        if not math.isfinite(timestamp):
+            raise DepthImageError(f"must be a finite number of seconds, got {short_repr(timestamp)}",
+                                  camera=camera.name, field="timestamp")
+    scale = camera.depth_scale if array.dtype == np.uint16 else 1.0
+    return DepthImage(camera=camera.name, data=array, depth_scale=scale, timestamp=timestamp)
+
+
+def checked_frame(frame: DepthImage, camera: PinholeCamera) -> DepthImage:
+    """A :class:`DepthImage` that someone else built (it is a plain dataclass, so it may bypass
+    :func:`depth_image`), checked again against ``camera``: a private read-only copy of its data (2-D, the camera's
+    size, ``uint16`` or float), its own ``depth_scale`` (a number in (0, ``config.DEPTH_SCALE_MAX``]) and its
+    timestamp (None or a real number). A timestamp that is NaN or infinite is kept as it is: the monitor treats such
+    a frame as stale, never fresh. Raises :class:`DepthImageError` naming the camera and field.
+    """
+    name = camera.name
+    if frame.camera != name:
+        raise InputError(f"the frame given for camera {name!r} was taken by camera {short_repr(frame.camera)}",
+                         camera=name, field="camera")
+    array = _checked_data(frame.data, camera)
+    scale = frame.depth_scale
+    if isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating)) or \
+            not 0.0 < float(scale) <= config.DEPTH_SCALE_MAX:
+        raise DepthImageError(f"must be a number of metres per unit in (0, {config.DEPTH_SCALE_MAX:g}], got "
+                              f"{short_repr(scale)}", camera=name, field="depth_scale")
+    timestamp = None if frame.timestamp is None else _seconds(frame.timestamp, name)
+    return DepthImage(camera=name, data=array, depth_scale=float(scale), timestamp=timestamp)
+
+
+def _checked_data(data, camera: PinholeCamera) -> np.ndarray:
+    """``data`` as a private, read-only, C-contiguous (h, w) ``uint16`` or ``float32`` array, masked pixels set to
+    "no measurement"."""
+    mask = None
+    if isinstance(data, np.ma.MaskedArray):
+        mask = np.ma.getmaskarray(data)
+        data = np.ma.getdata(data)
+    try:
+        array = np.asarray(data)
+    except (TypeError, ValueError) as exc:  # ragged nested lists, objects numpy cannot read
+        raise DepthImageError(f"not an image array ({' '.join(str(exc).split())[:120]})", camera=camera.name,
+                              field="dtype") from None
     if array.ndim != 2:
         raise DepthImageError(f"must be a 2-D image, got {array.ndim} dimensions (shape {array.shape})",
                               camera=camera.name, field="shape")
@@ -70,22 +120,29 @@ def depth_image(data, camera: PinholeCamera, timestamp: float | None = None) -> 
             field="width/height",
         )
     if array.dtype.kind == "u" and array.dtype.itemsize == 2:  # uint16, either byte order
-        scale = camera.depth_scale
         array = np.array(array, dtype=np.uint16, order="C", copy=True)
-    elif np.issubdtype(array.dtype, np.floating):
-        scale = 1.0
+        missing = 0
+    elif array.dtype.kind == "f":
         array = np.array(array, dtype=np.float32, order="C", copy=True)
+        missing = np.nan
     else:
         raise DepthImageError(f"must be uint16 (units of depth_scale) or float metres, got {array.dtype}",
                               camera=camera.name, field="dtype")
-    if timestamp is not None:
-        if isinstance(timestamp, bool) or not isinstance(timestamp, (int, float, np.floating, np.integer)) or \
-                not math.isfinite(timestamp):
-            raise DepthImageError(f"must be a finite number of seconds, got {timestamp!r}", camera=camera.name,
-                                  field="timestamp")
-        timestamp = float(timestamp)
+    if mask is not None and mask.any():
+        array[mask] = missing
     array.setflags(write=False)
-    return DepthImage(camera=camera.name, data=array, depth_scale=scale, timestamp=timestamp)
+    return array
+
+
+def _seconds(value, camera: str) -> float:
+    """A timestamp as a float (NaN and infinities pass; the caller decides); DepthImageError if not a number."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise DepthImageError(f"must be a number of seconds, got {short_repr(value)}", camera=camera,
+                              field="timestamp")
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
 
 
 def load_depth(path, camera: PinholeCamera, timestamp: float | None = None) -> DepthImage:

@@ -23,7 +23,7 @@ from depthguard import config
 from depthguard.cameras import PinholeCamera
 from depthguard.depth import _kernels
 from depthguard.depth._image import DepthImage
-from depthguard.errors import InputError
+from depthguard.errors import InputError, check_real, short_repr
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,11 +80,33 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
             surface; 0 where it is not). A measurement farther than that (plus the tolerance and the noise margin)
             saw past the padded geometry and stays a surface instead of making the space behind the robot blind.
     """
-    if invalid not in config.INVALID_POLICIES:
-        raise InputError(f"invalid-pixel policy must be one of {config.INVALID_POLICIES}, got {invalid!r}")
-    if depth.camera != camera.name or depth.shape != camera.shape:
-        raise InputError(f"depth image of camera {depth.camera!r} {depth.shape} given for camera {camera.name!r} "
-                         f"{camera.shape}")
+    # Cheap checks only (no pass over the pixels): the kernels trust what they get. A DepthImage built by hand is
+    # checked in full by depth_image / checked_frame, which the monitor calls.
+    if not isinstance(camera, PinholeCamera):
+        raise InputError(f"camera must be a PinholeCamera, got {type(camera).__name__}", field="camera")
+    if not isinstance(depth, DepthImage):
+        raise InputError(f"depth must be a DepthImage (depthguard.depth_image), got {type(depth).__name__}",
+                         camera=camera.name, field="depth")
+    if not isinstance(invalid, str) or invalid not in config.INVALID_POLICIES:
+        raise InputError(f"invalid-pixel policy must be one of {config.INVALID_POLICIES}, got {short_repr(invalid)}",
+                         field="invalid")
+    data = depth.data
+    if not (isinstance(data, np.ndarray) and not isinstance(data, np.ma.MaskedArray)
+            and data.dtype in (np.dtype(np.uint16), np.dtype(np.float32)) and data.flags.c_contiguous):
+        raise InputError("depth.data must be a C-contiguous uint16 or float32 array: build the frame with "
+                         "depthguard.depth_image", camera=camera.name, field="depth")
+    if depth.camera != camera.name or data.shape != camera.shape:
+        raise InputError(f"depth image of camera {short_repr(depth.camera)} {data.shape} given for camera "
+                         f"{camera.name!r} {camera.shape}")
+    scale = depth.depth_scale
+    if isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating)) or \
+            not 0.0 < float(scale) <= config.DEPTH_SCALE_MAX:
+        raise InputError(f"depth_scale must be in (0, {config.DEPTH_SCALE_MAX:g}] metres per unit, got "
+                         f"{short_repr(scale)}", camera=camera.name, field="depth_scale")
+    if isinstance(hole_pixels, bool) or not isinstance(hole_pixels, (int, np.integer)) or \
+            not 0 <= hole_pixels <= config.MAX_HOLE_PIXELS:
+        raise InputError(f"hole_pixels must be a whole number of pixels in [0, {config.MAX_HOLE_PIXELS}], got "
+                         f"{short_repr(hole_pixels)}", field="hole_pixels")
     h, w = camera.shape
     z_min, z_max = camera.depth_range
     m0, m1, m2 = camera.noise.coefficients()
@@ -98,8 +120,8 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
     n_invalid = int(np.count_nonzero(invalid_mask))
     if robot_near is not None:
         near = _robot_image(robot_near, camera, "robot_near")
-        if not (np.isfinite(robot_tolerance) and robot_tolerance >= 0):
-            raise InputError(f"robot_tolerance must be a non-negative number of metres, got {robot_tolerance!r}")
+        robot_tolerance = check_real(robot_tolerance, "robot_tolerance", minimum=0.0,
+                                     maximum=config.SELF_FILTER_TOLERANCE_MAX, unit="metres", field="robot_tolerance")
         far = near if robot_far is None else _robot_image(robot_far, camera, "robot_far")
         _kernels.robot_filter(z_start, invalid_mask, np.float32(invalid_start), near, far, robot_far is not None,
                               float(robot_tolerance), m0, m1, m2, z_end, blind)

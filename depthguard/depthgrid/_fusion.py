@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import math
+from collections.abc import Mapping
+
 import numpy as np
 from numba import parallel_chunksize
 
@@ -12,7 +15,7 @@ from depthguard.depth._kernels import block_minimum
 from depthguard.depthgrid import _kernels
 from depthguard.depthgrid._map import DepthGridMap
 from depthguard.depthspace._distance import check_options, check_points, query_arrays
-from depthguard.errors import InputError
+from depthguard.errors import InputError, check_real, short_repr
 from depthguard.results import DistanceResult, Flag
 
 
@@ -95,6 +98,13 @@ class FusedFrames:
                  check: bool = True, robot_near: np.ndarray | None = None,
                  robot_exit: np.ndarray | None = None):
         if check:
+            if not isinstance(grid, DepthGridMap) or not isinstance(rig, Rig) or \
+                    not isinstance(principal, OccupancyImage):
+                raise InputError("FusedFrames needs a DepthGridMap, a Rig and the principal's OccupancyImage (got "
+                                 f"{type(grid).__name__}, {type(rig).__name__}, {type(principal).__name__})")
+            if not isinstance(secondaries, Mapping):
+                raise InputError(f"secondaries must map camera names to free images (or None), got "
+                                 f"{short_repr(secondaries)}", field="secondaries")
             grid.check_rig(rig)
             if principal.camera.name != grid.principal:
                 raise InputError(f"the map's principal camera is {grid.principal!r}, the frame is camera "
@@ -103,13 +113,22 @@ class FusedFrames:
             if unknown:
                 raise InputError(f"cameras {sorted(unknown)} are not secondary cameras of this map "
                                  f"({', '.join(grid.secondaries)})")
-            if not (np.isfinite(margin) and margin >= 0) or int(pad) != pad or pad < 0:
-                raise InputError(f"margin must be >= 0 metres and pad a whole number of pixels >= 0, got {margin}, "
-                                 f"{pad}")
+            margin = check_real(margin, "margin", minimum=0.0, unit="metres", field="margin")
+            robot_tolerance = check_real(robot_tolerance, "robot_tolerance", minimum=0.0,
+                                         maximum=config.SELF_FILTER_TOLERANCE_MAX, unit="metres",
+                                         field="robot_tolerance")
+            if isinstance(pad, bool) or not isinstance(pad, (int, np.integer)) or \
+                    not 0 <= pad <= config.MAX_FUSION_PIXELS:
+                raise InputError(f"pad must be a whole number of pixels in [0, {config.MAX_FUSION_PIXELS}], got "
+                                 f"{short_repr(pad)}", field="pad")
             if principal.robot_pixels and robot_far is None:
                 raise InputError("the principal frame was self-filtered: pass robot_far, where the robot's body ends")
             if robot_near is not None and robot_far is None:
                 raise InputError("robot_near needs robot_far: where the robot's body ends")
+        if not 0 < grid.n_cells <= config.DEPTH_GRID_MAX_CELLS:  # the cell cache below holds a byte per cell
+            raise InputError(f"the depth grid has {grid.n_cells} cells per pixel; at most "
+                             f"{config.DEPTH_GRID_MAX_CELLS} are supported (config.DEPTH_GRID_MAX_CELLS)",
+                             field="n_cells")
         self.grid = grid
         self.principal = principal
         camera = principal.camera
@@ -120,8 +139,10 @@ class FusedFrames:
         free = np.zeros((len(used), h_max, w_max), dtype=np.float32)
         for k, (i, cam) in enumerate(zip(used, cams)):
             image = secondaries[grid.secondaries[i]]
-            if image.shape != cam.shape:
-                raise InputError(f"the free image of camera {cam.name!r} is {image.shape}, the camera is {cam.shape}")
+            if not isinstance(image, np.ndarray) or image.shape != cam.shape:
+                raise InputError(f"the free image of camera {cam.name!r} must be a {cam.shape} array, got "
+                                 f"{getattr(image, 'shape', type(image).__name__)}", camera=cam.name,
+                                 field="secondaries")
             free[k, : cam.height, : cam.width] = image
         self.secondaries = tuple(grid.secondaries[i] for i in used)
         self._stale = len(used) < len(grid.secondaries)
@@ -160,6 +181,9 @@ class FusedFrames:
         """Distances of control points, as :func:`depthguard.single_camera_distances` gives them for one camera.
 
         points_world: (n, 3) float64, metres, world frame. rho, aggregate, unseen: as there.
+
+        A principal frame whose timestamp is NaN or infinite is stale: every point gets distance 0 and
+        ``STALE_CAMERA`` (a secondary camera's staleness is its caller's to decide: pass None for it).
         """
         if check:
             check_options(rho, aggregate, unseen, "exact")
@@ -167,6 +191,9 @@ class FusedFrames:
         principal = self.principal
         camera = principal.camera
         grid = self.grid
+        timestamp = principal.timestamp
+        if timestamp is not None and not math.isfinite(timestamp):  # SPEC 8 "Time": stale, never fresh
+            return DistanceResult.blind(len(points_world), Flag.STALE_CAMERA, {camera.name: timestamp})
         points_camera, distance, direction_camera, count, invalid_count, flags = query_arrays(camera, points_world)
         unchecked = np.full(len(points_world), np.inf)
         if len(points_world):

@@ -2,47 +2,65 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import parallel_chunksize
 
 from depthguard import config
 from depthguard.depth import OccupancyImage
 from depthguard.depthspace import _kernels
-from depthguard.errors import InputError
+from depthguard.errors import InputError, check_real, short_repr
 from depthguard.results import DistanceResult, Flag
 
 
 def check_points(points_world) -> np.ndarray:
-    """Return control points as a C-contiguous (n, 3) float64 array; :class:`InputError` if malformed or not finite.
+    """Return control points as a C-contiguous (n, 3) float64 array (metres, world frame).
 
-    Accepts (3,) for a single point. An empty list gives a (0, 3) array.
+    Accepts a sequence or array of real numbers of shape (n, 3), or (3,) for a single point; an empty list or an
+    array of shape (0,) or (0, 3) gives a (0, 3) array. Raises :class:`InputError` for anything else: a string,
+    a masked array, complex, bool, object or text values, another shape (an (n, 0) array among them), a coordinate
+    that is not finite or beyond ``config.COORDINATE_LIMIT`` metres (naming the point's index).
     """
+    if isinstance(points_world, (str, bytes)):
+        raise InputError(f"points must be numbers of shape (n, 3) (metres, world frame), got a string "
+                         f"{short_repr(points_world)}", field="points")
+    if isinstance(points_world, np.ma.MaskedArray):
+        raise InputError("points must not be a masked array: a masked coordinate has no value (pass the points you "
+                         "mean, as a plain array)", field="points")
     try:
-        points = np.array(points_world, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"points must be numbers of shape (n, 3) ({exc})") from None
-    if points.ndim == 1 and points.shape[0] == 3:
-        points = points[None, :]
-    if points.size == 0:
-        return np.zeros((0, 3))
+        array = np.asarray(points_world)
+    except (TypeError, ValueError) as exc:  # ragged lists, objects numpy cannot read
+        raise InputError(f"points must be numbers of shape (n, 3) ({' '.join(str(exc).split())[:120]})",
+                         field="points") from None
+    if array.dtype.kind not in "fiu":  # checked before converting: complex, bool, object and text never pass
+        raise InputError(f"points must be real numbers (float or int), got dtype {array.dtype}", field="points")
+    points = np.array(array, dtype=np.float64)
+    if points.ndim == 1 and points.shape[0] in (0, 3):
+        points = points.reshape(-1, 3)
     if points.ndim != 2 or points.shape[1] != 3:
-        raise InputError(f"points must have shape (n, 3) (metres, world frame), got {points.shape}")
+        raise InputError(f"points must have shape (n, 3) (metres, world frame), got {points.shape}", field="points")
     bad = ~np.all(np.isfinite(points), axis=1)
     if bad.any():
-        raise InputError(f"point #{int(np.argmax(bad))} is not finite: {points[np.argmax(bad)].tolist()}")
+        i = int(np.argmax(bad))
+        raise InputError(f"point #{i} is not finite: {points[i].tolist()}", field="points")
+    far = np.any(np.abs(points) > config.COORDINATE_LIMIT, axis=1)
+    if far.any():
+        i = int(np.argmax(far))
+        raise InputError(f"point #{i} {points[i].tolist()} is beyond +-{config.COORDINATE_LIMIT:g} m "
+                         "(config.COORDINATE_LIMIT)", field="points")
     return np.ascontiguousarray(points)
 
 
-def check_options(rho: float, aggregate: str, unseen: str, method: str) -> None:
-    """Raise :class:`InputError` for an unknown policy or a rho that is not a positive finite number of metres."""
-    if isinstance(rho, bool) or not isinstance(rho, (int, float, np.floating)) or not (np.isfinite(rho) and rho > 0):
-        raise InputError(f"rho must be a positive number of metres, got {rho!r}")
-    if aggregate not in config.AGGREGATES:
-        raise InputError(f"aggregate must be one of {config.AGGREGATES}, got {aggregate!r}")
-    if unseen not in config.UNSEEN_POLICIES:
-        raise InputError(f"unseen must be one of {config.UNSEEN_POLICIES}, got {unseen!r}")
-    if method not in config.METHODS:
-        raise InputError(f"method must be one of {config.METHODS}, got {method!r}")
+def check_options(rho: float, aggregate: str, unseen: str, method: str) -> float:
+    """Raise :class:`InputError` for an unknown policy or a rho that is not a number of metres in
+    [``config.RHO_MIN``, ``config.RHO_MAX``]; return rho as a float."""
+    rho = check_real(rho, "rho", minimum=config.RHO_MIN, maximum=config.RHO_MAX, unit="metres", field="rho")
+    for name, value, allowed in (("aggregate", aggregate, config.AGGREGATES), ("unseen", unseen, config.UNSEEN_POLICIES),
+                                 ("method", method, config.METHODS)):
+        if not isinstance(value, str) or value not in allowed:
+            raise InputError(f"{name} must be one of {allowed}, got {short_repr(value)}", field=name)
+    return rho
 
 
 def query_arrays(camera, points_world: np.ndarray):
@@ -67,12 +85,20 @@ def single_camera_distances(occupancy: OccupancyImage, points_world, rho: float 
         unseen: ``"occupied"`` (fail-safe) or ``"free"``.
         method: ``"exact"`` (SPEC) or ``"paper"`` (the 2015 paper's unsafe formulas, for comparison only).
         check: validate arguments; ``False`` skips it for a hot loop that already holds checked arrays.
+
+    A frame whose timestamp is NaN or infinite is stale: every point gets distance 0 and ``STALE_CAMERA``.
     """
     if check:
-        check_options(rho, aggregate, unseen, method)
+        if not isinstance(occupancy, OccupancyImage):
+            raise InputError(f"occupancy must be an OccupancyImage (depthguard.prepare_depth), got "
+                             f"{type(occupancy).__name__}", field="occupancy")
+        rho = check_options(rho, aggregate, unseen, method)
         points_world = check_points(points_world)
     camera = occupancy.camera
     n = points_world.shape[0]
+    timestamp = occupancy.timestamp
+    if timestamp is not None and not math.isfinite(timestamp):  # SPEC 8 "Time": such a frame is stale, never fresh
+        return DistanceResult.blind(n, Flag.STALE_CAMERA, {camera.name: timestamp})
     points_camera, distance, direction_camera, count, invalid_count, flags = query_arrays(camera, points_world)
     blind_distance = np.full(n, np.inf)
     if n:
