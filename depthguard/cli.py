@@ -8,13 +8,23 @@
     depthguard scenario-a [--out DIR]
     depthguard real-room [--out DIR] [--data FOLDER]
 
-Bad input ends with exit status 2 and one line on standard error that says what is wrong.
+Bad input ends with exit status 2 and one line on standard error that says what is wrong (exit status 3 means a bug).
+Numeric options are checked where they are parsed (``inf``, ``nan`` and ``1e999`` are refused), in these ranges:
+
+- ``--rho``: metres in [``config.RHO_MIN``, ``config.RHO_MAX``];
+- ``--d-min``, ``--d-max``, ``--delta-d``: metres in (0, ``config.COORDINATE_LIMIT``], with d-max > d-min and at
+  most ``config.DEPTH_GRID_MAX_CELLS`` cells;
+- ``--duration``: finite seconds, at least one frame period of the scene (1/30 s for the default scenes); longer
+  than the scene simulates the whole scene;
+- ``--seed``: a whole number in [0, ``config.MAX_SEED``]; ``--repeats``: in [1, ``config.MAX_REPEATS``];
+- ``--joints``: finite numbers (radians, or metres for prismatic joints).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 
@@ -29,6 +39,46 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"depthguard: error: {message}\n")
 
 
+def _real(minimum: float, maximum: float, unit: str, above_minimum: bool = False):
+    """An argparse type: a finite number in [minimum, maximum] (``(minimum, maximum]`` with ``above_minimum``).
+    argparse reports a refusal as one line naming the option."""
+
+    def number(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        low_ok = value > minimum if above_minimum else value >= minimum
+        if not (math.isfinite(value) and low_ok and value <= maximum):
+            low = f"{'>' if above_minimum else '>='} {minimum:g}"
+            bounds = f"in {'(' if above_minimum else '['}{minimum:g}, {maximum:g}]" if math.isfinite(maximum) else low
+            raise argparse.ArgumentTypeError(f"must be a finite number of {unit} {bounds}, got {text!r}")
+        return value
+
+    return number
+
+
+def _whole(minimum: int, maximum: int):
+    """An argparse type: a whole number in [minimum, maximum]."""
+
+    def whole(text: str) -> int:
+        try:
+            value = int(text.strip()) if len(text) <= 40 else None
+        except ValueError:
+            value = None
+        if value is None or not minimum <= value <= maximum:
+            shown = text if len(text) <= 40 else text[:37] + "..."
+            raise argparse.ArgumentTypeError(f"must be a whole number in [{minimum}, {maximum}], got {shown!r}")
+        return value
+
+    return whole
+
+
+_METRES = _real(config.RHO_MIN, config.RHO_MAX, "metres")
+_GRID_METRES = _real(0.0, config.COORDINATE_LIMIT, "metres", above_minimum=True)
+_SECONDS = _real(0.0, math.inf, "seconds", above_minimum=True)
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="depthguard", description="Distances between a robot and unknown obstacles, computed in "
                                                      "the depth space of calibrated depth cameras.")
@@ -40,7 +90,8 @@ def _build_parser() -> argparse.ArgumentParser:
                           help="depth image of camera NAME (16-bit PNG/PGM in depth_scale units, .npy, float TIFF)")
     distance.add_argument("--points", required=True, help="control points: CSV with header x,y,z or JSON list of "
                                                           "[x, y, z] (world frame, metres)")
-    distance.add_argument("--rho", type=float, default=config.DEFAULT_RHO, help="surveillance radius, metres")
+    distance.add_argument("--rho", type=_METRES, default=config.DEFAULT_RHO,
+                          help=f"surveillance radius, metres, in [{config.RHO_MIN:g}, {config.RHO_MAX:g}]")
     distance.add_argument("--aggregate", choices=config.AGGREGATES, default=config.DEFAULT_AGGREGATE)
     distance.add_argument("--invalid", choices=config.INVALID_POLICIES, default=config.DEFAULT_INVALID,
                           help="pixels without a measurement: occupied (fail-safe), neighbors, free")
@@ -66,22 +117,26 @@ def _build_parser() -> argparse.ArgumentParser:
                                                   "section 8) and save it")
     build.add_argument("--rig", required=True, help="rig YAML file")
     build.add_argument("--principal", help="principal camera (default: the rig's principal, else its first camera)")
-    build.add_argument("--d-min", type=float, default=config.DEPTH_GRID_D_MIN, help="grid start, metres")
-    build.add_argument("--d-max", type=float, default=None, help="grid end, metres (default: 343 cells)")
-    build.add_argument("--delta-d", type=float, default=config.DEPTH_GRID_DELTA_D, help="cell depth, metres")
+    build.add_argument("--d-min", type=_GRID_METRES, default=config.DEPTH_GRID_D_MIN, help="grid start, metres")
+    build.add_argument("--d-max", type=_GRID_METRES, default=None, help="grid end, metres (default: 343 cells)")
+    build.add_argument("--delta-d", type=_GRID_METRES, default=config.DEPTH_GRID_DELTA_D,
+                       help=f"cell depth, metres (at most {config.DEPTH_GRID_MAX_CELLS} cells in all)")
     build.add_argument("--out", required=True, help="map file to write (.npz)")
 
     simulate = commands.add_parser("simulate", help="simulate a workcell and write its frames, rig, joint states "
                                                      "and ground truth")
     simulate.add_argument("scene", nargs="?", help="scene YAML (default: reference scenario B)")
     simulate.add_argument("--out", required=True, help="output folder")
-    simulate.add_argument("--seed", type=int, default=None, help="sensor-noise seed (default: the scene's)")
-    simulate.add_argument("--duration", type=float, default=None, help="simulate only the first S seconds")
+    simulate.add_argument("--seed", type=_whole(0, config.MAX_SEED), default=None,
+                          help="sensor-noise seed (default: the scene's)")
+    simulate.add_argument("--duration", type=_SECONDS, default=None,
+                          help="simulate only the first S seconds (at least one frame period)")
 
     demo = commands.add_parser("demo", help="the Quick start's main job: the simulated workcell of reference "
                                             "scenario B, each camera's distances against the truth")
     demo.add_argument("--out", default="out/demo", help="output folder for plots and summary.json")
-    demo.add_argument("--duration", type=float, default=None, help="only the first S seconds (default: all 12)")
+    demo.add_argument("--duration", type=_SECONDS, default=None,
+                      help="only the first S seconds, at least one frame (1/30 s) (default: all 12)")
 
     fusion = commands.add_parser("fusion-workcell", help="issue 4: scenario B's shadow and hidden-hand cases, each "
                                                          "camera alone against both fused through the depth grid")
@@ -100,7 +155,8 @@ def _build_parser() -> argparse.ArgumentParser:
     scenario_a = commands.add_parser("scenario-a", help="reference scenario A of the 2015 paper: plots and a "
                                                         "timing table")
     scenario_a.add_argument("--out", default="out/scenario-a", help="output folder for plots and tables")
-    scenario_a.add_argument("--repeats", type=int, default=20, help="timing repetitions per control point position")
+    scenario_a.add_argument("--repeats", type=_whole(1, config.MAX_REPEATS), default=20,
+                            help="timing repetitions per control point position")
     return parser
 
 
@@ -120,7 +176,7 @@ def main(argv=None) -> int:
         if args.command == "demo":
             from depthguard.experiments import workcell
 
-            return workcell.main(out=args.out, duration=_positive(args.duration, "--duration"))
+            return workcell.main(out=args.out, duration=_duration(args.duration, config.SIM_RATE))
         if args.command == "fusion-workcell":
             from depthguard.experiments import fusion_workcell
 
@@ -187,6 +243,16 @@ def _build_map(args) -> int:
     from depthguard import load_rig
     from depthguard.depthgrid import build_map, save_map
 
+    from depthguard.errors import InputError
+
+    d_max = config.DEPTH_GRID_D_MIN + config.DEPTH_GRID_CELLS * config.DEPTH_GRID_DELTA_D if args.d_max is None \
+        else args.d_max
+    if d_max <= args.d_min:
+        raise InputError(f"--d-max ({d_max:g} m) must be larger than --d-min ({args.d_min:g} m)")
+    cells = math.ceil((d_max - args.d_min) / args.delta_d - 1e-9)
+    if cells > config.DEPTH_GRID_MAX_CELLS:
+        raise InputError(f"--delta-d {args.delta_d:g} m gives {cells} cells from {args.d_min:g} to {d_max:g} m; at "
+                         f"most {config.DEPTH_GRID_MAX_CELLS} are supported")
     rig = load_rig(args.rig)
     start = time.perf_counter()
     grid = build_map(rig, args.principal, d_min=args.d_min, d_max=args.d_max, delta_d=args.delta_d)
@@ -202,7 +268,7 @@ def _simulate(args) -> int:
     from depthguard.simulation import default_workcell, load_workcell, write_episode
 
     workcell = load_workcell(args.scene) if args.scene else default_workcell()
-    duration = _positive(args.duration, "--duration")
+    duration = _duration(args.duration, workcell.rate)
     frames = None if duration is None else range(min(workcell.n_frames, int(round(duration * workcell.rate))))
     n = workcell.n_frames if frames is None else len(frames)
     print(f"simulating {n} frames of {', '.join(workcell.rig.cameras)} at {workcell.rate:g} Hz into {args.out}")
@@ -211,11 +277,12 @@ def _simulate(args) -> int:
     return 0
 
 
-def _positive(value, name):
+def _duration(value, rate: float):
+    """``--duration`` (finite seconds, or None): at least one frame period of a scene simulated at ``rate`` Hz."""
     from depthguard.errors import InputError
 
-    if value is not None and not value > 0:
-        raise InputError(f"{name} must be a positive number of seconds, got {value}")
+    if value is not None and value < 1.0 / rate:
+        raise InputError(f"--duration must be at least one frame period (1/{rate:g} s), got {value:g} s")
     return value
 
 
@@ -251,6 +318,9 @@ def parse_joints(text: str):
         values = [float(value) for _, value in pairs]
     except ValueError:
         raise InputError(f"--joints: not numbers: {text!r}") from None
+    if not all(math.isfinite(value) for value in values):
+        raise InputError(f"--joints: values must be finite numbers (radians, or metres for prismatic joints): "
+                         f"{text!r}")
     if not all(named):
         return values
     names = [name.strip() for name, _ in pairs]

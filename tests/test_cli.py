@@ -12,6 +12,7 @@ import pytest
 from PIL import Image
 
 import depthguard as dg
+from depthguard import config
 from depthguard._points_io import load_points
 from depthguard.cli import main
 from depthguard.depth import write_depth_png
@@ -374,3 +375,73 @@ def test_several_cameras_fuse_through_the_depth_grid(work, tmp_path, capsys):
     single = dg.DistanceMonitor(rig).query({"front": frames["front"]}, points)
     fused = np.array([np.inf if r["distance"] is None else r["distance"] for r in built])
     assert np.all(fused >= single.distance - 1e-12)
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# numeric options: ranges checked where they are parsed (issue 12); exit 2, one line naming the option
+
+
+def _option_cases(work, tmp):
+    distance = ["distance", "--rig", work["rig"], "--depth", f"front={work['png']}", "--points", work["csv"]]
+    build = ["build-map", "--rig", work["rig2"], "--out", tmp / "map.npz"]
+    simulate = ["simulate", "--out", tmp / "sim"]
+    return {
+        "rho inf": (distance + ["--rho", "inf"], "--rho"),
+        "rho 1e999": (distance + ["--rho", "1e999"], "--rho"),
+        "rho -inf": (distance + ["--rho=-inf"], "--rho"),
+        "rho zero": (distance + ["--rho", "0"], "--rho"),
+        "rho too large": (distance + ["--rho", str(config.RHO_MAX * 2)], "--rho"),
+        "d-min nan": (build + ["--d-min", "nan"], "--d-min"),
+        "d-min zero": (build + ["--d-min", "0"], "--d-min"),
+        "d-max inf": (build + ["--d-max", "inf"], "--d-max"),
+        "d-max below d-min": (build + ["--d-min", "1.0", "--d-max", "0.5"], "--d-max"),
+        "delta-d nan": (build + ["--delta-d", "nan"], "--delta-d"),
+        "delta-d tiny": (build + ["--delta-d", "1e-9"], "--delta-d"),
+        "simulate duration inf": (simulate + ["--duration", "inf"], "--duration"),
+        "simulate duration nan": (simulate + ["--duration", "nan"], "--duration"),
+        "simulate duration below a frame": (simulate + ["--duration", "1e-9"], "--duration"),
+        "simulate seed negative": (simulate + ["--seed=-1"], "--seed"),
+        "simulate seed 2**64": (simulate + ["--seed", str(2**64)], "--seed"),
+        "simulate seed 1.5": (simulate + ["--seed", "1.5"], "--seed"),
+        "simulate seed 5000 digits": (simulate + ["--seed", "9" * 5000], "--seed"),
+        "demo duration 1e-9": (["demo", "--out", tmp / "demo", "--duration", "1e-9"], "--duration"),
+        "demo duration inf": (["demo", "--out", tmp / "demo", "--duration", "inf"], "--duration"),
+        "repeats zero": (["scenario-a", "--out", tmp / "a", "--repeats", "0"], "--repeats"),
+        "repeats huge": (["scenario-a", "--out", tmp / "a", "--repeats", "1000000000"], "--repeats"),
+    }
+
+
+OPTION_CASES = ["rho inf", "rho 1e999", "rho -inf", "rho zero", "rho too large", "d-min nan", "d-min zero",
+                "d-max inf", "d-max below d-min", "delta-d nan", "delta-d tiny", "simulate duration inf",
+                "simulate duration nan", "simulate duration below a frame", "simulate seed negative",
+                "simulate seed 2**64", "simulate seed 1.5", "simulate seed 5000 digits", "demo duration 1e-9",
+                "demo duration inf", "repeats zero", "repeats huge"]
+
+
+@pytest.mark.parametrize("case", OPTION_CASES)
+def test_numeric_option_out_of_range_exits_2_naming_it(work, capsys, tmp_path, case):
+    argv, option = _option_cases(work, tmp_path)[case]
+    status, out, err = run(argv, capsys)
+    assert status == 2, err
+    assert out == "" and "Traceback" not in err
+    assert err.startswith("depthguard: error: ") and err.count("\n") == 1
+    assert option in err
+    assert not (tmp_path / "sim").exists() and not (tmp_path / "demo").exists() and not (tmp_path / "map.npz").exists()
+
+
+def test_all_option_cases_are_tested(work, tmp_path):
+    assert sorted(_option_cases(work, tmp_path)) == sorted(OPTION_CASES)
+
+
+@pytest.mark.parametrize("text", ["nan,0", "0,inf", "a=1e999,b=0", "a=-inf"])
+def test_joints_must_be_finite(text):
+    from depthguard.cli import parse_joints
+
+    with pytest.raises(dg.InputError) as exc_info:
+        parse_joints(text)
+    assert "--joints" in str(exc_info.value) and "finite" in str(exc_info.value)
+
+
+def test_edges_of_the_ranges_are_accepted(work, capsys):
+    for rho in (config.RHO_MIN, config.RHO_MAX):
+        assert len(distance_json(work, capsys, "--rho", repr(rho))) == len(POINTS)

@@ -150,7 +150,9 @@ def load_depth(path, camera: PinholeCamera, timestamp: float | None = None) -> D
 
     A ``uint16`` file is in units of ``camera.depth_scale``; a float file is in metres.
     """
+    if not isinstance(camera, PinholeCamera):
+        raise InputError(f"camera must be a PinholeCamera, got {type(camera).__name__}", field="camera")
     try:
-        return depth_image(read_depth_file(path), camera, timestamp)
+        return depth_image(read_depth_file(path, camera), camera, timestamp)
     except DepthImageError as exc:
         raise exc.with_source(str(path)) from None
