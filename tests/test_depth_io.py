@@ -821,3 +821,23 @@ def test_npy_header_parser_reads_numpys_own_files():
         assert shape == array.shape and dtype == array.dtype
         assert fortran_order == (array.flags.f_contiguous and not array.flags.c_contiguous)
         assert len(raw) - offset == array.nbytes
+
+
+@pytest.mark.parametrize("compression", ["tiff_deflate", "tiff_lzw", "tiff_adobe_deflate"])
+def test_compressed_tiff_is_read_by_value(tmp_path, compression):
+    data = np.linspace(0.5, 3.0, 12, dtype=np.float32).reshape(3, 4)
+    data[1, 2] = np.nan
+    Image.fromarray(data).save(tmp_path / "c.tif", compression=compression)
+    np.testing.assert_array_equal(dg.read_depth_file(tmp_path / "c.tif"), data)
+
+
+def test_load_depth_refuses_a_wrong_size_before_decoding(tmp_path, monkeypatch):
+    loads = []
+    monkeypatch.setattr(ImageFile.ImageFile, "load", lambda self: loads.append(1))
+    path = tmp_path / "wide.png"
+    path.write_bytes(hostile.png_bytes(16000, 12000))
+    with pytest.raises(dg.DepthImageError) as exc_info:
+        dg.load_depth(path, make_camera(8, 6, name="wrist"))
+    assert exc_info.value.camera == "wrist" and exc_info.value.field == "width/height"
+    assert "wide.png" in str(exc_info.value)
+    assert not loads
