@@ -282,3 +282,8 @@ MAX_REPEATS = 10_000
 
 #: Self-filtering geometries (depthguard.self_filter): padded convex hulls, capsules, or the meshes themselves.
 SELF_FILTER_GEOMETRIES = ("hulls", "capsules", "meshes")
+
+#: Robot descriptions (depthguard.robots): a URDF file of at most MAX_URDF_BYTES, each collision mesh file of at most
+#: MAX_MESH_FILE_BYTES (a device or a runaway file is never read whole).
+MAX_URDF_BYTES = 16 << 20
+MAX_MESH_FILE_BYTES = 128 << 20

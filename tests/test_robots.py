@@ -16,6 +16,7 @@ segment, in the link frame and in the world at random configurations. ``pytest -
 from __future__ import annotations
 
 import math
+import os
 import shutil
 import sys
 import threading
@@ -901,3 +902,131 @@ def test_default_robot_without_pybullet_says_how_to_get_it(monkeypatch):
         default_robot_path()
     with pytest.raises(RobotError, match="pybullet_data"):
         RobotModel.panda()
+
+
+# ------------------------------------------------------------------ issue 12: what a URDF may read, and joint values
+
+
+def test_mesh_path_leaving_the_urdf_folder_is_refused_naming_link_and_path(tmp_path):
+    folder = tmp_path / "robot"
+    folder.mkdir()
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    write_synthetic(outside)  # outside/meshes/link_7.stl exists
+    path = write_synthetic(folder, mesh="../outside/meshes/link_7.stl")
+    with pytest.raises(RobotError) as info:
+        RobotModel.from_urdf(path)
+    message = str(info.value)
+    assert "link 'tool'" in message and "../outside/meshes/link_7.stl" in message and "outside the URDF's folder" \
+        in message and str(path) in message
+    # an explicitly given folder allows it
+    assert "tool" in RobotModel.from_urdf(path, package_dirs=[outside]).collision_meshes
+    absolute = write_synthetic(folder, mesh=f"file://{outside / 'meshes' / 'link_7.stl'}")
+    with pytest.raises(RobotError, match="outside the URDF's folder"):
+        RobotModel.from_urdf(absolute)
+
+
+def test_symbolic_links_are_followed_before_the_check(tmp_path):
+    folder = tmp_path / "robot"
+    folder.mkdir()
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    write_synthetic(outside)
+    (folder / "meshes").mkdir()
+    (folder / "meshes" / "escape.stl").symlink_to(outside / "meshes" / "link_7.stl")
+    path = write_synthetic(folder, mesh="meshes/escape.stl")
+    with pytest.raises(RobotError, match="link 'tool': collision mesh 'meshes/escape.stl' resolves to .*outside"):
+        RobotModel.from_urdf(path)
+    (folder / "meshes" / "inside.stl").symlink_to(folder / "meshes" / "link_7.stl")  # a link within the folder
+    assert "tool" in RobotModel.from_urdf(write_synthetic(folder, mesh="meshes/inside.stl")).collision_meshes
+
+
+BILLION_LAUGHS = """<?xml version="1.0"?>
+<!DOCTYPE robot [
+  <!ENTITY lol "lol">
+  <!ENTITY lol2 "&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;">
+  <!ENTITY lol3 "&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;">
+]>
+<robot name="&lol3;"><link name="base"/></robot>
+"""
+
+EXTERNAL_ENTITY = """<?xml version="1.0"?>
+<!DOCTYPE robot [<!ENTITY secret SYSTEM "file:///etc/hostname">]>
+<robot name="x"><link name="&secret;"/></robot>
+"""
+
+EXTERNAL_DTD = """<?xml version="1.0"?>
+<!DOCTYPE robot SYSTEM "http://example.invalid/robot.dtd">
+<robot name="x"><link name="base"/></robot>
+"""
+
+
+@pytest.mark.parametrize("text", [BILLION_LAUGHS, EXTERNAL_ENTITY, EXTERNAL_DTD], ids=["entities", "external entity",
+                                                                                      "external dtd"])
+def test_urdf_with_a_doctype_is_refused_before_any_entity_is_expanded(tmp_path, text):
+    path = tmp_path / "robot.urdf"
+    path.write_text(text)
+    with pytest.raises(RobotError, match="document type declaration") as info:
+        RobotModel.from_urdf(path)
+    assert "lol" not in str(info.value) and str(path) in str(info.value)
+
+
+def test_urdf_that_is_not_a_regular_file_or_too_large_is_refused(tmp_path, monkeypatch):
+    fifo = tmp_path / "robot.urdf"
+    os.mkfifo(fifo)
+    with pytest.raises(RobotError, match="not a regular file"):
+        RobotModel.from_urdf(fifo)  # returns at once: a FIFO is never opened for reading
+    with pytest.raises(RobotError, match="folder"):
+        RobotModel.from_urdf(tmp_path)
+    (tmp_path / "big").mkdir()
+    path = write_synthetic(tmp_path / "big")
+    monkeypatch.setattr(config, "MAX_URDF_BYTES", 1000)
+    with pytest.raises(RobotError, match="more than the 1000 allowed"):
+        RobotModel.from_urdf(path)
+
+
+def test_mesh_that_is_not_a_regular_file_or_too_large_is_refused(tmp_path, monkeypatch):
+    path = write_synthetic(tmp_path, mesh="meshes/pipe.stl")
+    os.mkfifo(tmp_path / "meshes" / "pipe.stl")
+    with pytest.raises(RobotError, match="link 'tool': collision mesh .*pipe.stl.*not a regular file"):
+        RobotModel.from_urdf(path)
+    path = write_synthetic(tmp_path)
+    monkeypatch.setattr(config, "MAX_MESH_FILE_BYTES", 1000)
+    with pytest.raises(RobotError, match="link 'tool': collision mesh .*link_7.stl.*more than the 1000 allowed"):
+        RobotModel.from_urdf(path)
+
+
+@pytest.mark.parametrize("name", ["robot\0.urdf", 7, None])
+def test_urdf_path_that_is_no_file_name_is_a_robot_error(name):
+    with pytest.raises(RobotError):
+        RobotModel.from_urdf(name)
+
+
+def test_bad_package_dirs_are_a_robot_error(tmp_path):
+    path = write_synthetic(tmp_path)
+    for dirs in (5, [None], ["a\0b"]):
+        with pytest.raises(RobotError, match="package_dirs"):
+            RobotModel.from_urdf(path, package_dirs=dirs)
+
+
+@pytest.mark.parametrize("values", [np.full(7, 0.1 + 0.2j), np.zeros(7, dtype=bool), ["0.1"] * 7,
+                                    np.zeros(7, dtype=object), np.ma.masked_array(np.zeros(7))],
+                         ids=["complex", "bool", "strings", "object", "masked"])
+def test_joint_values_are_refused_before_conversion(iiwa, values):
+    with pytest.raises(InputError) as info:
+        iiwa.joint_vector(values)
+    assert info.value.field == "joints"
+    with pytest.raises(InputError) as info:
+        iiwa.control_point_positions(values)
+    assert info.value.field == "q"
+    by_name = dict(zip(iiwa.joint_names, [0.0] * 6 + [True]))
+    with pytest.raises(InputError):
+        iiwa.joint_vector(by_name)
+
+
+@pytest.mark.parametrize("tolerance", [math.nan, -0.1, "0.01", None, True])
+def test_limit_tolerance_must_be_a_number(iiwa, tolerance):
+    with pytest.raises(InputError) as info:
+        iiwa.joint_vector(np.zeros(7), limit_tolerance=tolerance)
+    assert info.value.field == "limit_tolerance"
+    assert iiwa.joint_vector(np.zeros(7), limit_tolerance=math.inf).shape == (7,)

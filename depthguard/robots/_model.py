@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import numbers
 import threading
 import types
 from collections.abc import Mapping
@@ -14,7 +15,7 @@ import pinocchio as pin
 import trimesh
 
 from depthguard import config
-from depthguard.errors import InputError, RigError, RobotError
+from depthguard.errors import InputError, RigError, RobotError, short_repr
 from depthguard.robots._capsules import LinkCapsule, fit_capsule
 from depthguard.robots._urdf import UrdfDescription, collision_mesh, parse_urdf
 from depthguard.scenes import Capsule
@@ -250,7 +251,7 @@ class RobotModel:
         padding = _check_padding(padding)
         description = parse_urdf(path, package_dirs)
         try:
-            model = pin.buildModelFromUrdf(str(description.path))
+            model = pin.buildModelFromXML(description.xml)  # the text parse_urdf read and checked
         except Exception as exc:  # pinocchio raises RuntimeError or ValueError with urdfdom's message
             raise RobotError(f"pinocchio cannot build the kinematic model ({exc})",
                              source=str(description.path)) from None
@@ -390,10 +391,7 @@ class RobotModel:
                              field="joints")
         else:
             values = joints
-        try:
-            q = np.array(values, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise InputError(f"expected {self.n_joints} numbers, got {values!r}", field="joints") from None
+        q = _real_vector(values, self.n_joints, "joints")
         if q.shape != (self.n_joints,):
             raise InputError(f"expected {self.n_joints} values (one per joint: {', '.join(self.joint_names)}), got "
                              f"shape {q.shape}", field="joints")
@@ -405,8 +403,10 @@ class RobotModel:
         if bad.any():
             names = [f"{self.joint_names[i]}={q[i]}" for i in np.flatnonzero(bad)]
             raise InputError(f"joint values must be finite: {', '.join(names)}", field=field_name)
-        if limit_tolerance < 0 or math.isnan(limit_tolerance):
-            raise InputError(f"limit_tolerance must be >= 0, got {limit_tolerance}", field="limit_tolerance")
+        if isinstance(limit_tolerance, bool) or not isinstance(limit_tolerance, numbers.Real) or \
+                not limit_tolerance >= 0:  # NaN fails too; +inf accepts any finite value
+            raise InputError(f"limit_tolerance must be a number >= 0 (or inf), got {short_repr(limit_tolerance)}",
+                             field="limit_tolerance")
         out = (q < self.lower - limit_tolerance) | (q > self.upper + limit_tolerance)
         if out.any():
             names = [f"{self.joint_names[i]}={q[i]:.6g} not in [{self.lower[i]:.6g}, {self.upper[i]:.6g}]"
@@ -417,10 +417,7 @@ class RobotModel:
     def _q(self, q, check: bool) -> np.ndarray:
         if not check:
             return np.ascontiguousarray(q, dtype=np.float64)
-        try:
-            q = np.asarray(q, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise InputError(f"expected (n,) = ({self.n_joints},) numbers, got {q!r}", field="q") from None
+        q = _real_vector(q, self.n_joints, "q")
         if q.shape != (self.n_joints,):
             raise InputError(f"expected shape ({self.n_joints},) in the order of joint_names, got {q.shape}; build "
                              "it by name with joint_vector()", field="q")
@@ -490,6 +487,26 @@ class RobotModel:
     def __repr__(self) -> str:
         return (f"RobotModel(name={self.name!r}, joints={len(self.joint_names)}, links with geometry="
                 f"{len(self.link_names)}, control points={len(self.control_points)}, padding={self.padding:g})")
+
+
+def _real_vector(values, n: int, field_name: str) -> np.ndarray:
+    """``values`` as a float64 array, refusing before conversion what is not real numbers (strings, complex, bools,
+    objects, masked arrays): numpy would turn "0.1" or 1+2j into a float silently."""
+    if isinstance(values, (str, bytes)) or isinstance(values, np.ma.MaskedArray):
+        raise InputError(f"expected {n} numbers, got {short_repr(values)}", field=field_name)
+    if isinstance(values, (list, tuple)):  # numpy would read [0.1, True] as floats: look at each value
+        for value in values:
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+                raise InputError(f"expected {n} real numbers (radians or metres), got {short_repr(value)} among them",
+                                 field=field_name)
+    try:
+        array = np.asarray(values)
+    except (TypeError, ValueError):
+        raise InputError(f"expected {n} numbers, got {short_repr(values)}", field=field_name) from None
+    if array.dtype.kind not in "fiu":
+        raise InputError(f"expected {n} real numbers (radians or metres), got {short_repr(values)} "
+                         f"(dtype {array.dtype})", field=field_name)
+    return np.array(array, dtype=np.float64)
 
 
 def _control_point(item) -> ControlPoint:

@@ -8,21 +8,37 @@ form: the file order of the joints, their limits, and each link's ``<collision>`
 Mesh file names are resolved as ROS and pinocchio do: ``package://pkg/rel/path`` is looked up as ``<dir>/pkg/rel/path``
 in each of ``package_dirs`` (and as ``<dir>/rel/path`` when ``<dir>`` is itself called ``pkg``), ``file:///abs`` is an
 absolute path, and any other name is relative to the URDF's directory.
+
+What a URDF may read (a URDF is input from outside, like a rig file):
+
+- Mesh files must lie, after following ``..`` and symbolic links, inside the URDF's folder or inside one of the
+  ``package_dirs`` given explicitly. A mesh name that leads elsewhere (``../../secret.stl``, ``file:///etc/...``, a
+  symbolic link out of the folder) is a :class:`RobotError` naming the link and the path; to use meshes kept
+  elsewhere, pass their folder in ``package_dirs``.
+- The URDF and each mesh are regular files (not a device, pipe or folder) of at most ``config.MAX_URDF_BYTES`` and
+  ``config.MAX_MESH_FILE_BYTES`` bytes, read once through :mod:`depthguard._files`; a mesh is decoded from those
+  bytes by trimesh, which opens no other file (an OBJ's material library is not read: collision needs none).
+- The XML may not have a document type declaration (``<!DOCTYPE ...>``): no DTD, no entity declarations, so no
+  entity expansion (internal or external) and no file or network access while parsing. The same bytes go to
+  pinocchio, which therefore builds its model from exactly the text that was checked.
 """
 
 from __future__ import annotations
 
+import io
 import math
 import os
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+import xml.parsers.expat
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
 from depthguard import config
-from depthguard.errors import RobotError
+from depthguard._files import read_bytes
+from depthguard.errors import RobotError, short_repr
 
 #: Joint types with one degree of freedom, which depthguard accepts.
 MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
@@ -71,6 +87,7 @@ class UrdfDescription:
         joints: every joint, in file order.
         root: the link that is no joint's child.
         collisions: link name -> its collision elements (only links that have some), in file order.
+        xml: the URDF's text as it was read and checked (pinocchio builds its model from it).
     """
 
     path: Path
@@ -79,6 +96,7 @@ class UrdfDescription:
     joints: tuple[UrdfJoint, ...]
     root: str
     collisions: dict[str, tuple[UrdfCollision, ...]]
+    xml: str = field(default="", repr=False)
 
     @property
     def movable_joints(self) -> tuple[UrdfJoint, ...]:
@@ -190,11 +208,19 @@ def parse_urdf(path, package_dirs=None) -> UrdfDescription:
     joint type depthguard does not accept (floating, planar), lacks the limits of a movable joint, or names a mesh
     file that does not exist.
     """
+    if not isinstance(path, (str, os.PathLike)) or "\0" in str(path):
+        raise RobotError(f"the URDF path must be a file name, got {short_repr(path)}", field="path")
     path = Path(path)
-    if not path.is_file():
+    if not _exists(path):
         raise RobotError("URDF file not found", source=str(path))
+    data = read_bytes(path, what="URDF file", max_bytes=config.MAX_URDF_BYTES, error=RobotError)
     try:
-        root_element = ET.parse(path).getroot()
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise RobotError("not UTF-8 text (a URDF is UTF-8 XML)", source=str(path)) from None
+    _refuse_doctype(data, path)
+    try:
+        root_element = ET.fromstring(text)
     except ET.ParseError as exc:
         raise RobotError(f"not valid XML ({exc})", source=str(path)) from None
     if root_element.tag != "robot":
@@ -231,7 +257,34 @@ def parse_urdf(path, package_dirs=None) -> UrdfDescription:
         raise RobotError(f"the URDF must have exactly one root link, found {roots or 'none (a cycle)'}",
                          source=str(path))
     return UrdfDescription(path=path, name=root_element.get("name", ""), links=tuple(links), joints=tuple(joints),
-                           root=roots[0], collisions=collisions)
+                           root=roots[0], collisions=collisions, xml=text)
+
+
+def _refuse_doctype(data: bytes, path: Path) -> None:
+    """RobotError if the XML ``data`` has a document type declaration (a DTD: entity declarations, external
+    entities). Scanned with expat before ElementTree parses it, so no declared entity is ever expanded."""
+
+    def refuse(*_):
+        raise RobotError("a URDF may not have a document type declaration (<!DOCTYPE ...>): DTDs and entities are "
+                         "not read", source=str(path))
+
+    scanner = xml.parsers.expat.ParserCreate()
+    scanner.SetParamEntityParsing(xml.parsers.expat.XML_PARAM_ENTITY_PARSING_NEVER)
+    scanner.StartDoctypeDeclHandler = refuse
+    scanner.EntityDeclHandler = refuse
+    scanner.ExternalEntityRefHandler = refuse
+    try:
+        scanner.Parse(data, True)
+    except xml.parsers.expat.ExpatError as exc:
+        raise RobotError(f"not valid XML ({exc})", source=str(path)) from None
+
+
+def _exists(path: Path) -> bool:
+    try:
+        return path.exists()
+    except (OSError, ValueError):  # a name too long, an embedded null byte
+        return False
+
 
 
 def _joint(element, path: Path, links: set) -> UrdfJoint:
@@ -317,11 +370,30 @@ def _package_dirs(path: Path, package_dirs) -> list[Path]:
         return [path.parent]
     if isinstance(package_dirs, (str, os.PathLike)):
         package_dirs = [package_dirs]
+    if not isinstance(package_dirs, (list, tuple)) or not all(
+            isinstance(d, (str, os.PathLike)) and "\0" not in str(d) for d in package_dirs):
+        raise RobotError(f"package_dirs must be a folder or a list of folders, got {short_repr(package_dirs)}",
+                         field="package_dirs", source=str(path))
     return [Path(d) for d in package_dirs]
 
 
+def _allowed_roots(urdf_path: Path, package_dirs: list[Path]) -> list[Path]:
+    """The folders mesh files may come from, symbolic links resolved: the URDF's own and the package_dirs."""
+    roots = []
+    for folder in [urdf_path.parent, *package_dirs]:
+        try:
+            roots.append(folder.resolve())
+        except (OSError, RuntimeError):  # a symbolic link loop: nothing can be inside it
+            continue
+    return roots
+
+
 def resolve_mesh_path(filename: str, urdf_path: Path, package_dirs: list[Path], *, link: str) -> Path:
-    """The file a URDF mesh name refers to; :class:`RobotError` naming the link and every place looked in."""
+    """The file a URDF mesh name refers to, symbolic links resolved; :class:`RobotError` naming the link and every
+    place looked in, or the path when it leads out of the URDF's folder and the ``package_dirs`` (module docstring).
+    """
+    if "\0" in filename:
+        raise RobotError(f"link {link!r}: collision mesh name contains a NUL character", source=str(urdf_path))
     if filename.startswith("package://"):
         rest = filename[len("package://"):]
         package, _, relative = rest.partition("/")
@@ -335,8 +407,14 @@ def resolve_mesh_path(filename: str, urdf_path: Path, package_dirs: list[Path], 
     else:
         candidates = [Path(filename) if os.path.isabs(filename) else urdf_path.parent / filename]
     for candidate in candidates:
-        if candidate.is_file():
-            return candidate
+        if _exists(candidate):  # a file, or something the bounded reader refuses by name (a FIFO, a device)
+            resolved = candidate.resolve()
+            roots = _allowed_roots(urdf_path, package_dirs)
+            if not any(resolved.is_relative_to(root) for root in roots):
+                raise RobotError(f"link {link!r}: collision mesh {filename!r} resolves to {str(resolved)!r}, outside "
+                                 f"the URDF's folder and package_dirs ({', '.join(str(r) for r in roots)}); pass its "
+                                 "folder in package_dirs to allow it", source=str(urdf_path))
+            return resolved
     raise RobotError(f"link {link!r}: collision mesh {filename!r} not found (looked for "
                      f"{', '.join(str(c) for c in candidates)})", source=str(urdf_path))
 
@@ -368,7 +446,14 @@ def collision_mesh(collisions: tuple[UrdfCollision, ...], source: Path) -> trime
 
 def _load_mesh(mesh_path: Path, link: str, source: Path) -> trimesh.Trimesh:
     try:
-        mesh = trimesh.load(str(mesh_path), force="mesh", process=False)
+        data = read_bytes(mesh_path, what="collision mesh", max_bytes=config.MAX_MESH_FILE_BYTES, error=RobotError)
+    except RobotError as exc:
+        raise RobotError(f"link {link!r}: collision mesh {str(mesh_path)!r}: {exc.message}", source=str(source)) \
+            from None
+    try:
+        # From the bytes just read, by the suffix's format: trimesh opens no file of its own (no resolver).
+        mesh = trimesh.load(io.BytesIO(data), file_type=mesh_path.suffix.lower().lstrip("."), force="mesh",
+                            process=False)
     except Exception as exc:  # trimesh raises many kinds of errors for unreadable files
         raise RobotError(f"link {link!r}: cannot read collision mesh {str(mesh_path)!r} ({type(exc).__name__}: "
                          f"{exc})", source=str(source)) from None
