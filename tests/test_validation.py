@@ -714,3 +714,75 @@ def test_age_rule_at_its_edges(rig, top, clean):
     assert not any(Flag.STALE_CAMERA in f for f in monitor.query({"top": frame}, IN_VIEW, now=5.1).flags)
     assert_blind(monitor.query({"top": frame}, IN_VIEW, now=5.1 + 1e-6), Flag.STALE_CAMERA)
     assert dg.DistanceMonitor(rig, max_age=config.MAX_AGE_LIMIT).max_age == config.MAX_AGE_LIMIT
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# property tests: whatever a rig entry, a point array or a timestamp holds, the answer is a named error or a result
+# that keeps the rules
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+from hypothesis.extra import numpy as hnp  # noqa: E402
+
+YAML_VALUES = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.integers(min_value=10**300, max_value=10**400)
+    | st.floats(allow_nan=True, allow_infinity=True) | st.text(max_size=8),
+    lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=6), inner, max_size=4),
+    max_leaves=24)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(where=st.sampled_from(["camera", "rig"]), key=st.sampled_from(CAMERA_KEYS + RIG_KEYS + ("D", "extra", "a")),
+       value=YAML_VALUES)
+def test_any_value_in_a_rig_gives_a_rig_or_a_rig_error(where, key, value):
+    entry = camera_entry("a")
+    data = {"cameras": [entry]}
+    (entry if where == "camera" else data)[key] = value
+    try:
+        rig = dg.rig_from_dict(data)
+    except dg.RigError as exc:
+        assert "\n" not in str(exc) and len(str(exc)) < 1000
+        return
+    camera = rig.camera(rig.principal or "a")  # what was accepted keeps the ranges
+    assert 0 < camera.width <= config.MAX_IMAGE_SIDE and config.FOCAL_LENGTH_MIN <= camera.fx <= config.INTRINSICS_LIMIT
+    assert np.isfinite(camera.T_world_camera).all() and math.isfinite(camera.depth_range[0])
+    assert key in RIG_KEYS + CAMERA_KEYS  # an unknown key never passes
+
+
+@settings(max_examples=200, deadline=None)
+@given(hnp.arrays(dtype=hnp.scalar_dtypes(), shape=hnp.array_shapes(min_dims=0, max_dims=3, min_side=0, max_side=4)))
+def test_any_array_of_points_is_checked_or_refused(array):
+    from depthguard.depthspace import check_points
+
+    try:
+        points = check_points(array)
+    except dg.InputError:
+        return
+    assert array.dtype.kind in "fiu"
+    assert points.dtype == np.float64 and points.ndim == 2 and points.shape[1] == 3
+    assert np.isfinite(points).all() and (np.abs(points) <= config.COORDINATE_LIMIT).all()
+
+
+@pytest.fixture(scope="module")
+def time_setup(rig, clean):
+    fresh = dg.DistanceMonitor(rig).query({"top": clean}, IN_VIEW)
+    assert np.all(fresh.distance > 0.1)
+    return fresh.distance
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(timestamp=st.floats(allow_nan=True, allow_infinity=True, width=64),
+       now=st.none() | st.floats(min_value=-1e9, max_value=1e9),
+       max_age=st.none() | st.floats(min_value=1e-6, max_value=config.MAX_AGE_LIMIT))
+def test_a_frame_is_used_only_when_its_time_is_right(rig, clean, time_setup, timestamp, now, max_age):
+    if max_age is not None and now is None:
+        return
+    result = dg.DistanceMonitor(rig, max_age=max_age).query({"top": hand_frame(clean, "top", timestamp)}, IN_VIEW,
+                                                              now=now)
+    right = math.isfinite(timestamp) and (now is None or timestamp <= now + config.CLOCK_SKEW_TOLERANCE) and (
+        max_age is None or now - timestamp <= max_age)
+    if right:
+        np.testing.assert_array_equal(result.distance, time_setup)
+        assert not any(Flag.STALE_CAMERA in f for f in result.flags)
+    else:
+        assert_blind(result, Flag.STALE_CAMERA)
