@@ -239,6 +239,7 @@ def _distance(args) -> int:
 
 def _build_map(args) -> int:
     import time
+    from pathlib import Path
 
     from depthguard import load_rig
     from depthguard.depthgrid import build_map, save_map
@@ -253,6 +254,9 @@ def _build_map(args) -> int:
     if cells > config.DEPTH_GRID_MAX_CELLS:
         raise InputError(f"--delta-d {args.delta_d:g} m gives {cells} cells from {args.d_min:g} to {d_max:g} m; at "
                          f"most {config.DEPTH_GRID_MAX_CELLS} are supported")
+    out = Path(args.out)
+    if out.exists() and not out.is_file():  # a folder, a FIFO, a device: never written to
+        raise InputError(f"--out {args.out}: exists and is not a regular file")
     rig = load_rig(args.rig)
     start = time.perf_counter()
     grid = build_map(rig, args.principal, d_min=args.d_min, d_max=args.d_max, delta_d=args.delta_d)

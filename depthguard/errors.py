@@ -11,8 +11,8 @@ fix the rig or the driver::
     ├── RenderingError    no headless OpenGL (EGL) context, or its OpenGL lacks what rendering needs
     └── SceneError        a simulation scene file (depthguard.simulation) is malformed or describes the impossible
 
-Two helpers phrase such errors alike everywhere: :func:`short_repr` (a value the user gave, cut short for a one-line
-message) and :func:`check_real` (a real number within a range, with its unit).
+Three helpers phrase such errors alike everywhere: :func:`short_repr` (a value the user gave, cut short for a one-line
+message), :func:`check_real` (a real number within a range, with its unit) and :func:`check_path` (a file name).
 """
 
 from __future__ import annotations
@@ -107,3 +107,19 @@ def check_real(value, name: str, *, minimum: float | None = None, maximum: float
             (maximum is not None and number > maximum):
         raise error(f"{name} must be {wanted}, got {short_repr(value)}", **context)
     return number
+
+
+def check_path(path, what: str, error: type[DepthguardError] | None = None, **context):
+    """``path`` as a :class:`pathlib.Path` after checking that it is a file name: a ``str`` or ``os.PathLike``
+    without NUL characters (``None``, a number or bytes are refused with ``error``, default :class:`InputError`)."""
+    import os
+    from pathlib import Path
+
+    error = InputError if error is None else error
+    if not isinstance(path, (str, os.PathLike)):
+        raise error(f"{what} must be a file name (str or path), got {short_repr(path)}", **context)
+    text = os.fspath(path)
+    if not isinstance(text, str) or "\0" in text or not text:
+        raise error(f"{what} must be a non-empty file name without NUL characters, got {short_repr(path)}",
+                    **context)
+    return Path(text)

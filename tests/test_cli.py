@@ -445,3 +445,13 @@ def test_joints_must_be_finite(text):
 def test_edges_of_the_ranges_are_accepted(work, capsys):
     for rho in (config.RHO_MIN, config.RHO_MAX):
         assert len(distance_json(work, capsys, "--rho", repr(rho))) == len(POINTS)
+
+
+def test_build_map_out_that_is_not_a_regular_file_is_refused(work, capsys, tmp_path):
+    import os
+
+    fifo = tmp_path / "map.npz"
+    os.mkfifo(fifo)
+    for out in (fifo, tmp_path):
+        status, out_text, err = run(["build-map", "--rig", work["rig2"], "--out", out], capsys)
+        assert status == 2 and out_text == "" and "--out" in err and err.count("\n") == 1

@@ -786,3 +786,30 @@ def test_a_frame_is_used_only_when_its_time_is_right(rig, clean, time_setup, tim
         assert not any(Flag.STALE_CAMERA in f for f in result.flags)
     else:
         assert_blind(result, Flag.STALE_CAMERA)
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# file names given to the loaders
+
+
+@pytest.mark.parametrize("path", [None, 5, b"rig.yaml", "", "rig\0.yaml", ["rig.yaml"]])
+def test_loaders_refuse_what_is_no_file_name(top, path):
+    with pytest.raises(dg.RigError):
+        dg.load_rig(path)
+    with pytest.raises(dg.RigError) as exc_info:
+        dg.load_camera_info(path, camera="depth")
+    assert exc_info.value.camera == "depth" and exc_info.value.field == "camera_info"
+    with pytest.raises(dg.DepthImageError) as exc_info:
+        dg.load_depth(path, top)
+    assert exc_info.value.camera == "top"
+    with pytest.raises(dg.RigError):
+        dg.rig_from_dict({"cameras": [camera_entry()]}, base_dir=path)
+
+
+def test_save_rig_refuses_what_is_no_rig_or_no_file_name(tmp_path, rig):
+    with pytest.raises(dg.RigError):
+        dg.save_rig({"cameras": []}, tmp_path / "rig.yaml")
+    with pytest.raises(dg.RigError):
+        dg.save_rig(rig, None)
+    with pytest.raises(dg.InputError):
+        dg.load_depth(tmp_path / "d.png", "top")

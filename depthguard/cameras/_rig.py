@@ -42,7 +42,7 @@ from depthguard import config
 from depthguard._files import read_yaml
 from depthguard.cameras._noise import NoiseModel
 from depthguard.cameras._pinhole import PinholeCamera
-from depthguard.errors import RigError, short_repr
+from depthguard.errors import RigError, check_path, short_repr
 
 _INTRINSIC_KEYS = ("width", "height", "fx", "fy", "cx", "cy")
 
@@ -200,7 +200,7 @@ _KEY_HINTS.update({key: "give the pose as 'T_world_camera' (4x4, optical frame -
 
 def load_rig(path) -> Rig:
     """Read a rig YAML file (safe loader; no code runs). Raises :class:`RigError` naming the camera and field."""
-    path = Path(path)
+    path = check_path(path, "rig file", RigError)
     data = read_yaml(path, what="rig file", error=RigError)
     try:
         return rig_from_dict(data, base_dir=path.parent)
@@ -222,7 +222,9 @@ _RigDumper.add_representer(list, _represent_list)
 
 def save_rig(rig: Rig, path) -> None:
     """Write ``rig`` as a YAML file that :func:`load_rig` reads back to an equal rig."""
-    Path(path).write_text(yaml.dump(rig.to_dict(), Dumper=_RigDumper, sort_keys=False))
+    if not isinstance(rig, Rig):
+        raise RigError(f"save_rig needs a Rig, got {type(rig).__name__}")
+    check_path(path, "rig file", RigError).write_text(yaml.dump(rig.to_dict(), Dumper=_RigDumper, sort_keys=False))
 
 
 def rig_from_dict(data, base_dir=".") -> Rig:
@@ -234,6 +236,7 @@ def rig_from_dict(data, base_dir=".") -> Rig:
     """
     if not isinstance(data, dict):
         raise RigError(f"a rig must be a mapping with a 'cameras' list, got {type(data).__name__}")
+    base_dir = check_path(base_dir, "base_dir", RigError)
     plain = _plain(data)
     try:
         rig_file = _RigFile.model_validate(plain)
@@ -244,7 +247,7 @@ def rig_from_dict(data, base_dir=".") -> Rig:
         rig_noise = rig_file.noise.model() if rig_file.noise is not None else NoiseModel.none()
     cameras: dict[str, PinholeCamera] = {}
     for entry in rig_file.cameras:
-        camera = _camera_from(entry, rig_file.depth_scale, rig_noise, Path(base_dir))
+        camera = _camera_from(entry, rig_file.depth_scale, rig_noise, base_dir)
         if camera.name in cameras:
             raise RigError("appears twice in the rig", camera=camera.name, field="name")
         cameras[camera.name] = camera
@@ -438,7 +441,7 @@ def load_camera_info(path, camera: str | None = None, rectified: bool = False) -
     ``camera`` and the field (matrices by their camera_calibration names: camera_matrix, distortion_coefficients,
     projection_matrix).
     """
-    path = Path(path)
+    path = check_path(path, "camera_info file", RigError, camera=camera, field="camera_info")
     where = f"camera_info {path}"
     data = read_yaml(path, what="camera_info file", error=RigError, camera=camera, field="camera_info")
     if not isinstance(data, dict):

@@ -10,7 +10,7 @@ import numpy as np
 from depthguard import config
 from depthguard.cameras import PinholeCamera
 from depthguard.depth._io import read_depth_file
-from depthguard.errors import DepthImageError, InputError, short_repr
+from depthguard.errors import DepthImageError, InputError, check_path, short_repr
 
 
 @dataclass(frozen=True, eq=False)
@@ -152,6 +152,7 @@ def load_depth(path, camera: PinholeCamera, timestamp: float | None = None) -> D
     """
     if not isinstance(camera, PinholeCamera):
         raise InputError(f"camera must be a PinholeCamera, got {type(camera).__name__}", field="camera")
+    path = check_path(path, "depth image", DepthImageError, camera=camera.name)
     try:
         return depth_image(read_depth_file(path, camera), camera, timestamp)
     except DepthImageError as exc:

@@ -38,7 +38,7 @@ import trimesh
 
 from depthguard import config
 from depthguard._files import read_bytes
-from depthguard.errors import RobotError, short_repr
+from depthguard.errors import RobotError, check_path, short_repr
 
 #: Joint types with one degree of freedom, which depthguard accepts.
 MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
@@ -208,9 +208,7 @@ def parse_urdf(path, package_dirs=None) -> UrdfDescription:
     joint type depthguard does not accept (floating, planar), lacks the limits of a movable joint, or names a mesh
     file that does not exist.
     """
-    if not isinstance(path, (str, os.PathLike)) or "\0" in str(path):
-        raise RobotError(f"the URDF path must be a file name, got {short_repr(path)}", field="path")
-    path = Path(path)
+    path = check_path(path, "URDF file", RobotError)
     if not _exists(path):
         raise RobotError("URDF file not found", source=str(path))
     data = read_bytes(path, what="URDF file", max_bytes=config.MAX_URDF_BYTES, error=RobotError)
