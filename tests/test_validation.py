@@ -46,8 +46,8 @@ def assert_lists_known_keys(message: str, keys) -> None:
     assert "known keys: " + ", ".join(keys) in message
 
 
-@pytest.mark.parametrize("typo, meant", [("fxx", "fx"), ("depth_rnage", "depth_range"), ("T_world_cam", "T_world_camera"),
-                                         ("Width", "width")])
+@pytest.mark.parametrize("typo, meant", [("fxx", "fx"), ("depth_rnage", "depth_range"),
+                                         ("T_world_cam", "T_world_camera"), ("Width", "width")])
 def test_misspelled_camera_key_is_refused_naming_it_and_listing_the_known_keys(tmp_path, typo, meant):
     entry = camera_entry("left")
     entry[typo] = entry.pop(meant)

@@ -56,8 +56,8 @@ def check_options(rho: float, aggregate: str, unseen: str, method: str) -> float
     """Raise :class:`InputError` for an unknown policy or a rho that is not a number of metres in
     [``config.RHO_MIN``, ``config.RHO_MAX``]; return rho as a float."""
     rho = check_real(rho, "rho", minimum=config.RHO_MIN, maximum=config.RHO_MAX, unit="metres", field="rho")
-    for name, value, allowed in (("aggregate", aggregate, config.AGGREGATES), ("unseen", unseen, config.UNSEEN_POLICIES),
-                                 ("method", method, config.METHODS)):
+    for name, value, allowed in (("aggregate", aggregate, config.AGGREGATES),
+                                 ("unseen", unseen, config.UNSEEN_POLICIES), ("method", method, config.METHODS)):
         if not isinstance(value, str) or value not in allowed:
             raise InputError(f"{name} must be one of {allowed}, got {short_repr(value)}", field=name)
     return rho
