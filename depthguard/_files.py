@@ -156,6 +156,10 @@ def load_yaml(text: str, *, source, error: type[DepthguardError] = InputError, *
         raise error(f"malformed YAML ({_one_line(exc)})", source=str(source), **context) from None
     except yaml.YAMLError as exc:
         raise error(f"malformed YAML ({_one_line(exc)})", source=str(source), **context) from None
+    except (ValueError, OverflowError) as exc:  # a scalar no Python value holds: an integer of 4301+ digits, a
+        # timestamp such as 2001-13-45
+        raise error(f"malformed YAML: a value that cannot be read ({_one_line(exc)[:200]})", source=str(source),
+                    **context) from None
     except RecursionError:  # nesting inside a single scalar flow cannot get here, but stay safe
         raise error(f"YAML nested deeper than {config.MAX_NESTING} levels", source=str(source), **context) from None
 
