@@ -12,10 +12,11 @@ unit vectors from the nearest point towards the control point, zero when none).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 from scipy.spatial import cKDTree
 
 from depthguard import config
+from depthguard._jit import kernel
 from depthguard.depth import DepthImage
 from depthguard.depthspace._distance import check_points
 from depthguard.depthspace._kernels import cube_window
@@ -30,7 +31,7 @@ def valid_metres(depth: DepthImage, camera) -> np.ndarray:
     return d
 
 
-@njit(parallel=True, cache=True, error_model="numpy")
+@kernel(parallel=True)
 def _nearest_points_in_windows(depth_m, points_camera, rho, fx, fy, cx, cy, near_eps, distance, direction):
     height, width = depth_m.shape
     for i in prange(points_camera.shape[0]):

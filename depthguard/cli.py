@@ -7,6 +7,7 @@
     depthguard fusion-workcell [--out DIR] [--scene SCENE.yaml ...] [--all-frames]
     depthguard scenario-a [--out DIR]
     depthguard real-room [--out DIR] [--data FOLDER]
+    depthguard warmup
 
 Bad input ends with exit status 2 and one line on standard error that says what is wrong (exit status 3 means a bug).
 Numeric options are checked where they are parsed (``inf``, ``nan`` and ``1e999`` are refused), in these ranges:
@@ -157,6 +158,9 @@ def _build_parser() -> argparse.ArgumentParser:
     scenario_a.add_argument("--out", default="out/scenario-a", help="output folder for plots and tables")
     scenario_a.add_argument("--repeats", type=_whole(1, config.MAX_REPEATS), default=20,
                             help="timing repetitions per control point position")
+
+    commands.add_parser("warmup", help="compile every numba kernel that is not cached yet (after an install or an "
+                                       "upgrade), so that no query has to")
     return parser
 
 
@@ -177,6 +181,10 @@ def main(argv=None) -> int:
             from depthguard.experiments import workcell
 
             return workcell.main(out=args.out, duration=_duration(args.duration, config.SIM_RATE))
+        if args.command == "warmup":
+            from depthguard import _warmup
+
+            return _warmup.main()
         if args.command == "fusion-workcell":
             from depthguard.experiments import fusion_workcell
 

@@ -1,10 +1,12 @@
 """Numba kernels of the per-frame preparation. They trust their inputs; ``_prepare.py`` validates them."""
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
+
+from depthguard._jit import kernel
 
 
-@njit(parallel=True, cache=True, error_model="numpy")
+@kernel(parallel=True)
 def start_depths(raw, scale, z_min, z_max, m0, m1, m2, invalid_start, z_start, invalid, z_end, blind):
     """Per pixel, the depth from which its frustum is possibly occupied.
 
@@ -34,7 +36,7 @@ def start_depths(raw, scale, z_min, z_max, m0, m1, m2, invalid_start, z_start, i
                 invalid[v, u] = 1
 
 
-@njit(parallel=True, cache=True, error_model="numpy")
+@kernel(parallel=True)
 def block_minimum(z_start, block, out):
     """out[i, j] = min of z_start over the block of pixels [i*block, (i+1)*block) x [j*block, (j+1)*block).
 
@@ -55,7 +57,7 @@ def block_minimum(z_start, block, out):
             out[bi, bj] = m
 
 
-@njit(parallel=True, cache=True, error_model="numpy")
+@kernel(parallel=True)
 def robot_filter(z_start, invalid, policy_start, robot_near, robot_far, has_far, tolerance, m0, m1, m2, z_end, blind):
     """Self-filtering (SPEC section 7): remove the robot from what a frame says is possibly occupied.
 
@@ -81,7 +83,7 @@ def robot_filter(z_start, invalid, policy_start, robot_near, robot_far, has_far,
                                     m0, m1, m2, z_end, blind)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _filter_robot_pixel(v, u, z_start, invalid, policy_start, robot_near, robot_far, has_far, tolerance, m0, m1, m2,
                         z_end, blind):
     """:func:`robot_filter` on one pixel where the robot is rendered."""
@@ -116,7 +118,7 @@ def _filter_robot_pixel(v, u, z_start, invalid, policy_start, robot_near, robot_
         blind[v, u] = d_r
 
 
-@njit(cache=True, error_model="numpy")
+@kernel()
 def fill_small_holes(raw, scale, invalid, hole_pixels, m0, m1, m2, z_start, z_end, blind, visited, stack):
     """``invalid="neighbors"``: fill holes (8-connected pixels without a measurement) that are small — at most
     ``hole_pixels`` pixels, or nowhere more than 2 pixels thick (no pixel of the hole has all 8 neighbours in it:

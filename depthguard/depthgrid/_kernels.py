@@ -16,8 +16,9 @@ free[j][q] is j's measured depth minus its noise margin (0 where j measured noth
 """
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
+from depthguard._jit import kernel
 from depthguard.depthspace._kernels import (
     AGG_MIN,
     FLAG_ROBOT_BLIND_SPOT,
@@ -31,7 +32,7 @@ from depthguard.depthspace._kernels import (
 )
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def measured_free(raw, scale, z_min, z_max, m0, m1, m2):
     """How far one pixel saw its ray free: its measurement (raw * scale metres) minus the noise margin, at least 0;
     -1 where it measured nothing (or outside [z_min, z_max])."""
@@ -41,7 +42,7 @@ def measured_free(raw, scale, z_min, z_max, m0, m1, m2):
     return -1.0
 
 
-@njit(parallel=True, cache=True, error_model="numpy")
+@kernel(parallel=True)
 def free_depths(raw, scale, z_min, z_max, m0, m1, m2, free):
     """Per pixel of a secondary frame, the depth up to which the camera saw the ray free: the measured depth minus
     its noise margin, 0 where it measured nothing (or outside [z_min, z_max]). Writes free (h, w) float32."""
@@ -51,7 +52,7 @@ def free_depths(raw, scale, z_min, z_max, m0, m1, m2, free):
             free[v, u] = max(measured_free(raw[v, u], scale, z_min, z_max, m0, m1, m2), 0.0)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def surface_cell_end(zs, d_min, delta_d):
     """Where the grid cell holding a measured surface at depth zs ends (d_min for a surface before the grid)."""
     if zs < d_min:
@@ -59,7 +60,7 @@ def surface_cell_end(zs, d_min, delta_d):
     return d_min + (np.floor((zs - d_min) / delta_d) + 1.0) * delta_d
 
 
-@njit(parallel=True, cache=True, error_model="numpy")
+@kernel(parallel=True)
 def seen_free_depths(raw, scale, z_min, z_max, m0, m1, m2, z_start, invalid, invalid_start, blind, free):
     """Per pixel of a secondary camera's frame, how far it saw the ray free: its measurement minus the noise margin
     (:func:`free_depths`; the robot's own surface included: the ray is free up to it); where it measured nothing,
@@ -80,7 +81,7 @@ def seen_free_depths(raw, scale, z_min, z_max, m0, m1, m2, z_start, invalid, inv
                 free[v, u] = 0.0
 
 
-@njit(parallel=True, cache=True, error_model="numpy")
+@kernel(parallel=True)
 def principal_arrays(z_start, z_end, invalid, invalid_start, blind, robot_near, robot_far, robot_exit, slack, m0, m1,
                      m2, certain, z_end_fused, blind_from, unchecked_from):
     """Per pixel of the principal frame, what fusion starts from:
@@ -121,7 +122,7 @@ def principal_arrays(z_start, z_end, invalid, invalid_start, blind, robot_near, 
                     unchecked_from[v, u] = start
 
 
-@njit(parallel=True, cache=True, error_model="numpy")
+@kernel(parallel=True)
 def erode_free(free, sizes, pad, out):
     """out[j, r, q] = the smallest free[j] over the pixels within pad of (r, q) (a (2 pad + 1)^2 square), 0 where
     that square leaves camera j's image: a cell's footprint then needs only its own pixels read, and the grown
@@ -151,7 +152,7 @@ def erode_free(free, sizes, pad, out):
                 out[j, r, q] = m
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def face_box(corners, offset, u, v, z, z_near):
     """The 4 corners of principal pixel (u, v)'s frustum at depth z, projected into one secondary camera: (ok,
     x_lo, x_hi, y_lo, y_hi, largest depth); not ok when a corner is behind the camera or nearer than it measures."""
@@ -176,7 +177,7 @@ def face_box(corners, offset, u, v, z, z_near):
     return True, x_lo, x_hi, y_lo, y_hi, far
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def box_seen_through(eroded, width, height, x_lo, x_hi, y_lo, y_hi, need):
     """Whether every pixel whose footprint meets [x_lo, x_hi] x [y_lo, y_hi], grown by the erosion's pad, lies in
     the image and saw at least ``need`` metres."""
@@ -197,7 +198,7 @@ _ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
 CLASSIFY_RUN = 8  # cells classified together: neighbours share a face, projected once
 
 
-@njit(cache=True, error_model="numpy")
+@kernel()
 def classify_run(u, v, k_a, k_b, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin, cells):
     """Classify cells k_a..k_b (at most 64) of principal pixel (u, v) into cells[v, u, k]: 1 when some secondary
     camera saw through the whole cell, else 2 (occupied, or hidden from every camera). Each face between two cells is
@@ -236,7 +237,7 @@ def classify_run(u, v, k_a, k_b, d_min, delta_d, corners, offsets, eroded, sizes
         cells[v, u, k_a + i] = 1 if (cleared >> np.uint64(i)) & np.uint64(1) else 2
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _next_not_free(cells, v, u, k, k_end, step):
     """The first cell from k towards k_end (inclusive, by step +-1) not known to be free, or k_end + step."""
     while k != k_end + step and cells[v, u, k] == 1:
@@ -244,7 +245,7 @@ def _next_not_free(cells, v, u, k, k_end, step):
     return k
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel()
 def occupied_in(u, v, k_lo, k_hi, highest, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin, cells):
     """The highest (or lowest) occupied cell in k_lo..k_hi of principal pixel (u, v), -1 for none.
 
@@ -277,7 +278,7 @@ def occupied_in(u, v, k_lo, k_hi, highest, d_min, delta_d, corners, offsets, ero
 NO_FREE_RUN = 1 << 32  # free_run's value for "no run known": the empty range 1..0
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def remember_free_run(free_run, v, u, k_lo, k_hi):
     """Record that cells k_lo..k_hi of pixel (u, v) are all free: free_run[v, u] = (first << 32) | last of one run
     of cells known free, grown by this one where they touch, else replaced by the longer. One 8-byte store, so a
@@ -295,7 +296,7 @@ def remember_free_run(free_run, v, u, k_lo, k_hi):
     free_run[v, u] = (np.int64(k_lo) << 32) | np.int64(k_hi)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def known_free(lo, hi, u, v, d_min, delta_d, n_cells, free_run):
     """Whether every cell of the candidate range [lo, hi] (inside the grid) of pixel (u, v) is known free."""
     if lo < d_min or hi > d_min + n_cells * delta_d:
@@ -305,21 +306,22 @@ def known_free(lo, hi, u, v, d_min, delta_d, n_cells, free_run):
         run & 0xFFFFFFFF)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, d_min, delta_d, corners, offsets, eroded, sizes, z_near,
               margin, cells, free_run):
     """:func:`nearest_confirmed`'s walk down and up from cell k_star (or from the ends of the known free run holding
     it) to the first occupied cell each way within k_lo..k_hi. Returns (k_left, k_right), -1 for none, or (-2, -2)
     when k_star's own cell is occupied. Records the free run found between them."""
-    if not in_run and occupied_in(u, v, k_star, k_star, False, d_min, delta_d, corners, offsets, eroded, sizes, z_near,
-                                  margin, cells) >= 0:
+    # np.bool_, not a literal True or False, for which numba would compile occupied_in twice.
+    if not in_run and occupied_in(u, v, k_star, k_star, np.bool_(False), d_min, delta_d, corners, offsets, eroded,
+                                  sizes, z_near, margin, cells) >= 0:
         return -2, -2
     down_from = run_lo - 1 if in_run else k_star - 1
     up_from = run_hi + 1 if in_run else k_star + 1
-    k_left = occupied_in(u, v, k_lo, down_from, True, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin,
-                         cells)
-    k_right = occupied_in(u, v, up_from, k_hi, False, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin,
-                          cells)
+    k_left = occupied_in(u, v, k_lo, down_from, np.bool_(True), d_min, delta_d, corners, offsets, eroded, sizes, z_near,
+                         margin, cells)
+    k_right = occupied_in(u, v, up_from, k_hi, np.bool_(False), d_min, delta_d, corners, offsets, eroded, sizes,
+                          z_near, margin, cells)
     # Everything between the two is free now.
     free_lo = k_left + 1 if k_left >= 0 else (min(k_lo, run_lo) if in_run else k_lo)
     free_hi = k_right - 1 if k_right >= 0 else (max(k_hi, run_hi) if in_run else k_hi)
@@ -327,7 +329,7 @@ def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, d_min, delta_d, 
     return k_left, k_right
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel()
 def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, u, v, d_min, delta_d, n_cells,
                       corners, offsets, eroded, sizes, z_near, margin, cells, free_run):
     """The nearest occupied part of [lo, hi] along principal pixel (u, v)'s frustum, nearer than ``bound2``: the
@@ -401,7 +403,7 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
     return best2, best_z
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_from, bound2, d_min, delta_d, n_cells,
                    corners, offsets, eroded, sizes, z_near, margin, cells, free_run):
     """Squared distance from P to what is occupied along principal pixel (u, v) after fusion, its depth z*, and
@@ -449,7 +451,7 @@ ACC_COUNT, ACC_INVALID, ACC_INSIDE, ACC_SUM_D, ACC_SX, ACC_SY, ACC_SZ, ACC_BEST2
 N_ACC = 12
 
 
-@njit(cache=True, error_model="numpy")
+@kernel()
 def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, certain, blind_from, fx, fy, cx, cy,
                prune_min, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, free_run,
                scratch, acc):
@@ -483,7 +485,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
         b0 = (v - 0.5 - cy) / fy
         b1 = (v + 0.5 - cy) / fy
         # Gather the row's pixels with something possibly occupied in reach, and the depth span that holds it.
-        m = 0
+        m = np.int64(0)  # not a literal 0, for which numba would compile _guess_piece_row once more
         for u in range(spans[v, 0], spans[v, 1] + 1):
             zs = np.float64(z_start[v, u])
             bf = np.float64(blind_from[v, u])
@@ -564,7 +566,66 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
     acc[ACC_BEST_INVALID] = best_invalid
 
 
-@njit(parallel=True, cache=True, error_model="numpy")
+@kernel()
+def fused_region(X, Y, Z, rho, unchecked_from, blind_from, certain, unchecked_block_min, block, width, height, fx, fy,
+                 cx, cy, z_min, z_max, unseen_occupied, near_eps, inside_tol, spans, region, out_direction):
+    """The first step of one control point P's fused query: its surveillance region (``spans``, (height, 2) int64,
+    as :func:`surveillance_region` fills it), written into region (8,): flags, P unseen?, unseen_d, nx, ny, nz,
+    v_lo, v_hi (v_hi < v_lo: no rows to visit). Clears out_direction (3,). Returns the distance to the space between
+    links that fusion takes for the robot and does not check (inf beyond rho)."""
+    f, unseen_here, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi = surveillance_region(
+        X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_max, unseen_occupied, near_eps, inside_tol, spans,
+        out_direction)
+    unchecked = np.inf
+    if v_lo <= v_hi and not unseen_here:
+        # The space between links: the nearest of it, as the single camera finds its blind spot (blocks in rings
+        # round P's pixel, skipped by their nearest start depth). (``certain`` stands in for its per-pixel "invalid"
+        # array, whose answer is not used here.)
+        u2 = _nearest_in_blocks(X, Y, Z, rho, unchecked_from, blind_from, np.bool_(True), certain,
+                                unchecked_block_min, block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi, near_eps, spans)[0]
+        if u2 < rho * rho:
+            unchecked = np.sqrt(u2)
+    region[0] = f
+    region[1] = 1.0 if unseen_here else 0.0
+    region[2] = unseen_d
+    region[3] = nx
+    region[4] = ny
+    region[5] = nz
+    region[6] = v_lo
+    region[7] = v_hi if not unseen_here else v_lo - 1
+    return unchecked
+
+
+@kernel()
+def fused_finish(X, Y, Z, aggregate, region, acc, fx, fy, cx, cy, inside_tol, min_direction, out_direction):
+    """The last step of one control point P's fused query: the sums of its row tasks (acc, (row_chunks, N_ACC)),
+    added in a fixed order, so that the answer does not depend on the threads' timing, and aggregated. region (8,):
+    from :func:`fused_region`. Returns (distance, count, invalid_count, flags) and writes the direction."""
+    f = int(region[0])
+    if region[1] != 0.0:
+        return 0.0, 1, 0, f
+    total = acc[0].copy()
+    for c in range(1, acc.shape[0]):
+        part = acc[c]
+        for a in (ACC_COUNT, ACC_INVALID, ACC_SUM_D, ACC_SX, ACC_SY, ACC_SZ):
+            total[a] += part[a]
+        total[ACC_INSIDE] = max(total[ACC_INSIDE], part[ACC_INSIDE])
+        # The nearest pixel; among equals, the first in (v, u) order, as one scan of the rows would find.
+        if part[ACC_BEST2] < total[ACC_BEST2] or (part[ACC_BEST2] == total[ACC_BEST2] and (
+                part[ACC_BEST_V] < total[ACC_BEST_V] or (part[ACC_BEST_V] == total[ACC_BEST_V]
+                                                         and part[ACC_BEST_U] < total[ACC_BEST_U]))):
+            for a in (ACC_BEST2, ACC_BEST_U, ACC_BEST_V, ACC_BEST_Z, ACC_BEST_INVALID):
+                total[a] = part[a]
+    if aggregate == AGG_MIN:
+        return _finish_min_at_pixel(X, Y, Z, total[ACC_BEST2], int(total[ACC_BEST_U]), int(total[ACC_BEST_V]),
+                                    total[ACC_BEST_Z], int(total[ACC_BEST_INVALID]), fx, fy, cx, cy, region[2],
+                                    region[3], region[4], region[5], f, inside_tol, out_direction)
+    return _finish_sum(aggregate, int(total[ACC_COUNT]), int(total[ACC_INVALID]), total[ACC_INSIDE] != 0.0,
+                       total[ACC_SUM_D], total[ACC_SX], total[ACC_SY], total[ACC_SZ], total[ACC_BEST2], region[2],
+                       region[3], region[4], region[5], f, inside_tol, min_direction, out_direction)
+
+
+@kernel(parallel=True)
 def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, unchecked_from, unchecked_block_min,
                        block, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, near_eps, inside_tol,
                        min_direction, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells,
@@ -578,35 +639,18 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
 
     Each point's region is split into ``row_chunks`` interleaved sets of rows, and the n * row_chunks tasks run in
     parallel: a point near much clutter does not leave the other threads idle. Their sums are then added in a fixed
-    order, so a query's answer does not depend on the threads' timing.
+    order (:func:`fused_finish`). The parallel loops only call functions compiled on their own: numba compiles a
+    parallel loop's body twice.
     """
     n = points_camera.shape[0]
     height, width = z_start.shape
     spans = np.empty((n, height, 2), dtype=np.int64)
-    region = np.empty((n, 8))  # flags, P unseen?, unseen_d, nx, ny, nz, v_lo, v_hi
+    region = np.empty((n, 8))
     for i in prange(n):
-        X, Y, Z = points_camera[i, 0], points_camera[i, 1], points_camera[i, 2]
-        f, unseen_here, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi = surveillance_region(
-            X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_max, unseen_occupied, near_eps, inside_tol, spans[i],
-            direction[i])
-        unchecked[i] = np.inf
-        if v_lo <= v_hi and not unseen_here:
-            # The space between links that fusion takes for the robot: the nearest of it, as the single camera finds
-            # its blind spot (blocks in rings round P's pixel, skipped by their nearest start depth).
-            # (``certain`` stands in for its per-pixel "invalid" array, whose answer is not used here.)
-            u2 = _nearest_in_blocks(X, Y, Z, rho, unchecked_from, blind_from, True, certain, unchecked_block_min,
-                                    block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi, near_eps, spans[i])[0]
-            if u2 < rho * rho:
-                unchecked[i] = np.sqrt(u2)
-        region[i, 0] = f
-        region[i, 1] = 1.0 if unseen_here else 0.0
-        region[i, 2] = unseen_d
-        region[i, 3] = nx
-        region[i, 4] = ny
-        region[i, 5] = nz
-        region[i, 6] = v_lo
-        region[i, 7] = v_hi if not unseen_here else v_lo - 1
-    prune_min = aggregate == AGG_MIN
+        unchecked[i] = fused_region(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, unchecked_from,
+                                    blind_from, certain, unchecked_block_min, block, width, height, fx, fy, cx, cy,
+                                    z_min, z_max, unseen_occupied, near_eps, inside_tol, spans[i], region[i],
+                                    direction[i])
     acc = np.empty((n, row_chunks, N_ACC))
     scratch = np.empty((n * row_chunks, 5, width))
     for t in prange(n * row_chunks):
@@ -614,36 +658,11 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
         c = t % row_chunks
         fused_rows(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, int(region[i, 6]) + c,
                    int(region[i, 7]), row_chunks, spans[i], z_start, z_end, certain, blind_from, fx, fy, cx, cy,
-                   prune_min, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin,
+                   aggregate == AGG_MIN, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin,
                    cells, free_run, scratch[t], acc[i, c])
     for i in range(n):
-        X, Y, Z = points_camera[i, 0], points_camera[i, 1], points_camera[i, 2]
-        f = int(region[i, 0])
-        if region[i, 1] != 0.0:
-            distance[i], count[i], invalid_count[i], flags[i] = 0.0, 1, 0, f
-            continue
-        total = acc[i, 0].copy()
-        for c in range(1, row_chunks):
-            part = acc[i, c]
-            for a in (ACC_COUNT, ACC_INVALID, ACC_SUM_D, ACC_SX, ACC_SY, ACC_SZ):
-                total[a] += part[a]
-            total[ACC_INSIDE] = max(total[ACC_INSIDE], part[ACC_INSIDE])
-            # The nearest pixel; among equals, the first in (v, u) order, as one scan of the rows would find.
-            if part[ACC_BEST2] < total[ACC_BEST2] or (part[ACC_BEST2] == total[ACC_BEST2] and (
-                    part[ACC_BEST_V] < total[ACC_BEST_V] or (part[ACC_BEST_V] == total[ACC_BEST_V]
-                                                             and part[ACC_BEST_U] < total[ACC_BEST_U]))):
-                for a in (ACC_BEST2, ACC_BEST_U, ACC_BEST_V, ACC_BEST_Z, ACC_BEST_INVALID):
-                    total[a] = part[a]
-        if prune_min:
-            d, k, m, g = _finish_min_at_pixel(X, Y, Z, total[ACC_BEST2], int(total[ACC_BEST_U]),
-                                              int(total[ACC_BEST_V]), total[ACC_BEST_Z], int(total[ACC_BEST_INVALID]),
-                                              fx, fy, cx, cy, region[i, 2], region[i, 3], region[i, 4], region[i, 5],
-                                              f, inside_tol, direction[i])
-        else:
-            d, k, m, g = _finish_sum(aggregate, int(total[ACC_COUNT]), int(total[ACC_INVALID]),
-                                     total[ACC_INSIDE] != 0.0, total[ACC_SUM_D], total[ACC_SX], total[ACC_SY],
-                                     total[ACC_SZ], total[ACC_BEST2], region[i, 2], region[i, 3], region[i, 4],
-                                     region[i, 5], f, inside_tol, min_direction, direction[i])
+        d, k, m, g = fused_finish(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], aggregate, region[i],
+                                  acc[i], fx, fy, cx, cy, inside_tol, min_direction, direction[i])
         distance[i] = d
         count[i] = k
         invalid_count[i] = m

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
+from depthguard._jit import kernel
 from depthguard.depthspace._kernels import frustum_nearest, frustum_nearest_paper
 
 
-@njit(parallel=True, cache=True, error_model="numpy")
+@kernel(parallel=True)
 def _many(points, bounds, nearest_out, distance_out, paper):
     for i in prange(points.shape[0]):
         X, Y, Z = points[i, 0], points[i, 1], points[i, 2]

@@ -8,7 +8,9 @@ The tests hold every kernel against a slow NumPy twin (``tests/naive.py``).
 """
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
+
+from depthguard._jit import kernel
 
 # Aggregation codes (config.AGGREGATES order).
 AGG_MIN = 0
@@ -25,7 +27,7 @@ FLAG_ROBOT_BLIND_SPOT = 32
 SILHOUETTE_PAD = 1e-9
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel()
 def frustum_nearest(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
     """Squared distance from P = (X, Y, Z) to the frustum segment {x/z in [a0, a1], y/z in [b0, b1], z in [z_lo,
     z_hi]} (z_hi may be inf), and the depth z* of its nearest point.
@@ -45,7 +47,7 @@ def frustum_nearest(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
                                 _breakpoint(Y, b1), z_lo, z_hi)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def frustum_direction(X, Y, Z, a0, a1, b0, b1, z, d):
     """The unit vector from the nearest point of a pixel frustum's slice at depth z, (clamp(X, a0 z, a1 z),
     clamp(Y, b0 z, b1 z), z), towards P = (X, Y, Z), which lies d > 0 metres from it."""
@@ -54,7 +56,7 @@ def frustum_direction(X, Y, Z, a0, a1, b0, b1, z, d):
             (Z - z) * inv_d)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(inline=True)
 def guessed_piece(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
     """The minimiser of g on the piece that holds z_g = clamp(Z, z_lo, z_hi), clamped to [z_lo, z_hi].
 
@@ -77,13 +79,13 @@ def guessed_piece(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
     return dx * dx + dy * dy + (Z - z) * (Z - z), z, ok_x & ok_y
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def _breakpoint(c, a):
     """Depth c/a where a*z - c changes sign; -1 (never, for z > 0) when a == 0."""
     return c / a if a != 0.0 else -1.0
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def frustum_nearest_walk(X, Y, Z, a0, a1, b0, b1, t0, t1, t2, t3, z_lo, z_hi):
     """:func:`frustum_nearest` by walking the pieces from z_lo, given the breakpoints t0 = X/a0, t1 = X/a1,
     t2 = Y/b0, t3 = Y/b1 (any value <= z_lo, or NaN, for "none").
@@ -136,7 +138,7 @@ def frustum_nearest_walk(X, Y, Z, a0, a1, b0, b1, t0, t1, t2, t3, z_lo, z_hi):
     return dx * dx + dy * dy + dz * dz, z_star
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def frustum_nearest_paper(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
     """The papers' distance (2015 eqs. 7-8): the frustum point at the fixed depth clamp(Z, z_lo, z_hi) nearest to P.
 
@@ -150,7 +152,7 @@ def frustum_nearest_paper(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
     return dx * dx + dy * dy + dz * dz, z
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def view_boundary(X, Y, Z, tx0, tx1, ty0, ty1, z_min, z_max):
     """Signed distance from P to the boundary of the observed volume and the boundary's inward unit normal.
 
@@ -183,7 +185,7 @@ def view_boundary(X, Y, Z, tx0, tx1, ty0, ty1, z_min, z_max):
     return s, nx, ny, nz
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def cube_window(X, Y, Z, rho, fx, fy, cx, cy, width, height, near_eps):
     """Pixels to visit for P: the image bounding box of the cube [P - rho, P + rho] (SPEC section 5).
 
@@ -203,7 +205,7 @@ def cube_window(X, Y, Z, rho, fx, fy, cx, cy, width, height, near_eps):
     return u_lo, u_hi, v_lo, v_hi
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def footprint_span(t_lo, t_hi, f, c, size):
     """Pixels i in [0, size) whose footprint [i - 1/2, i + 1/2] meets the image coordinates [f*t_lo + c, f*t_hi + c]
     (t: tangents x/z or y/z). Returns (lo, hi), inclusive; lo > hi when there is none."""
@@ -212,7 +214,7 @@ def footprint_span(t_lo, t_hi, f, c, size):
     return int(lo), int(hi)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, u_hi, pad, spans):
     """For each row v in [v_lo, v_hi], the columns whose pixel frustum can come closer than rho to P: those whose
     footprint meets the ball's silhouette (the cone from the optical centre around the ball of radius rho).
@@ -258,13 +260,14 @@ def ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, 
         spans[v, 1] = min(hi, u_hi)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel()
 def _nearest_in_blocks(X, Y, Z, rho, z_start, z_end, bounded, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi,
                        v_lo, v_hi, near_eps, spans):
     """The nearest contributing pixel for ``min``: visit blocks of pixels in rings around P's pixel, skipping a
     block whose minimum start depth lies behind the region or whose bounding frustum is farther than the best
     distance so far. Ties go to the smallest (v, u), as in a full scan. Pixel segments are [z_start, z_end] if
-    ``bounded``, else [z_start, inf).
+    ``bounded``, else [z_start, inf). (Callers pass ``np.bool_(True)``, not ``True``: numba would compile the kernel
+    once for each literal.)
 
     Returns (best d^2 (inf if none below rho^2), v, u, z*, invalid flag of that pixel).
     """
@@ -337,7 +340,7 @@ def _nearest_in_blocks(X, Y, Z, rho, z_start, z_end, bounded, invalid, block_min
     return best2, best_v, best_u, best_z, best_invalid
 
 
-@njit(cache=True, error_model="numpy")
+@kernel()
 def _guess_piece_row(X, Y, Z, b0, b1, z_in, z_hi_in, u_in, m, inv_fx, cx, d2_out, z_out):
     """:func:`guessed_piece` for m pixels of one row (tangents b0, b1): pixel k has column u_in[k] and segment
     [z_in[k], z_hi_in[k]]. Writes d2_out[k] = g(z*) and z_out[k] = z*, or d2_out[k] = -1 where the guessed piece does
@@ -349,7 +352,7 @@ def _guess_piece_row(X, Y, Z, b0, b1, z_in, z_hi_in, u_in, m, inv_fx, cx, d2_out
         z_out[k] = z
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, v_lo, v_hi, spans, scratch):
     """Every contributing pixel for ``mean`` and ``hybrid``: per row, gather the silhouette span's pixels whose
     start depth is not behind the region, take their exact distances (:func:`_guess_piece_row`, walking where the
@@ -379,7 +382,7 @@ def _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, v_lo, v_
         b1 = (v + 0.5 - cy) * inv_fy
         row = z_start[v]
         row_end = z_end[v]
-        m = 0
+        m = np.int64(0)  # not a literal 0, for which numba would compile _guess_piece_row once more
         for u in range(spans[v, 0], spans[v, 1] + 1):
             zs = row[u]
             if zs <= z_far:  # else it and what it hides lie behind the region (also inf: nothing)
@@ -415,7 +418,7 @@ def _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, v_lo, v_
     return count, n_invalid, inside, sum_d, sx, sy, sz, best2
 
 
-@njit(cache=True, error_model="numpy")
+@kernel()
 def surveillance_region(X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_max, unseen_occupied, near_eps,
                         inside_tol, spans, out_direction):
     """What every query of one point P starts with (single camera and fused): the observed volume's boundary and the
@@ -453,7 +456,7 @@ def surveillance_region(X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_ma
     return flags, unseen_here, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block, fx, fy, cx,
                 cy, z_min, z_max, aggregate, unseen_occupied, near_eps, inside_tol, min_direction, spans, scratch,
                 out_direction, out_blind):
@@ -478,8 +481,8 @@ def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_b
     if unseen_here:
         return 0.0, 1, 0, flags
     if has_blind and v_lo <= v_hi:
-        blind2 = _nearest_in_blocks(X, Y, Z, rho, blind, blind, False, invalid, blind_block_min, block, fx, fy, cx, cy,
-                                    u_lo, u_hi, v_lo, v_hi, near_eps, spans)[0]
+        blind2 = _nearest_in_blocks(X, Y, Z, rho, blind, blind, np.bool_(False), invalid, blind_block_min, block, fx,
+                                    fy, cx, cy, u_lo, u_hi, v_lo, v_hi, near_eps, spans)[0]
         out_blind[0] = np.sqrt(blind2)
 
     if aggregate == AGG_MIN:
@@ -487,8 +490,8 @@ def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_b
         best_invalid = 0
         if v_lo <= v_hi:
             best2, best_v, best_u, best_z, best_invalid = _nearest_in_blocks(
-                X, Y, Z, rho, z_start, z_end, True, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi,
-                near_eps, spans)
+                X, Y, Z, rho, z_start, z_end, np.bool_(True), invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi,
+                v_lo, v_hi, near_eps, spans)
         return _finish_min_at_pixel(X, Y, Z, best2, best_u, best_v, best_z, best_invalid, fx, fy, cx, cy, unseen_d, nx,
                                     ny, nz, flags, inside_tol, out_direction)
 
@@ -507,7 +510,7 @@ def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_b
                        inside_tol, min_direction, out_direction)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def _finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, inside_tol, out_direction):
     """``min``'s answer from the nearest pixel (squared distance best2, its unit direction (ex, ey, ez), whether it
     had no measurement) and the observed volume's boundary (distance unseen_d, inward normal). Returns (distance,
@@ -529,7 +532,7 @@ def _finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, in
     return np.sqrt(best2), 1, best_invalid, flags
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def _finish_min_at_pixel(X, Y, Z, best2, best_u, best_v, best_z, best_invalid, fx, fy, cx, cy, unseen_d, nx, ny, nz,
                          flags, inside_tol, out_direction):
     """:func:`_finish_min` when the nearest point lies on pixel (best_u, best_v)'s frustum at depth best_z: its unit
@@ -541,7 +544,7 @@ def _finish_min_at_pixel(X, Y, Z, best2, best_u, best_v, best_z, best_invalid, f
     return _finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, inside_tol, out_direction)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def _finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, unseen_d, nx, ny, nz, flags, inside_tol,
                 min_direction, out_direction):
     """``mean``'s and ``hybrid``'s answer from the sums over the contributing pixels and the observed volume's
@@ -572,7 +575,7 @@ def _finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, u
     return d_min, count, n_invalid, flags
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(inline=True)
 def query_point_paper(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied,
                       inside_tol, min_direction, out_direction):
     """The 2015 paper's method, for comparison only: window of half-width rho*f/(2*(Z - rho)) (eq. 10-11), pixels
@@ -651,7 +654,7 @@ def query_point_paper(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, z_m
                        inside_tol, min_direction, out_direction)
 
 
-@njit(cache=True, error_model="numpy")
+@kernel()
 def _query_one(i, points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block, fx,
                fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol, min_direction, spans,
                scratch, distance, direction, count, invalid_count, flags, blind_distance):
@@ -674,11 +677,13 @@ def _query_one(i, points_camera, rho, z_start, z_end, invalid, block_min, blind,
     flags[i] = f
 
 
-@njit(parallel=True, cache=True, error_model="numpy")
+@kernel(parallel=True)
 def query_points(points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block,
                  fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol, min_direction,
                  distance, direction, count, invalid_count, flags, blind_distance):
-    """:func:`query_point` (or the paper's variant) for each of the (n, 3) optical-frame points, in parallel.
+    """:func:`query_point` (or the paper's variant) for each of the (n, 3) optical-frame points, in parallel; one
+    point on the calling thread, since for one point a parallel region only adds a barrier that a busy machine can
+    hold up for milliseconds.
 
     Writes distance (n,) float64, direction (n, 3) float64 (optical frame), count (n,) int64, invalid_count (n,)
     int64, flags (n,) int64 and blind_distance (n,) float64.
@@ -686,22 +691,19 @@ def query_points(points_camera, rho, z_start, z_end, invalid, block_min, blind, 
     n = points_camera.shape[0]
     spans = np.empty((n, z_start.shape[0], 2), dtype=np.int64)
     scratch = np.empty((n, 5, z_start.shape[1]), dtype=np.float64)
+    if n == 1:
+        _query_one(np.int64(0), points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min,
+                   has_blind, block, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps,
+                   inside_tol, min_direction, spans[0], scratch[0], distance, direction, count, invalid_count, flags,
+                   blind_distance)
+        return
     for i in prange(n):
-        _query_one(i, points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block,
-                   fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol,
-                   min_direction, spans[i], scratch[i], distance, direction, count, invalid_count, flags,
+        # An int64 index, as above: prange's is unsigned, and a second index type would compile _query_one twice.
+        _query_one(np.int64(i), points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min,
+                   has_blind, block, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps,
+                   inside_tol, min_direction, spans[i], scratch[i], distance, direction, count, invalid_count, flags,
                    blind_distance)
 
 
-@njit(cache=True, error_model="numpy")
-def query_points_serial(points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind,
-                        block, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol,
-                        min_direction, distance, direction, count, invalid_count, flags, blind_distance):
-    """:func:`query_points` on the calling thread: for one point, a parallel region only adds a barrier that a busy
-    machine can hold up for milliseconds."""
-    spans = np.empty((z_start.shape[0], 2), dtype=np.int64)
-    scratch = np.empty((5, z_start.shape[1]), dtype=np.float64)
-    for i in range(points_camera.shape[0]):
-        _query_one(i, points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block,
-                   fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol,
-                   min_direction, spans, scratch, distance, direction, count, invalid_count, flags, blind_distance)
+# One kernel serves one point and many (one compile less); the name stays for its callers.
+query_points_serial = query_points

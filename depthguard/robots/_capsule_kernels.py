@@ -5,10 +5,11 @@ as plain Python (``.py_func``)."""
 import math
 
 import numpy as np
-from numba import njit
+
+from depthguard._jit import kernel
 
 
-@njit(cache=True)
+@kernel(inline=True, error_model="python")
 def circumcircle(ax, ay, bx, by, cx, cy):
     """(centre x, centre y, radius) of the circle through three points; for (nearly) collinear points, the circle
     on the farthest pair."""
@@ -26,7 +27,7 @@ def circumcircle(ax, ay, bx, by, cx, cy):
     return ux, uy, math.hypot(ax - ux, ay - uy)
 
 
-@njit(cache=True)
+@kernel(error_model="python")
 def enclosing_circle(x, y):
     """Smallest circle enclosing the points (x[i], y[i]), (n,) float64 each: (centre x, centre y, radius).
 
@@ -54,7 +55,7 @@ def enclosing_circle(x, y):
     return cx, cy, rad
 
 
-@njit(cache=True)
+@kernel(inline=True, error_model="python")
 def _scan(t, r2, lo, hi, samples):
     """The radius in ``samples`` evenly spaced values of [lo, hi] whose capsule (shortest segment) has the smallest
     volume: (radius, index)."""
@@ -72,24 +73,42 @@ def _scan(t, r2, lo, hi, samples):
     return best_radius, best_index
 
 
-@njit(cache=True)
+@kernel(error_model="python")
 def fit_along(points, axis, samples):
     """The smallest capsule this fit finds around (n, 3) ``points`` with its segment parallel to the unit (3,)
     ``axis``: (p0 (3,), p1 (3,), radius, volume). The radius is the one the volume scan chose; every point lies
-    within it of the segment (up to rounding; the caller recomputes the exact largest distance)."""
+    within it of the segment (up to rounding; the caller recomputes the exact largest distance).
+
+    Written with scalars rather than NumPy's cross, norm and matrix products, which take seconds to compile."""
     n = points.shape[0]
-    helper = np.zeros(3)
-    helper[np.argmin(np.abs(axis))] = 1.0
-    e1 = np.cross(axis, helper)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(axis, e1)
-    t = points @ axis
-    u = points @ e1
-    v = points @ e2
+    ax, ay, az = axis[0], axis[1], axis[2]
+    # e1 = axis x (the coordinate axis least aligned with it), normalised; e2 = axis x e1.
+    if abs(ax) <= abs(ay) and abs(ax) <= abs(az):
+        e1x, e1y, e1z = 0.0, az, -ay
+    elif abs(ay) <= abs(az):
+        e1x, e1y, e1z = -az, 0.0, ax
+    else:
+        e1x, e1y, e1z = ay, -ax, 0.0
+    norm = math.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
+    e1x, e1y, e1z = e1x / norm, e1y / norm, e1z / norm
+    e2x, e2y, e2z = ay * e1z - az * e1y, az * e1x - ax * e1z, ax * e1y - ay * e1x
+    t = np.empty(n)
+    u = np.empty(n)
+    v = np.empty(n)
+    for i in range(n):
+        x, y, z = points[i, 0], points[i, 1], points[i, 2]
+        t[i] = x * ax + y * ay + z * az
+        u[i] = x * e1x + y * e1y + z * e1z
+        v[i] = x * e2x + y * e2y + z * e2z
     cu, cv, r_min = enclosing_circle(u, v)
-    r2 = (u - cu) ** 2 + (v - cv) ** 2
+    r2 = np.empty(n)
+    t_min, t_max = np.inf, -np.inf
+    for i in range(n):
+        r2[i] = (u[i] - cu) ** 2 + (v[i] - cv) ** 2
+        t_min = min(t_min, t[i])
+        t_max = max(t_max, t[i])
     # Beyond the radius of the sphere centred mid-way along the axis, the volume only grows.
-    t_mid = 0.5 * (t.min() + t.max())
+    t_mid = 0.5 * (t_min + t_max)
     r_max = r_min
     for i in range(n):
         r_max = max(r_max, math.sqrt(r2[i] + (t[i] - t_mid) ** 2))
@@ -103,6 +122,8 @@ def fit_along(points, axis, samples):
         t_hi = max(t_hi, t[i] - s)
     if t_lo > t_hi:  # a sphere: any centre in [t_hi, t_lo] contains every point
         t_lo = t_hi = 0.5 * (t_lo + t_hi)
-    origin = cu * e1 + cv * e2
+    ox, oy, oz = cu * e1x + cv * e2x, cu * e1y + cv * e2y, cu * e1z + cv * e2z
+    p0 = np.array([ox + t_lo * ax, oy + t_lo * ay, oz + t_lo * az])
+    p1 = np.array([ox + t_hi * ax, oy + t_hi * ay, oz + t_hi * az])
     volume = math.pi * radius * radius * (t_hi - t_lo) + 4.0 / 3.0 * math.pi * radius**3
-    return origin + t_lo * axis, origin + t_hi * axis, radius, volume
+    return p0, p1, radius, volume

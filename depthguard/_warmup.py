@@ -1,0 +1,199 @@
+"""``depthguard warmup``: compile every numba kernel the product uses, for every argument type it passes them, before
+the first query needs it (see :mod:`depthguard._jit` for the caches).
+
+numba compiles a kernel for each combination of argument types it is called with (uint16 and float32 frames are
+two). The one honest way to reach every combination the product uses is to run the product's own paths, so
+:func:`warm_up` runs small real workloads through the public API on a rig of two 32x24 cameras: frame preparation
+(each invalid-pixel policy, with and without a robot rendered, uint16 and float32 frames), single-camera queries
+of one point (the serial kernel) and of several (the parallel one), the depth grid's fusion of two cameras with and
+without a robot and with a blind secondary camera, the monitor, the frustum distance, the baselines and the capsule
+fit. ``tests/test_warmup.py`` checks that after it the command line and the monitor compile nothing.
+
+Once the kernels are cached it takes a few seconds (mostly imports and loading the cached kernels).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba.core import event
+
+from depthguard import _jit
+
+
+@dataclass
+class Compile:
+    """One numba compile: the kernel (module.function), its argument types, seconds (including the kernels it called
+    that compiled within it), and how deep it was nested in another compile (0: top level)."""
+
+    kernel: str
+    args: str
+    seconds: float
+    depth: int
+
+
+@dataclass
+class WarmupReport:
+    """What :func:`warm_up` did: every compile (empty when everything was cached) and the seconds it took in all."""
+
+    compiles: list[Compile] = field(default_factory=list)
+    seconds: float = 0.0
+
+    @property
+    def top_level(self) -> list[Compile]:
+        """The compiles that a workload asked for; the others compiled within them."""
+        return [c for c in self.compiles if c.depth == 0]
+
+    @property
+    def compile_seconds(self) -> float:
+        return sum(c.seconds for c in self.top_level)
+
+
+class CompileRecorder(event.Listener):
+    """Records every numba compile of a depthguard kernel while registered (``with CompileRecorder() as r:``);
+    ``progress(kernel)`` is called as a top-level one starts."""
+
+    def __init__(self, progress=None):
+        self.compiles: list[Compile] = []
+        self._stack: list[tuple[str, str, float]] = []
+        self._progress = progress
+
+    def on_start(self, ev):
+        dispatcher = ev.data["dispatcher"]
+        func = dispatcher.py_func
+        name = f"{func.__module__}.{func.__qualname__}"
+        if not self._stack and self._progress is not None:
+            self._progress(name)
+        self._stack.append((name, str(ev.data.get("args", "")), time.perf_counter()))
+
+    def on_end(self, ev):
+        name, args, start = self._stack.pop()
+        self.compiles.append(Compile(name, args, time.perf_counter() - start, len(self._stack)))
+
+    def __enter__(self):
+        event.register("numba:compile", self)
+        return self
+
+    def __exit__(self, *exc):
+        event.unregister("numba:compile", self)
+        return False
+
+
+def warm_up(progress=None) -> WarmupReport:
+    """Run every kernel the product uses once, compiling (and caching) those not in the cache yet.
+
+    ``progress``: called with a kernel's name as it starts compiling. Returns the :class:`WarmupReport`.
+    """
+    start = time.perf_counter()
+    with _jit.quiet_compiles(), CompileRecorder(progress) as recorder:
+        _run_workloads()
+    return WarmupReport(compiles=recorder.compiles, seconds=time.perf_counter() - start)
+
+
+def _run_workloads() -> None:
+    import depthguard as dg
+    from depthguard import baselines
+    from depthguard.depthgrid import FusedFrames, build_map, free_image, seen_free
+    from depthguard.robots._capsules import enclosing_circle, fit_capsule
+
+    rig, frames, robot, points = _small_workcell()
+    grid = build_map(rig, "principal")
+    one, several = points[:1], points
+    for kind in ("uint16", "float32"):
+        images = {name: dg.depth_image(frames[kind][name], rig.cameras[name]) for name in rig.cameras}
+        prepared = {}
+        for name, camera in rig.cameras.items():
+            depth = images[name]
+            near, far, exit_ = robot[name]
+            plain = dg.prepare_depth(depth, camera)
+            filled = dg.prepare_depth(depth, camera, "neighbors")
+            filtered = dg.prepare_depth(depth, camera, "neighbors", robot_near=near, robot_far=far)
+            dg.prepare_depth(depth, camera, "free", robot_near=near)
+            for occupancy in (plain, filtered):
+                for pts in (one, several):
+                    dg.single_camera_distances(occupancy, pts, 0.3, "hybrid")
+                    dg.single_camera_distances(occupancy, pts, 0.3, "min", method="paper")
+            free_image(depth, camera)
+            prepared[name] = (plain, filled, filtered)
+        # The depth grid: with the robot filtered out (cases iii and iv), without, and with a blind secondary camera.
+        near, far, exit_ = robot["principal"]
+        with_robot = FusedFrames(grid, rig, prepared["principal"][2],
+                                 {"second": seen_free(images["second"], prepared["second"][2])},
+                                 robot_far=far, robot_near=near, robot_exit=exit_)
+        without = FusedFrames(grid, rig, prepared["principal"][0],
+                              {"second": seen_free(images["second"], prepared["second"][1])})
+        blind = FusedFrames(grid, rig, prepared["principal"][0], {"second": None})
+        for frames_ in (with_robot, without, blind):
+            for pts in (one, several):
+                frames_.distances(pts, 0.3, "hybrid")
+                frames_.distances(pts, 0.3, "min")
+        monitor = dg.DistanceMonitor(rig, rho=0.3)
+        for pts in (one, several):
+            monitor.query({"principal": images["principal"]}, pts)
+            monitor.query(images, pts)
+        baselines.cartesian_region_distances(images["principal"], rig.cameras["principal"], several, 0.3)
+    tangents = np.array([[-0.1, 0.1, -0.1, 0.1], [0.0, 0.2, 0.0, 0.2]])
+    dg.frustum_distance([0.0, 0.0, 1.0], tangents, [0.5, np.inf])
+    dg.paper_frustum_distance([0.0, 0.0, 1.0], tangents, [0.5, np.inf])
+    rng = np.random.default_rng(0)
+    fit_capsule(rng.normal(size=(40, 3)) * [0.05, 0.05, 0.2], link="warmup", padding=0.01)
+    enclosing_circle(rng.normal(size=(20, 2)))
+
+
+def _small_workcell():
+    """A rig of two 32x24 cameras watching a floor, a wall and a box from two sides, their frames (uint16 with a few
+    pixels dropped, and float32), a rendered "robot" in front of the box for each camera (near, far, first exit), and
+    three control points near the box (world frame)."""
+    import depthguard as dg
+    from depthguard.scenes import Box, render_depth
+    from depthguard.transforms import look_at
+
+    target = [0.0, 0.0, 0.6]
+    eyes = {"principal": [1.5, -2.0, 1.8], "second": [1.5, 2.0, 1.8]}
+    cameras = {name: dg.PinholeCamera(name, 32, 24, 26.25, 26.25, 15.5, 11.5, look_at(eye, target),
+                                      depth_range=(0.3, 7.0)) for name, eye in eyes.items()}
+    rig = dg.Rig(cameras=cameras, principal="principal")
+    scene = [Box.from_bounds([-2.0, -3.0, -0.05], [3.0, 3.0, 0.0]), Box.from_bounds([-2.1, -3.0, 0.0],
+                                                                                    [-2.0, 3.0, 2.5]),
+             Box.from_bounds([-0.2, -0.2, 0.0], [0.2, 0.2, 1.0])]
+    frames = {"uint16": {}, "float32": {}}
+    robot = {}
+    for name, camera in cameras.items():
+        metres = render_depth(camera, scene)
+        millimetres = np.round(metres * 1000.0).astype(np.uint16)
+        millimetres[5:7, 5:8] = 0  # a small hole, filled by the "neighbors" policy
+        frames["uint16"][name] = millimetres
+        frames["float32"][name] = metres.astype(np.float32)
+        near = np.zeros(camera.shape, dtype=np.float32)
+        window = (slice(8, 14), slice(12, 20))
+        near[window] = np.where(metres[window] > 0, metres[window] - 0.02, 0.0)
+        far = np.where(near > 0, near + 0.15, 0.0).astype(np.float32)
+        exit_ = np.where(near > 0, near + 0.05, 0.0).astype(np.float32)
+        robot[name] = (near, far, exit_)
+    points = np.array([[0.0, 0.0, 1.1], [0.3, -0.3, 0.5], [0.1, 0.25, 0.9]])
+    return rig, frames, robot, points
+
+
+def main() -> int:
+    """``depthguard warmup``: compile what is not cached yet and say what and how long."""
+    started = []
+
+    def progress(kernel):
+        if not started:
+            print("depthguard warmup: compiling the numba kernels that are not cached yet (after an install or an "
+                  "upgrade; once)", flush=True)
+        started.append(kernel)
+        print(f"  compiling {kernel} ...", flush=True)
+
+    report = warm_up(progress)
+    if not report.compiles:
+        print(f"depthguard warmup: every kernel was already compiled and cached; checked in {report.seconds:.1f} s")
+        return 0
+    top = report.top_level
+    print(f"depthguard warmup: compiled {len(top)} kernel signatures in {report.compile_seconds:.1f} s "
+          f"({report.seconds:.1f} s in all); the slowest:")
+    for c in sorted(top, key=lambda c: -c.seconds)[:10]:
+        print(f"  {c.seconds:6.1f} s  {c.kernel}")
+    return 0
