@@ -25,8 +25,9 @@ def _many(points, bounds, nearest_out, distance_out, paper):
 
 
 def _run(points_camera, tangents, z_range, paper):
-    points = np.ascontiguousarray(np.broadcast_to(np.asarray(points_camera, np.float64), (len(tangents), 3))
-                                  if np.ndim(points_camera) == 1 else np.asarray(points_camera, np.float64))
+    # Always a writable copy: a read-only array (a broadcast point, or the caller's) would compile the kernel again.
+    points = np.array(np.broadcast_to(np.asarray(points_camera, np.float64), (len(tangents), 3))
+                      if np.ndim(points_camera) == 1 else points_camera, dtype=np.float64, order="C")
     tangents = np.asarray(tangents, dtype=np.float64).reshape(-1, 4)
     z_range = np.broadcast_to(np.asarray(z_range, dtype=np.float64), (len(tangents), 2))
     if points.shape != (len(tangents), 3):

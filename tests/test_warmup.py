@@ -1,0 +1,161 @@
+"""``depthguard warmup`` compiles every kernel the product uses (issue 12): afterwards a new process answers from the
+cache and compiles nothing; a kernel that does compile at run time says so; kernel caches know the sources they
+inline (``depthguard._jit``)."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import depthguard as dg
+from depthguard import _jit
+from depthguard.depth import write_depth_png
+from depthguard.rendering import Renderer
+from depthguard.robots import RobotModel
+from depthguard.scenes import Box, render_depth
+from depthguard.self_filter import RobotSilhouette
+from depthguard.transforms import look_at
+
+PACKAGE = Path(dg.__file__).parent
+Q = np.array([0.2, 0.5, 0.0, -1.2, 0.0, 0.6, 0.0])
+
+# Runs in a fresh process after the warm-up: the command line and the Python API on real inputs, with every numba
+# compile of a depthguard kernel recorded. Prints the list of compiles as JSON on its last line.
+PRODUCT_RUNS = r"""
+import json, sys
+from pathlib import Path
+import numpy as np
+from numba.core import event
+
+compiles = []
+
+class Recorder(event.Listener):
+    def on_start(self, ev):
+        func = ev.data["dispatcher"].py_func
+        if func.__module__.startswith("depthguard"):
+            compiles.append(f"{func.__module__}.{func.__qualname__} {ev.data['args']}")
+
+    def on_end(self, ev):
+        pass
+
+event.register("numba:compile", Recorder())
+folder = Path(sys.argv[1])
+joints = ",".join(map(str, json.loads((folder / "q.json").read_text())))
+from depthguard import cli
+import depthguard as dg
+
+single = ["distance", "--rig", str(folder / "rig.yaml"), "--depth", f"principal={folder / 'principal.png'}",
+          "--points", str(folder / "points.json"), "--json"]
+fused = single + ["--depth", f"second={folder / 'second.png'}"]
+robot = ["--robot", "iiwa", "--joints", joints]
+for argv in (single + robot, fused + robot, single, fused, single + ["--aggregate", "min", "--invalid", "neighbors"],
+             fused + ["--aggregate", "mean", "--invalid", "free"], single + ["--method", "paper"],
+             ["distance", "--rig", str(folder / "rig.yaml"), "--depth", f"principal={folder / 'principal.npy'}",
+              "--points", str(folder / "one.json")]):
+    assert cli.main(argv) == 0, argv
+rig = dg.load_rig(folder / "rig.yaml")
+points = np.array(json.loads((folder / "points.json").read_text()))
+frames = {name: dg.load_depth(folder / f"{name}.png", rig.cameras[name]) for name in rig.cameras}
+floats = {name: dg.depth_image(np.load(folder / f"{name}.npy"), rig.cameras[name]) for name in rig.cameras}
+for aggregate in ("min", "hybrid"):
+    monitor = dg.DistanceMonitor(rig, aggregate=aggregate)
+    for pts in (points[:1], points):
+        monitor.query({"principal": frames["principal"]}, pts)
+        monitor.query(frames, pts)
+        monitor.query({"principal": floats["principal"]}, pts)
+        monitor.query(floats, pts)
+dg.frustum_distance([0.0, 0.0, 1.0], [[-0.1, 0.1, -0.1, 0.1]], [0.5, np.inf])
+print(json.dumps(compiles))
+"""
+
+
+@pytest.fixture(scope="module")
+def workcell(tmp_path_factory):
+    """Two 96x72 cameras watching the iiwa at Q, a floor, a wall and a box: a rig, uint16 PNG and float32 .npy
+    frames of each camera, the robot's control points and joints."""
+    folder = tmp_path_factory.mktemp("warmup")
+    robot = RobotModel.default()
+    cameras = {name: dg.PinholeCamera(name, 96, 72, 78.75, 78.75, 47.5, 35.5, look_at(eye, [0.0, 0.0, 0.6]),
+                                      depth_range=(0.3, 6.0))
+               for name, eye in (("principal", [1.8, -1.5, 1.6]), ("second", [1.6, 1.8, 1.5]))}
+    rig = dg.Rig(cameras, principal="principal")
+    scene = [Box.from_bounds([-3, -3, -0.1], [3, 3, 0]), Box.from_bounds([-2.5, -3, 0], [-2.4, 3, 3]),
+             Box.from_bounds([0.5, -0.6, 0.0], [0.8, -0.3, 0.5])]
+    with Renderer() as renderer:
+        silhouette = RobotSilhouette(robot, renderer, geometry="meshes")
+        for name, camera in cameras.items():
+            room = render_depth(camera, scene)
+            arm = silhouette.render(camera, Q)
+            depth = np.where(arm > 0, np.minimum(arm, np.where(room > 0, room, np.inf)), room).astype(np.float32)
+            write_depth_png(folder / f"{name}.png", np.round(depth * 1000).astype(np.uint16))
+            np.save(folder / f"{name}.npy", depth)
+    dg.save_rig(rig, folder / "rig.yaml")
+    points = robot.control_point_positions(Q)
+    (folder / "points.json").write_text(json.dumps(points.tolist() + [[0.65, -0.45, 0.7]]))
+    (folder / "one.json").write_text(json.dumps([[0.65, -0.45, 0.7]]))
+    (folder / "q.json").write_text(json.dumps(Q.tolist()))
+    return folder
+
+
+def test_after_warmup_a_new_process_compiles_nothing(workcell):
+    """The warm-up covers every argument type the product passes its kernels, and its caches are found again: the
+    command line (one camera and two fused, with and without the robot, uint16 and float32 frames, each policy) and
+    the monitor compile nothing, and say nothing about compiling."""
+    warm = subprocess.run([sys.executable, "-m", "depthguard.cli", "warmup"], capture_output=True, text=True,
+                          timeout=900)
+    assert warm.returncode == 0, warm.stderr
+    done = subprocess.run([sys.executable, "-c", PRODUCT_RUNS, str(workcell)], capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert json.loads(done.stdout.strip().splitlines()[-1]) == []
+    assert "compiling" not in done.stderr
+
+
+def test_a_kernel_compiled_at_run_time_says_so(tmp_path):
+    """With an empty cache (a cache folder of its own), the first call of a kernel logs one line on standard error
+    that names it; the kernels it calls compile within it and add no line."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+    code = "import depthguard as dg; dg.frustum_distance([0.0, 0.0, 1.0], [[-0.1, 0.1, -0.1, 0.1]], [0.5, 2.0])"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
+    assert done.returncode == 0, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, lines
+    assert "depthguard.depthspace._frustum._many" in lines[0] and "depthguard warmup" in lines[0]
+    assert any(tmp_path.rglob("*.nbi"))  # cached where the user asked
+    again = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
+    assert again.returncode == 0 and again.stderr == ""
+
+
+def test_every_kernel_module_compiles_through_jit_kernel():
+    """Every module that defines numba kernels is listed in _jit.KERNEL_MODULES and uses _jit.kernel (cached,
+    stamped with its dependencies), never numba's njit directly."""
+    uses_kernel = set()
+    for path in PACKAGE.rglob("*.py"):
+        source = path.read_text()
+        name = "depthguard." + ".".join(path.relative_to(PACKAGE).with_suffix("").parts)
+        assert not re.search(r"\bnjit\b|numba\.jit|from numba import jit", source) or path.name == "_jit.py", name
+        if re.search(r"^@kernel\(", source, re.M):
+            uses_kernel.add(name)
+    assert uses_kernel == set(_jit.KERNEL_MODULES)
+
+
+def test_kernel_caches_are_stamped_with_the_sources_they_inline():
+    from depthguard.depthgrid import _kernels as grid_kernels
+    from depthguard.depthspace import _kernels as space_kernels
+
+    assert _jit.kernel_dependencies("depthguard.depthgrid._kernels") == ("depthguard.depthgrid._kernels",
+                                                                         "depthguard.depthspace._kernels")
+    assert _jit.kernel_dependencies("depthguard.depth._kernels") == ("depthguard.depth._kernels",)
+    # The locator in use is depthguard's, and its stamp covers the depth grid's and the single camera's sources.
+    locator = grid_kernels.fused_query_points._cache._impl.locator
+    assert type(locator).__name__.startswith("Depthguard")
+    stamp = locator.get_source_stamp()
+    assert stamp == _jit.sources_stamp(grid_kernels.__file__)
+    assert stamp != _jit.sources_stamp(space_kernels.__file__)
