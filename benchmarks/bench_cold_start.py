@@ -1,0 +1,109 @@
+"""Ready in seconds (issue 12): compile time of every kernel from an empty cache, the warm-up when everything is
+cached, and the first answers of new processes after the warm-up.
+
+It copies the committed package (``git archive HEAD``: no numba caches, as a fresh clone) into a temporary folder and
+runs it from there with this virtual environment, each step a new process:
+
+1. ``depthguard warmup`` with an empty cache: what ``./dev.sh setup`` does after a fresh clone (compile time of all
+   kernels, and the slowest ones);
+2. ``depthguard warmup`` again: what every later ``./dev.sh`` command pays;
+3. ``depthguard simulate`` writes a short recording of scenario B (two cameras, the iiwa);
+4. ``depthguard distance`` on its first frame, one camera and then both fused, with the robot filtered out: seconds
+   from the process's start to its answer.
+
+    .venv/bin/python benchmarks/bench_cold_start.py [--without-warmup]
+
+``--without-warmup`` also times the first answers from an empty cache (what the first query costs when nothing was
+compiled ahead: minutes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def run(argv, cwd, label):
+    """Run ``python -m depthguard.cli ARGV`` from the copy; (wall seconds, CPU seconds, stdout)."""
+    env = dict(os.environ, PYTHONPATH=str(cwd))
+    env.pop("NUMBA_CACHE_DIR", None)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", "depthguard.cli", *map(str, argv)], cwd=cwd, env=env,
+                          capture_output=True, text=True)
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode != 0:
+        sys.exit(f"{label} failed ({done.returncode}):\n{done.stderr[-3000:]}")
+    cpu = after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
+    return wall, cpu, done.stdout
+
+
+def fresh_copy(folder: Path) -> Path:
+    folder.mkdir(parents=True)
+    archive = subprocess.run(["git", "-C", str(REPO), "archive", "HEAD", "depthguard"], capture_output=True,
+                             check=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True)
+    return folder
+
+
+def first_answers(copy: Path, sim: Path):
+    joints = (sim / "joint_states.csv").read_text().splitlines()[1].split(",", 1)[1]
+    points = copy / "points.csv"
+    points.write_text("x,y,z\n0.5,0.0,1.0\n0.3,0.2,0.8\n")
+    base = ["distance", "--rig", sim / "rig.yaml", "--depth", f"principal={sim / 'depth/principal/000000.png'}",
+            "--points", points, "--robot", "iiwa", "--joints", joints, "--json"]
+    single = run(base, copy, "single camera")
+    fused = run(base + ["--depth", f"second={sim / 'depth/second/000000.png'}"], copy, "fused")
+    return single, fused
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--without-warmup", action="store_true", help="also time the first answers from an empty "
+                                                                      "cache")
+    args = parser.parse_args(argv)
+    with tempfile.TemporaryDirectory(prefix="depthguard-cold-") as tmp:
+        tmp = Path(tmp)
+        sim = tmp / "sim"
+        rows = []
+        if args.without_warmup:
+            cold = fresh_copy(tmp / "cold")
+            run(["simulate", "--out", sim, "--duration", "0.1"], cold, "simulate")
+            for p in cold.rglob("*.nb[ic]"):
+                p.unlink()
+            (s_wall, s_cpu, _), (f_wall, f_cpu, _) = first_answers(cold, sim)
+            rows += [("first single-camera answer, empty cache, no warm-up", s_wall, s_cpu),
+                     ("then the first fused answer, no warm-up", f_wall, f_cpu)]
+        copy = fresh_copy(tmp / "clone")
+        wall, cpu, out = run(["warmup"], copy, "warmup")
+        rows.append(("depthguard warmup, empty cache (compiles every kernel)", wall, cpu))
+        slowest = [line for line in out.splitlines() if re.match(r"\s+[\d.]+ s\s+depthguard\.", line)]
+        summary = next(line for line in out.splitlines() if "kernel signatures in" in line)
+        wall, cpu, _ = run(["warmup"], copy, "warmup again")
+        rows.append(("depthguard warmup, everything cached", wall, cpu))
+        if not sim.exists():
+            run(["simulate", "--out", sim, "--duration", "0.1"], copy, "simulate")
+        (s_wall, s_cpu, _), (f_wall, f_cpu, _) = first_answers(copy, sim)
+        rows += [("first single-camera answer after the warm-up (new process)", s_wall, s_cpu),
+                 ("first fused answer after the warm-up (new process)", f_wall, f_cpu)]
+    print(f"{'step':64s} {'wall s':>7s} {'CPU s':>7s}")
+    for label, wall, cpu in rows:
+        print(f"{label:64s} {wall:7.1f} {cpu:7.1f}")
+    print(f"\n{summary.strip()}")
+    for line in slowest:
+        print(line)
+    print("\nGoals: each first answer within 5 s of the process's start; every kernel compiled within 30 s.")
+
+
+if __name__ == "__main__":
+    main()
