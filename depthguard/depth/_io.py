@@ -22,6 +22,7 @@ Every problem is a :class:`DepthImageError` naming the file (and the camera when
 from __future__ import annotations
 
 import io
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -218,6 +219,15 @@ def _read_npy(data: bytes, camera) -> np.ndarray:
 
 
 def _read_pillow(data: bytes, kind: str, camera) -> np.ndarray:
+    # Pillow warns about corrupt metadata (EXIF) and about images near its decompression-bomb limit: in a depth
+    # image either means the file is not what it claims, so it is refused like any other corrupt file (and nothing
+    # is printed beside the one-line error).
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        return _decode_pillow(data, kind, camera)
+
+
+def _decode_pillow(data: bytes, kind: str, camera) -> np.ndarray:
     try:
         # The plugin of the format the suffix names, constructed directly: no other Pillow plugin (EPS, whose loader
         # runs Ghostscript, among them) ever sees the bytes, and the size checks below come before Pillow's own.
