@@ -276,6 +276,14 @@ MAX_FUSION_PIXELS = MAX_IMAGE_SIDE
 #: allocated as touched: 4096 cells at 640x480 is 1.3 GB at most). build-map's options and FusedFrames check it.
 DEPTH_GRID_MAX_CELLS = 4096
 
+#: Thinnest depth-grid cell, metres. Cell indices int((z - d_min) / delta_d) of any depth within the coordinate limit
+#: then stay far from the integer range's end.
+DEPTH_GRID_MIN_DELTA_D = 1e-6
+
+#: Largest difference between a loaded map's geometry and the geometry rebuilt from the rig, relative to the largest
+#: magnitude of each array (float64 rounding differs between machines only in the last bits).
+DEPTH_GRID_GEOMETRY_TOLERANCE = 1e-9
+
 #: Command line: --seed in [0, MAX_SEED]; --repeats in [1, MAX_REPEATS].
 MAX_SEED = 2**63 - 1
 MAX_REPEATS = 10_000

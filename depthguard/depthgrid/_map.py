@@ -58,13 +58,8 @@ from depthguard.errors import DepthguardError, InputError, short_repr
 MAP_FORMAT = "depthguard-depth-grid-map/2"
 _OLD_FORMATS = ("depthguard-depth-grid-map/1",)
 
-#: Thinnest cell, metres. Cell indices int((z - d_min) / delta_d) of any depth within the coordinate limit then stay
-#: far from the integer range's end.
-MIN_DELTA_D = 1e-6
-
-#: Largest difference between a map's geometry and the geometry rebuilt from the rig, relative to the largest
-#: magnitude of each array (float64 rounding differs between machines only in the last bits).
-GEOMETRY_TOLERANCE = 1e-9
+MIN_DELTA_D = config.DEPTH_GRID_MIN_DELTA_D
+GEOMETRY_TOLERANCE = config.DEPTH_GRID_GEOMETRY_TOLERANCE
 
 #: Largest header member, bytes.
 _MAX_HEADER_BYTES = 1 << 16
