@@ -26,9 +26,12 @@ from depthguard.depthspace._kernels import (
     _finish_sum,
     _guess_piece_row,
     _nearest_in_blocks,
+    clamped_index,
     frustum_direction,
     frustum_nearest,
+    rho_squared,
     surveillance_region,
+    usable_rho,
 )
 
 
@@ -155,7 +158,8 @@ def erode_free(free, sizes, pad, out):
 @kernel(inline=True)
 def face_box(corners, offset, u, v, z, z_near):
     """The 4 corners of principal pixel (u, v)'s frustum at depth z, projected into one secondary camera: (ok,
-    x_lo, x_hi, y_lo, y_hi, largest depth); not ok when a corner is behind the camera or nearer than it measures."""
+    x_lo, x_hi, y_lo, y_hi, largest depth); not ok when a corner is behind the camera or nearer than it measures,
+    or when the map's geometry gives no finite point (NaN in a map: the cell cannot be cleared)."""
     x_lo = np.inf
     x_hi = -np.inf
     y_lo = np.inf
@@ -164,11 +168,11 @@ def face_box(corners, offset, u, v, z, z_near):
     for dv in range(2):
         for du in range(2):
             hz = corners[v + dv, u + du, 2] * z + offset[2]
-            if hz <= z_near:
-                return False, x_lo, x_hi, y_lo, y_hi, far
             inv = 1.0 / hz
             x = (corners[v + dv, u + du, 0] * z + offset[0]) * inv
             y = (corners[v + dv, u + du, 1] * z + offset[1]) * inv
+            if not (hz > z_near and np.isfinite(hz) and np.isfinite(x) and np.isfinite(y)):
+                return False, x_lo, x_hi, y_lo, y_hi, far
             x_lo = min(x_lo, x)
             x_hi = max(x_hi, x)
             y_lo = min(y_lo, y)
@@ -180,12 +184,13 @@ def face_box(corners, offset, u, v, z, z_near):
 @kernel(inline=True)
 def box_seen_through(eroded, width, height, x_lo, x_hi, y_lo, y_hi, need):
     """Whether every pixel whose footprint meets [x_lo, x_hi] x [y_lo, y_hi], grown by the erosion's pad, lies in
-    the image and saw at least ``need`` metres."""
+    the image and saw at least ``need`` metres (not when any of them is NaN)."""
     q_lo = np.ceil(x_lo - 0.5)
     q_hi = np.floor(x_hi + 0.5)
     r_lo = np.ceil(y_lo - 0.5)
     r_hi = np.floor(y_hi + 0.5)
-    if q_lo < 0.0 or r_lo < 0.0 or q_hi > width - 1 or r_hi > height - 1:
+    if not (q_lo >= 0.0 and r_lo >= 0.0 and q_lo <= q_hi <= width - 1 and r_lo <= r_hi <= height - 1
+            and need == need):
         return False
     for r in range(int(r_lo), int(r_hi) + 1):
         for q in range(int(q_lo), int(q_hi) + 1):
@@ -299,11 +304,18 @@ def remember_free_run(free_run, v, u, k_lo, k_hi):
 @kernel(inline=True)
 def known_free(lo, hi, u, v, d_min, delta_d, n_cells, free_run):
     """Whether every cell of the candidate range [lo, hi] (inside the grid) of pixel (u, v) is known free."""
-    if lo < d_min or hi > d_min + n_cells * delta_d:
+    if not (d_min <= lo <= hi <= d_min + n_cells * delta_d):
         return False
     run = free_run[v, u]
-    return (run >> 32) <= int((lo - d_min) / delta_d) and min(int((hi - d_min) / delta_d), n_cells - 1) <= (
-        run & 0xFFFFFFFF)
+    return (run >> 32) <= cell_index(lo, d_min, delta_d, n_cells) and min(
+        cell_index(hi, d_min, delta_d, n_cells), n_cells - 1) <= (run & 0xFFFFFFFF)
+
+
+@kernel(inline=True)
+def cell_index(z, d_min, delta_d, n_cells):
+    """int((z - d_min) / delta_d), the grid cell holding depth z, with the quotient clamped to [-1, n_cells] first:
+    a depth far beyond the grid (or NaN) gives an end, never an index int() made garbage of."""
+    return clamped_index((z - d_min) / delta_d, -1, n_cells)
 
 
 @kernel(inline=True)
@@ -356,8 +368,8 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
     if candidates_only:
         if known_free(lo, hi, u, v, d_min, delta_d, n_cells, free_run):
             return np.inf, 0.0
-        k_lo = int((lo - d_min) / delta_d)
-        k_hi = min(int((hi - d_min) / delta_d), n_cells - 1)
+        k_lo = cell_index(lo, d_min, delta_d, n_cells)
+        k_hi = min(cell_index(hi, d_min, delta_d, n_cells), n_cells - 1)
     run = free_run[v, u]
     run_lo = run >> 32
     run_hi = run & 0xFFFFFFFF
@@ -370,12 +382,15 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
         # g(z), the squared distance from P to the frustum's slice at depth z, is convex with g'' >= 2, so
         # g(z) >= d2 + (z - z*)^2 and only cells within reach of z* can come nearer than bound2.
         reach = np.sqrt(bound2 - d2)
-        k_lo = max(int((max(below, lo) - d_min) / delta_d), int((max(z - reach, d_min) - d_min) / delta_d))
-        k_hi = min(int((min(hi, d_max, z + reach) - d_min) / delta_d), n_cells - 1)
-    k_star = min(max(int((z - d_min) / delta_d), k_lo), k_hi)
-    # Skip the run of cells already known free around z*, if there is one; else start at z*'s own cell.
+        k_lo = max(cell_index(max(below, lo), d_min, delta_d, n_cells),
+                   cell_index(max(z - reach, d_min), d_min, delta_d, n_cells))
+        k_hi = min(cell_index(min(hi, d_max, z + reach), d_min, delta_d, n_cells), n_cells - 1)
+    k_lo = max(k_lo, 0)
+    k_star = min(max(cell_index(z, d_min, delta_d, n_cells), k_lo), k_hi)
+    # Skip the run of cells already known free around z*, if there is one; else start at z*'s own cell. (No cell
+    # in reach, k_lo > k_hi, happens only with numbers the public functions refuse.)
     in_run = run_lo <= k_star <= run_hi
-    if run_lo <= k_lo and k_hi <= run_hi:
+    if (run_lo <= k_lo and k_hi <= run_hi) or k_lo > k_hi:
         k_left = -1
         k_right = -1
     else:
@@ -460,7 +475,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
     the secondary cameras do not clear. Writes into acc (N_ACC,) the count of contributing pixels, those from pixels
     without a measurement, whether P is inside, the sums of their distances and unit directions, and the nearest
     one (squared distance, pixel, depth, from a pixel without a measurement?). ``scratch`` (5, width) float64."""
-    rho2 = rho * rho
+    rho2 = rho_squared(rho)
     z_far = Z + rho
     d_max = d_min + n_cells * delta_d
     best2 = np.inf
@@ -583,7 +598,7 @@ def fused_region(X, Y, Z, rho, unchecked_from, blind_from, certain, unchecked_bl
         # array, whose answer is not used here.)
         u2 = _nearest_in_blocks(X, Y, Z, rho, unchecked_from, blind_from, np.bool_(True), certain,
                                 unchecked_block_min, block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi, near_eps, spans)[0]
-        if u2 < rho * rho:
+        if u2 < rho_squared(rho):
             unchecked = np.sqrt(u2)
     region[0] = f
     region[1] = 1.0 if unseen_here else 0.0
@@ -644,6 +659,7 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
     """
     n = points_camera.shape[0]
     height, width = z_start.shape
+    rho = usable_rho(rho)
     spans = np.empty((n, height, 2), dtype=np.int64)
     region = np.empty((n, 8))
     for i in prange(n):

@@ -26,6 +26,40 @@ FLAG_ROBOT_BLIND_SPOT = 32
 # Tangent units by which the ball's silhouette spans are widened against rounding (about 5e-7 pixel at f = 525).
 SILHOUETTE_PAD = 1e-9
 
+# The smallest rho^2 the kernels compare squared distances with (the smallest normal float64): a point inside an
+# occupied set (d^2 = 0) is within rho even where rho^2 underflows (rho = 1e-200, which the public functions refuse).
+MIN_RHO2 = 2.2250738585072014e-308
+
+# The kernels trust their inputs (the public functions check them: rho in [config.RHO_MIN, config.RHO_MAX], points
+# finite and within config.COORDINATE_LIMIT), and are exact within those ranges. Beyond them (check=False) they stay
+# memory-safe and finish, and answer conservatively where they cannot compute: every float is clamped before it
+# becomes an index, a point that is not finite is "unseen" (distance 0), a NaN rho counts as inf.
+
+
+@kernel(inline=True)
+def usable_rho(rho):
+    """rho as the kernels use it: NaN counts as inf (every pixel is looked at), a negative rho as 0."""
+    if rho != rho:
+        return np.inf
+    return max(rho, 0.0)
+
+
+@kernel(inline=True)
+def rho_squared(rho):
+    """rho^2, at least :data:`MIN_RHO2`."""
+    return max(rho * rho, MIN_RHO2)
+
+
+@kernel(inline=True)
+def clamped_index(x, lo, hi):
+    """int(x) for a float x clamped to the whole numbers [lo, hi] first (int() of a huge or NaN float is garbage);
+    NaN gives lo."""
+    if not x > lo:
+        return lo
+    if x > hi:
+        return hi
+    return int(x)
+
 
 @kernel()
 def frustum_nearest(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
@@ -209,9 +243,14 @@ def cube_window(X, Y, Z, rho, fx, fy, cx, cy, width, height, near_eps):
 def footprint_span(t_lo, t_hi, f, c, size):
     """Pixels i in [0, size) whose footprint [i - 1/2, i + 1/2] meets the image coordinates [f*t_lo + c, f*t_hi + c]
     (t: tangents x/z or y/z). Returns (lo, hi), inclusive; lo > hi when there is none."""
-    lo = min(max(np.ceil(f * t_lo + c - 0.5), 0.0), float(size))
-    hi = min(max(np.floor(f * t_hi + c + 0.5), -1.0), float(size - 1))
-    return int(lo), int(hi)
+    return index_span(np.ceil(f * t_lo + c - 0.5), np.floor(f * t_hi + c + 0.5), size)
+
+
+@kernel(inline=True)
+def index_span(lo, hi, size):
+    """The whole numbers lo..hi (floats) clamped to [0, size) before they become integers: (first, last), first >
+    last when none. NaN (only from numbers the public functions refuse) gives the whole range."""
+    return clamped_index(lo, 0, size), (size - 1 if hi != hi else clamped_index(hi, -1, size - 1))
 
 
 @kernel(inline=True)
@@ -225,7 +264,16 @@ def ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, 
     point to the right boundary at the clamped y of the rightmost point. ``pad`` (tangent units) widens every span
     against rounding. Writes spans[v, 0] = first column, spans[v, 1] = last column (first > last when none),
     within [u_lo, u_hi].
+
+    The cone is the same for (X, Y, Z, rho) scaled by any factor, so they are first divided by max(|X|, |Y|, |Z|):
+    the squares below then never overflow, whatever the point's distance. A row whose span is not a number (only
+    from numbers no kernel should get) keeps [u_lo, u_hi] whole.
     """
+    scale = max(abs(X), abs(Y), abs(Z))
+    X = X / scale
+    Y = Y / scale
+    Z = Z / scale
+    rho = rho / scale
     c = X * X + Y * Y + Z * Z - rho * rho
     q = Z * Z - rho * rho
     root_x = rho * np.sqrt(max(X * X + Z * Z - rho * rho, 0.0))
@@ -256,6 +304,8 @@ def ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, 
         C = (yr * Y + Z) ** 2 - c * (yr * yr + 1.0)
         x_hi = (-B - np.sqrt(max(B * B - A * C, 0.0))) / A
         lo, hi = footprint_span(x_lo - pad, x_hi + pad, fx, cx, width)
+        if x_lo != x_lo or x_hi != x_hi:
+            lo, hi = u_lo, u_hi
         spans[v, 0] = max(lo, u_lo)
         spans[v, 1] = min(hi, u_hi)
 
@@ -272,7 +322,7 @@ def _nearest_in_blocks(X, Y, Z, rho, z_start, z_end, bounded, invalid, block_min
     Returns (best d^2 (inf if none below rho^2), v, u, z*, invalid flag of that pixel).
     """
     height, width = z_start.shape
-    rho2 = rho * rho
+    rho2 = rho_squared(rho)
     z_far = Z + rho
     inv_fx = 1.0 / fx
     inv_fy = 1.0 / fy
@@ -291,8 +341,8 @@ def _nearest_in_blocks(X, Y, Z, rho, z_start, z_end, bounded, invalid, block_min
     else:
         pu = 0.5 * (u_lo + u_hi)
         pv = 0.5 * (v_lo + v_hi)
-    cbu = int(min(max(pu, u_lo), u_hi)) // block
-    cbv = int(min(max(pv, v_lo), v_hi)) // block
+    cbu = clamped_index(pu, u_lo, u_hi) // block
+    cbv = clamped_index(pv, v_lo, v_hi) // block
     rings = max(cbu - bu_lo, bu_hi - cbu, cbv - bv_lo, bv_hi - cbv)
     for r in range(rings + 1):
         for bv in range(cbv - r, cbv + r + 1):
@@ -360,7 +410,7 @@ def _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, v_lo, v_
 
     Returns (count, invalid count, inside?, sum of d, sum of unit directions x, y, z, best d^2).
     """
-    rho2 = rho * rho
+    rho2 = rho_squared(rho)
     z_far = Z + rho
     inv_fx = 1.0 / fx
     inv_fy = 1.0 / fy
@@ -428,31 +478,60 @@ def surveillance_region(X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_ma
     REGION_OUTSIDE_VIEW flag; whether P itself lies in unseen space under ``unseen_occupied`` (the answer is then
     0); the observed volume's boundary as a contributor (distance unseen_d, inf when it does not count, and inward
     normal); the cube window, v_lo > v_hi when it is empty. Fills spans[v] for the window's rows with the columns
-    that meet the silhouette of the ball B(P, rho).
+    that meet the silhouette of the ball B(P, rho), and P's own pixel.
+
+    A point that is not finite (which the public functions refuse) is unseen: nothing can be computed for it.
     """
+    out_direction[0] = 0.0
+    out_direction[1] = 0.0
+    out_direction[2] = 0.0
+    if not (np.isfinite(X) and np.isfinite(Y) and np.isfinite(Z)):
+        return FLAG_REGION_OUTSIDE_VIEW, True, np.inf, 0.0, 0.0, 0.0, 0, -1, 0, -1
     flags = 0
     s_view, nx, ny, nz = view_boundary(X, Y, Z, (-0.5 - cx) / fx, (width - 0.5 - cx) / fx, (-0.5 - cy) / fy,
                                        (height - 0.5 - cy) / fy, z_min, z_max)
     if s_view < rho:
         flags |= FLAG_REGION_OUTSIDE_VIEW
-    out_direction[0] = 0.0
-    out_direction[1] = 0.0
-    out_direction[2] = 0.0
     unseen_here = unseen_occupied and s_view <= inside_tol
     # The boundary of the observed volume is one more contributor when unseen space counts as occupied.
     unseen_d = s_view if (unseen_occupied and s_view < rho) else np.inf
     u_lo, u_hi, v_lo, v_hi = cube_window(X, Y, Z, rho, fx, fy, cx, cy, width, height, near_eps)
-    if u_lo <= u_hi and v_lo <= v_hi and not unseen_here:
-        if Z - rho > near_eps:
-            ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, u_hi, SILHOUETTE_PAD,
-                                 spans)
-        else:
-            for v in range(v_lo, v_hi + 1):
-                spans[v, 0] = u_lo
-                spans[v, 1] = u_hi
+    if unseen_here:
+        return flags, unseen_here, unseen_d, nx, ny, nz, u_lo, u_hi, 0, -1
+    if Z - rho <= near_eps:  # the whole image
+        for v in range(v_lo, v_hi + 1):
+            spans[v, 0] = u_lo
+            spans[v, 1] = u_hi
+        return flags, unseen_here, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi
+    if u_lo <= u_hi and v_lo <= v_hi:
+        ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, u_hi, SILHOUETTE_PAD, spans)
     else:
         v_lo = 0
         v_hi = -1
+    # P's own pixel (two or four where P projects onto their border) is always visited: rounding in the window or
+    # the silhouette (a tiny rho, a far point) must never leave out the pixel whose frustum holds P.
+    pu_lo, pu_hi = footprint_span(X / Z, X / Z, fx, cx, width)
+    pv_lo, pv_hi = footprint_span(Y / Z, Y / Z, fy, cy, height)
+    if pu_lo <= pu_hi and pv_lo <= pv_hi:
+        if v_lo > v_hi:
+            u_lo, u_hi, v_lo, v_hi = pu_lo, pu_hi, pv_lo, pv_hi
+        for v in range(pv_lo, pv_hi + 1):
+            if v < v_lo or v > v_hi or spans[v, 0] > spans[v, 1]:
+                spans[v, 0] = pu_lo
+                spans[v, 1] = pu_hi
+            else:
+                spans[v, 0] = min(spans[v, 0], pu_lo)
+                spans[v, 1] = max(spans[v, 1], pu_hi)
+        for v in range(pv_hi + 1, v_lo):  # rows between the own pixel's and the window's see nothing more
+            spans[v, 0] = 1
+            spans[v, 1] = 0
+        for v in range(v_hi + 1, pv_lo):
+            spans[v, 0] = 1
+            spans[v, 1] = 0
+        u_lo = min(u_lo, pu_lo)
+        u_hi = max(u_hi, pu_hi)
+        v_lo = min(v_lo, pv_lo)
+        v_hi = max(v_hi, pv_hi)
     return flags, unseen_here, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi
 
 
@@ -585,15 +664,17 @@ def query_point_paper(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, z_m
     method so that the two differ only in the papers' formulas.
     """
     height, width = z_start.shape
-    rho2 = rho * rho
+    rho2 = rho_squared(rho)
+    out_direction[0] = 0.0
+    out_direction[1] = 0.0
+    out_direction[2] = 0.0
+    if not (np.isfinite(X) and np.isfinite(Y) and np.isfinite(Z)):
+        return 0.0, 1, 0, FLAG_REGION_OUTSIDE_VIEW
     flags = 0
     s_view, nx, ny, nz = view_boundary(X, Y, Z, (-0.5 - cx) / fx, (width - 0.5 - cx) / fx, (-0.5 - cy) / fy,
                                        (height - 0.5 - cy) / fy, z_min, z_max)
     if s_view < rho:
         flags |= FLAG_REGION_OUTSIDE_VIEW
-    out_direction[0] = 0.0
-    out_direction[1] = 0.0
-    out_direction[2] = 0.0
     if unseen_occupied and s_view <= inside_tol:
         return 0.0, 1, 0, flags
     if Z - rho > 0.0:
@@ -601,10 +682,8 @@ def query_point_paper(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, z_m
         half_v = 0.5 * rho * fy / (Z - rho)
         pu = fx * X / Z + cx
         pv = fy * Y / Z + cy
-        u_lo = int(min(max(np.ceil(pu - half_u), 0.0), float(width)))
-        u_hi = int(min(max(np.floor(pu + half_u), -1.0), float(width - 1)))
-        v_lo = int(min(max(np.ceil(pv - half_v), 0.0), float(height)))
-        v_hi = int(min(max(np.floor(pv + half_v), -1.0), float(height - 1)))
+        u_lo, u_hi = index_span(np.ceil(pu - half_u), np.floor(pu + half_u), width)
+        v_lo, v_hi = index_span(np.ceil(pv - half_v), np.floor(pv + half_v), height)
     else:
         u_lo, u_hi, v_lo, v_hi = 0, width - 1, 0, height - 1
     best2 = np.inf
@@ -689,6 +768,7 @@ def query_points(points_camera, rho, z_start, z_end, invalid, block_min, blind, 
     int64, flags (n,) int64 and blind_distance (n,) float64.
     """
     n = points_camera.shape[0]
+    rho = usable_rho(rho)
     spans = np.empty((n, z_start.shape[0], 2), dtype=np.int64)
     scratch = np.empty((n, 5, z_start.shape[1]), dtype=np.float64)
     if n == 1:
