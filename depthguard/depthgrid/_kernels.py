@@ -168,10 +168,12 @@ def face_box(corners, offset, u, v, z, z_near):
     for dv in range(2):
         for du in range(2):
             hz = corners[v + dv, u + du, 2] * z + offset[2]
+            if not (hz > z_near and np.isfinite(hz)):
+                return False, x_lo, x_hi, y_lo, y_hi, far
             inv = 1.0 / hz
             x = (corners[v + dv, u + du, 0] * z + offset[0]) * inv
             y = (corners[v + dv, u + du, 1] * z + offset[1]) * inv
-            if not (hz > z_near and np.isfinite(hz) and np.isfinite(x) and np.isfinite(y)):
+            if not (np.isfinite(x) and np.isfinite(y)):
                 return False, x_lo, x_hi, y_lo, y_hi, far
             x_lo = min(x_lo, x)
             x_hi = max(x_hi, x)

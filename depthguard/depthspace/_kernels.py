@@ -53,12 +53,8 @@ def rho_squared(rho):
 @kernel(inline=True)
 def clamped_index(x, lo, hi):
     """int(x) for a float x clamped to the whole numbers [lo, hi] first (int() of a huge or NaN float is garbage);
-    NaN gives lo."""
-    if not x > lo:
-        return lo
-    if x > hi:
-        return hi
-    return int(x)
+    NaN gives lo. (max(a, b) and min(a, b) return a unless b is larger, smaller: never a NaN b.)"""
+    return int(min(float(hi), max(float(lo), x)))
 
 
 @kernel()
@@ -250,7 +246,7 @@ def footprint_span(t_lo, t_hi, f, c, size):
 def index_span(lo, hi, size):
     """The whole numbers lo..hi (floats) clamped to [0, size) before they become integers: (first, last), first >
     last when none. NaN (only from numbers the public functions refuse) gives the whole range."""
-    return clamped_index(lo, 0, size), (size - 1 if hi != hi else clamped_index(hi, -1, size - 1))
+    return int(min(float(size), max(0.0, lo))), int(max(-1.0, min(float(size - 1), hi)))
 
 
 @kernel(inline=True)
