@@ -180,16 +180,17 @@ class DistanceMonitor:
             self._prepared[name] = (frame, state)
         return state
 
-    def query(self, frames: Mapping[str, object], points_world, *, joints=None, now: float | None = None,
-              check: bool = True) -> DistanceResult:
+    def query(self, frames: Mapping[str, object], points_world, *, joints=None, camera_joints=None,
+              now: float | None = None, check: bool = True) -> DistanceResult:
         """Distances of control points given the latest frame of each camera.
 
         Args:
             frames: camera name -> :class:`DepthImage` (or a (height, width) array in the camera's units).
             points_world: (n, 3) float64, metres, world frame.
             joints: with a robot: its joint positions when the new frames were captured (a dict by name or a
-                sequence in ``robot.joint_names`` order, radians), or a mapping camera name -> such joint positions
-                when the cameras' frames were captured at different times. Only frames not prepared before use it.
+                sequence in ``robot.joint_names`` order, radians). Only frames not prepared before use it.
+            camera_joints: with a robot whose cameras captured their frames at different times: a mapping camera
+                name -> its joint positions at that camera's capture time (given instead of ``joints``).
             now: the current time in the frames' clock, seconds (a finite number), or None; needed when ``max_age``
                 is set.
             check: validate the points (``False`` for a hot loop that passes a checked (n, 3) float64 array).
@@ -211,6 +212,15 @@ class DistanceMonitor:
         if not isinstance(frames, Mapping):
             raise InputError(f"frames must map camera names to depth images, got {type(frames).__name__}",
                              field="frames")
+        if camera_joints is not None:
+            if joints is not None:
+                raise InputError("give joints (one set for every frame) or camera_joints (per camera), not both",
+                                 field="camera_joints")
+            if not isinstance(camera_joints, Mapping):
+                raise InputError(f"camera_joints must map camera names to joint positions, got "
+                                 f"{short_repr(camera_joints)}", field="camera_joints")
+            for name in camera_joints:
+                self.rig.camera(name)
         if now is not None:
             now = check_real(now, "now", unit="seconds", field="now")
         if self.max_age is not None and now is None:
@@ -221,7 +231,7 @@ class DistanceMonitor:
         for name, frame in frames.items():
             if not isinstance(name, str):
                 raise InputError(f"frames must be keyed by camera name, got {short_repr(name)}", field="frames")
-            state = self._camera_frame(name, frame, _joints_for(name, joints, frames))
+            state = self._camera_frame(name, frame, joints if camera_joints is None else camera_joints.get(name))
             timestamp = state.occupancy.timestamp
             if self.is_stale(timestamp, now):
                 stale[name] = timestamp
@@ -327,14 +337,6 @@ class _CameraFrame:
 
             self._free = seen_free(self.image, self.occupancy)
         return self._free
-
-
-def _joints_for(name: str, joints, frames):
-    """The joint positions for camera ``name``: ``joints`` itself, or its entry when it maps camera names."""
-    if isinstance(joints, Mapping) and joints and set(joints) <= set(frames) and all(
-            not isinstance(v, (int, float)) for v in joints.values()):
-        return joints.get(name)
-    return joints
 
 
 def _choice(value, name: str, allowed: tuple) -> str:

@@ -40,10 +40,17 @@ def test_joints_are_required_and_checked(scene):
         monitor.query({"right": depth}, points, joints={n: 0.0 for n in robot.joint_names[:6]})
     by_name = monitor.query({"right": depth}, points, joints=dict(zip(robot.joint_names, Q)))
     by_order = monitor.query({"right": depth}, points, joints=list(Q))
-    per_camera = monitor.query({"right": depth}, points, joints={"right": list(Q)})
+    per_camera = monitor.query({"right": depth}, points, camera_joints={"right": list(Q)})
     assert np.array_equal(by_name.distance, by_order.distance)
     assert np.array_equal(by_name.distance, per_camera.distance)
     assert np.all(by_name.distance > 0.3)  # the floor, farther than the arm's own pixels
+    # Joints per camera only through camera_joints: a mapping of camera names given as joints is not guessed.
+    with pytest.raises(dg.InputError, match="right"):
+        monitor.query({"right": depth}, points, joints={"right": list(Q)})
+    with pytest.raises(dg.InputError, match="not both"):
+        monitor.query({"right": depth}, points, joints=Q, camera_joints={"right": Q})
+    with pytest.raises(dg.DepthguardError, match="nowhere"):
+        monitor.query({"right": depth}, points, camera_joints={"nowhere": Q})
 
 
 def test_filtering_at_the_wrong_joints_leaves_the_robot_in_view(scene):
