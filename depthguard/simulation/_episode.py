@@ -217,10 +217,14 @@ def write_episode(workcell: Workcell, out_dir, seed: int | None = None, progress
 
     Files:
         rig.yaml: the depth cameras (:func:`depthguard.save_rig`; loads back with :func:`depthguard.load_rig`).
+        frames.csv: ``camera, frame, time``: one row per depth image written (every depth camera, every frame, in
+            frame order), capture time in seconds with 6 decimals (SPEC section 12a; read back with
+            :func:`depthguard.recordings.open_recording`).
         intensity_rig.yaml: the intensity cameras, if the scene has any.
         depth/<camera>/<index:06d>.png: 16-bit PNG (ROS 16UC1), units of depth_scale (millimetres), 0 = none.
         intensity/<camera>/<index:06d>.png: 8-bit grey PNG, every camera.
-        joint_states.csv: ``time`` then one column per joint, named as ``robot.joint_names``, radians.
+        joint_states.csv: ``time`` (6 decimals, as in frames.csv) then one column per joint, named as
+            ``robot.joint_names``, radians.
         ground_truth.csv: one row per frame and control point: ``time, frame, control_point, distance (m),
             nearest_obstacle, nearest_part, touching (0/1), clearance (m)``; distance and clearance are ``inf`` when
             there is no obstacle.
@@ -255,12 +259,14 @@ def write_episode(workcell: Workcell, out_dir, seed: int | None = None, progress
         iterator = tqdm(iterator, total=len(indices), unit="frame", desc="simulating")
     joints_file = open(out / "joint_states.csv", "w", newline="")
     truth_file = open(out / "ground_truth.csv", "w", newline="")
+    frames_file = open(out / "frames.csv", "w", newline="")
     # PNGs are compressed on a second thread (zlib releases the GIL) while the next frame is simulated.
     writer = ThreadPoolExecutor(max_workers=1)
     pending: deque = deque()
-    with joints_file, truth_file, writer:
-        joints_csv, truth_csv = csv.writer(joints_file), csv.writer(truth_file)
+    with joints_file, truth_file, frames_file, writer:
+        joints_csv, truth_csv, frames_csv = csv.writer(joints_file), csv.writer(truth_file), csv.writer(frames_file)
         joints_csv.writerow(["time", *workcell.robot.joint_names])
+        frames_csv.writerow(["camera", "frame", "time"])
         truth_csv.writerow(["time", "frame", "control_point", "distance", "nearest_obstacle", "nearest_part",
                             "touching", "clearance"])
         for frame in iterator:
@@ -268,6 +274,8 @@ def write_episode(workcell: Workcell, out_dir, seed: int | None = None, progress
             while len(pending) > 2:
                 pending.popleft().result()  # re-raises a failed write
             joints_csv.writerow([f"{frame.time:.6f}", *(repr(float(x)) for x in frame.joints)])
+            for name, image in frame.depth.items():
+                frames_csv.writerow([name, frame.index, f"{image.timestamp:.6f}"])
             truth = frame.truth
             for k, name in enumerate(truth.control_points):
                 truth_csv.writerow([f"{frame.time:.6f}", frame.index, name, _number(truth.distance[k]),

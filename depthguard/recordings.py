@@ -1,0 +1,780 @@
+"""Recordings: depth frames of a rig and the robot's joint states over time, read back for replay (SPEC section 12a).
+
+Two layouts hold the same data:
+
+- **A recording folder** (``depthguard simulate`` writes one; a user can write one from any sensor)::
+
+      RECORDING/
+        rig.yaml                      the rig (SPEC section 2)
+        frames.csv                    camera,frame,time: one row per depth image, capture time in seconds
+        depth/<camera>/<frame>.png    16-bit PNG in depth_scale units, frame as six digits (000042.png)
+        joint_states.csv              time,<joint name>,...: radians (metres for prismatic joints), at any rate
+
+  Rows of ``frames.csv`` may come in any order (they are sorted by time, stably). Other columns are ignored.
+
+- **A ROS 2 bag** (rosbag2 folder with ``metadata.yaml``, MCAP or SQLite storage, or a bare ``.mcap`` file), read
+  with ``rosbags`` (no ROS installation):
+
+  - ``/<camera>/depth/image_raw``: ``sensor_msgs/msg/Image``, encoding ``16UC1`` (units of the camera's depth_scale)
+    or ``32FC1`` (metres);
+  - ``/<camera>/depth/camera_info``: ``sensor_msgs/msg/CameraInfo``, which must agree with the rig (``width``,
+    ``height``, ``fx``, ``fy``, ``cx``, ``cy`` from ``k``; distortion ``d`` all zero; no binning or region of
+    interest);
+  - ``/joint_states``: ``sensor_msgs/msg/JointState``, every message naming the same joints (in any order).
+
+  Capture time = the message's header stamp. Frame number of an image = its index among that camera's images.
+  Camera poses, depth ranges and noise are not in standard messages: the rig comes from ``rig.yaml`` in the bag
+  folder (beside a bare ``.mcap`` file), or from the ``rig=`` argument of :func:`open_recording`.
+  :func:`write_bag` writes this layout.
+
+A :class:`Recording` gives the rig, the joints (interpolated linearly to any capture time inside the recorded span;
+a time outside it is an error naming the time, never an extrapolation), and its **frame sets** in capture-time
+order: the frames of every camera that share one frame number, answered once the last of them has arrived.
+
+Input from outside is checked where it is read. Files go through :mod:`depthguard._files` (regular files only,
+bounded); depth PNGs through the depth image reader. A missing file, a row naming a camera the rig lacks, a frame
+file missing, a capture time that is not finite or that goes back for one camera, a joint state time that does not
+increase, a bag without the topics it needs, a camera_info that contradicts the rig: each raises an
+:class:`~depthguard.errors.InputError` (:class:`~depthguard.errors.DepthImageError` for a depth image file) whose
+message names the file, the camera and the field.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass
+from decimal import Decimal
+from pathlib import Path
+
+import numpy as np
+
+from depthguard import config
+from depthguard._files import check_regular_file, load_yaml, read_text
+from depthguard.cameras import PinholeCamera, Rig, load_rig, save_rig
+from depthguard.depth import DepthImage, depth_image, load_depth
+from depthguard.errors import DepthguardError, DepthImageError, InputError, check_path, short_repr
+
+__all__ = ["FrameRecord", "FrameSet", "Recording", "open_recording", "write_bag"]
+
+# Bounds of the files a recording holds (a depth PNG is bounded by config.MAX_DEPTH_FILE_BYTES, a rig by
+# config.MAX_TEXT_FILE_BYTES). The CSV files are parsed whole; a bag is streamed message by message by rosbags, so its
+# bound only refuses what cannot be a recording.
+#: frames.csv and joint_states.csv: 256 MiB each (an hour of four cameras at 30 Hz is about 10 MB of frames.csv).
+MAX_CSV_BYTES = 256 << 20
+#: One storage file of a bag (.mcap, .db3): 1 TiB.
+MAX_BAG_FILE_BYTES = 1 << 40
+#: Frame numbers in [0, MAX_FRAME_NUMBER].
+MAX_FRAME_NUMBER = 10**9 - 1
+
+#: A plain decimal number, as the CSV readers accept it (no nan, inf, 1_000 or non-ASCII digits).
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_WHOLE = re.compile(r"[0-9]{1,10}")
+#: The bag's topics: /<camera>/depth/image_raw and /<camera>/depth/camera_info.
+_CAMERA_TOPIC = re.compile(r"/(?P<camera>.+)/depth/(?P<kind>image_raw|camera_info)")
+JOINT_STATES_TOPIC = "/joint_states"
+_IMAGE = "sensor_msgs/msg/Image"
+_CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
+_JOINT_STATE = "sensor_msgs/msg/JointState"
+#: Image encodings read: ROS name -> numpy dtype (byte order from is_bigendian).
+_ENCODINGS = {"16UC1": np.uint16, "32FC1": np.float32}
+#: Intrinsics in a camera_info agree with the rig's within this many pixels.
+_INTRINSICS_TOLERANCE = 1e-6
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    """One depth image of a recording.
+
+    Attributes:
+        camera: the camera that took it (a camera of the recording's rig).
+        frame: its frame number (folder: from ``frames.csv``; bag: its index among the camera's images), >= 0.
+        time: capture time, seconds, finite (the recording's clock).
+    """
+
+    camera: str
+    frame: int
+    time: float
+
+
+@dataclass(frozen=True, eq=False)
+class FrameSet:
+    """The frames of every camera that share one frame number.
+
+    Attributes:
+        frame: the frame number.
+        time: seconds, the latest capture time of the set (when its last frame arrived).
+        images: camera name -> :class:`~depthguard.DepthImage` stamped with its own capture time, in the rig's
+            camera order; a camera without a frame of this number is absent.
+        joints: camera name -> (n,) float64 joint positions at that camera's capture time, in
+            :attr:`Recording.joint_names` order (radians, metres for prismatic joints).
+    """
+
+    frame: int
+    time: float
+    images: dict[str, DepthImage]
+    joints: dict[str, np.ndarray]
+
+
+class Recording:
+    """A recording opened by :func:`open_recording`: rig, joints over time, and frame sets in capture-time order.
+
+    Images are read when the frame sets are iterated (never all at once); everything else is read and checked when
+    the recording is opened.
+
+    Attributes:
+        path: the recording folder, bag folder or ``.mcap`` file.
+        kind: ``"folder"`` or ``"bag"``.
+        rig: the cameras (:class:`~depthguard.Rig`).
+        joint_names: the joints of ``joint_states`` (folder: the CSV's columns; bag: the first message's names).
+        joint_times: (k,) float64 seconds, strictly increasing, read-only.
+        joint_positions: (k, n) float64, row i the joints at ``joint_times[i]``, columns in ``joint_names`` order,
+            read-only.
+        frames: every :class:`FrameRecord`, sorted by capture time (stably: rows of one time keep their order).
+    """
+
+    def __init__(self, path: Path, kind: str, rig: Rig, joint_names, joint_times, joint_positions, frames,
+                 joints_source: str, reader):
+        self.path = path
+        self.kind = kind
+        self.rig = rig
+        self.joint_names = tuple(joint_names)
+        self.joint_times = np.array(joint_times, dtype=np.float64)
+        self.joint_times.setflags(write=False)
+        self.joint_positions = np.array(joint_positions, dtype=np.float64).reshape(len(self.joint_times), -1)
+        self.joint_positions.setflags(write=False)
+        self.frames = tuple(frames)
+        self._joints_source = joints_source
+        # The layout's image reader: reader(sets) yields (frame, time, records, {camera: DepthImage}) per set.
+        self._reader = reader
+        for record in self.frames:  # every capture time inside the joints' span, checked before any replay
+            self._check_time(record.time, camera=record.camera, frame=record.frame)
+        self._sets = _schedule(self.frames, list(rig.cameras))
+
+    def __repr__(self) -> str:
+        return (f"Recording({str(self.path)!r}, kind={self.kind!r}, cameras={list(self.rig.cameras)}, "
+                f"frames={len(self.frames)}, sets={len(self._sets)})")
+
+    def __len__(self) -> int:
+        """The number of frame sets."""
+        return len(self._sets)
+
+    @property
+    def set_times(self) -> np.ndarray:
+        """(sets,) float64 seconds: each frame set's latest capture time, in iteration order."""
+        return np.array([time for _, time, _ in self._sets], dtype=np.float64)
+
+    def joints_at(self, time: float) -> np.ndarray:
+        """(n,) float64 joint positions at ``time`` (seconds), in :attr:`joint_names` order: linear interpolation
+        between the two recorded joint states around it (the recorded values themselves at their times).
+
+        Raises :class:`InputError` naming the time and the recorded span when ``time`` is outside it (nothing is
+        extrapolated) or not finite.
+        """
+        time = self._check_time(time)
+        times = self.joint_times
+        i = int(np.searchsorted(times, time, side="right")) - 1
+        if times[i] == time:
+            return self.joint_positions[i].copy()
+        w = (time - times[i]) / (times[i + 1] - times[i])
+        return (1.0 - w) * self.joint_positions[i] + w * self.joint_positions[i + 1]
+
+    def _check_time(self, time, camera: str | None = None, frame: int | None = None) -> float:
+        if isinstance(time, bool) or not isinstance(time, (int, float, np.integer, np.floating)) or \
+                not math.isfinite(float(time)):
+            raise InputError(f"a time must be a finite number of seconds, got {short_repr(time)}", field="time")
+        time = float(time)
+        first, last = self.joint_times[0], self.joint_times[-1]
+        if not first <= time <= last:
+            what = f"frame {frame} captured at {time!r} s" if frame is not None else f"time {time!r} s"
+            raise InputError(f"{what} is outside the recorded joint states ({first!r} to {last!r} s); joints are "
+                             "interpolated, never extrapolated", source=self._joints_source, camera=camera,
+                             field="time")
+        return time
+
+    def __iter__(self) -> Iterator[FrameSet]:
+        return self.frame_sets()
+
+    def frame_sets(self) -> Iterator[FrameSet]:
+        """The frame sets in capture-time order (each once its last frame has arrived): a generator of
+        :class:`FrameSet`. Images are read as the sets are reached."""
+        for frame, time, records, images in self._reader(self._sets):
+            joints = {record.camera: self.joints_at(record.time) for record in records}
+            yield FrameSet(frame=frame, time=time, images=images, joints=joints)
+
+
+def open_recording(path, rig=None) -> Recording:
+    """Open a recording: a recording folder (with ``frames.csv``), a rosbag2 folder (with ``metadata.yaml``) or a
+    bare ``.mcap`` file (see the module docstring for the layouts).
+
+    Args:
+        path: the folder or file.
+        rig: the rig, as a :class:`~depthguard.Rig` or a rig file; default: ``rig.yaml`` in the recording folder,
+            in the bag folder, or beside the ``.mcap`` file.
+
+    Raises :class:`InputError` (or :class:`~depthguard.RigError` for the rig file) naming the file, the camera and
+    the field at fault.
+    """
+    path = check_path(path, "recording")
+    if path.is_dir():
+        if (path / "metadata.yaml").exists():
+            return _open_bag(path, rig, folder=True)
+        if (path / "frames.csv").exists():
+            return _open_folder(path, rig)
+        raise InputError("is neither a recording folder (no frames.csv) nor a rosbag2 folder (no metadata.yaml)",
+                         source=str(path))
+    if path.suffix.lower() == ".mcap":
+        check_regular_file(path, what="MCAP bag", max_bytes=MAX_BAG_FILE_BYTES)
+        return _open_bag(path, rig, folder=False)
+    if not path.exists():
+        raise InputError("no such recording (a recording folder, a rosbag2 folder or an .mcap file)",
+                         source=str(path))
+    raise InputError("not a recording: give a recording folder, a rosbag2 folder or an .mcap file",
+                     source=str(path))
+
+
+def _rig_of(rig, default: Path) -> Rig:
+    if rig is None:
+        return load_rig(default)
+    if isinstance(rig, Rig):
+        return rig
+    return load_rig(check_path(rig, "rig file"))
+
+
+# ------------------------------------------------------------------------------------------------ schedule
+
+
+def _schedule(frames: tuple, camera_order: list) -> list:
+    """The frame sets in answering order: [(frame number, latest time, records in rig camera order)], each set
+    placed where its last record comes in ``frames`` (sorted by time)."""
+    last_index: dict[int, int] = {}
+    members: dict[int, list] = {}
+    for i, record in enumerate(frames):
+        last_index[record.frame] = i
+        members.setdefault(record.frame, []).append(record)
+    rank = {name: i for i, name in enumerate(camera_order)}
+    out = []
+    for frame in sorted(last_index, key=last_index.__getitem__):
+        records = sorted(members[frame], key=lambda r: rank[r.camera])
+        out.append((frame, frames[last_index[frame]].time, tuple(records)))
+    return out
+
+
+def _check_order(frames: list, source: str, what: str) -> None:
+    """Per camera, capture times strictly increasing with the frame number."""
+    by_camera: dict[str, list] = {}
+    for record in frames:
+        by_camera.setdefault(record.camera, []).append(record)
+    for camera, records in by_camera.items():
+        records.sort(key=lambda r: r.frame)
+        for a, b in zip(records, records[1:]):
+            if not b.time > a.time:
+                raise InputError(f"capture times must increase with the frame number ({what}): frame {b.frame} at "
+                                 f"{b.time!r} s is not after frame {a.frame} at {a.time!r} s", source=source,
+                                 camera=camera, field="time")
+
+
+def _check_cameras_present(rig: Rig, frames: list, source: str, where: str) -> None:
+    seen = {record.camera for record in frames}
+    for name in rig.cameras:
+        if name not in seen:
+            raise InputError(f"the rig's camera has no frames in {where}", source=source, camera=name,
+                             field="camera")
+
+
+# ------------------------------------------------------------------------------------------ recording folders
+
+
+def _open_folder(path: Path, rig) -> Recording:
+    rig = _rig_of(rig, path / "rig.yaml")
+    frames_path = path / "frames.csv"
+    frames = _read_frames_csv(frames_path, rig)
+    if not frames:
+        raise InputError("lists no frames (one row per depth image: camera,frame,time)", source=str(frames_path))
+    _check_cameras_present(rig, frames, str(frames_path), "frames.csv")
+    _check_order(frames, str(frames_path), "frames.csv")
+    files = {}
+    for record in frames:  # every frame file present, before any replay starts
+        file = path / "depth" / record.camera / f"{record.frame:06d}.png"
+        files[(record.camera, record.frame)] = check_regular_file(
+            file, what="depth image (listed in frames.csv)", max_bytes=config.MAX_DEPTH_FILE_BYTES,
+            error=DepthImageError, camera=record.camera)
+    joints_path = path / "joint_states.csv"
+    names, times, positions = _read_joint_states_csv(joints_path)
+    frames.sort(key=lambda r: r.time)  # stable: rows of one time keep their order
+
+    def read(sets):
+        cameras = rig.cameras
+        for frame, time, records in sets:
+            data = {r.camera: load_depth(files[(r.camera, r.frame)], cameras[r.camera], timestamp=r.time)
+                    for r in records}
+            yield frame, time, records, data
+
+    return Recording(path, "folder", rig, names, times, positions, frames, str(joints_path), read)
+
+
+def _csv_rows(text: str, source: Path):
+    """(line number, cells) of every non-blank row after the header, and the header; InputError on malformed
+    CSV."""
+    reader = csv.reader(io.StringIO(text, newline=""))
+    try:
+        header = next(reader, None)
+        if header is None:
+            raise InputError("empty file; expected a header line", source=str(source))
+        rows = [(reader.line_num, row) for row in reader if any(cell.strip() for cell in row)]
+    except csv.Error as exc:  # a field longer than csv.field_size_limit(), a quote left open
+        raise InputError(f"line {reader.line_num}: malformed CSV ({exc})", source=str(source)) from None
+    return [cell.strip() for cell in header], rows
+
+
+def _read_frames_csv(path: Path, rig: Rig) -> list[FrameRecord]:
+    text = read_text(path, what="frames file", max_bytes=MAX_CSV_BYTES)
+    header, rows = _csv_rows(text, path)
+    for name in ("camera", "frame", "time"):
+        if header.count(name) != 1:
+            raise InputError(f"line 1: the header must name each of the columns camera, frame, time once, got "
+                             f"{short_repr(header, 80)}", source=str(path), field=name)
+    col = {name: header.index(name) for name in ("camera", "frame", "time")}
+    frames, seen = [], {}
+    for line, row in rows:
+        cells = {name: row[c].strip() if c < len(row) else "" for name, c in col.items()}
+        camera = cells["camera"]
+        if camera not in rig.cameras:
+            raise InputError(f"line {line}: no such camera in the rig (cameras: {', '.join(rig.cameras)})",
+                             source=str(path), camera=short_repr(camera), field="camera")
+        if not _WHOLE.fullmatch(cells["frame"]) or int(cells["frame"]) > MAX_FRAME_NUMBER:
+            raise InputError(f"line {line}: a frame number must be a whole number in [0, {MAX_FRAME_NUMBER}], got "
+                             f"{short_repr(cells['frame'])}", source=str(path), camera=camera, field="frame")
+        frame = int(cells["frame"])
+        time = _finite(cells["time"], f"line {line}: a capture time", path, camera=camera, field="time")
+        if (camera, frame) in seen:
+            raise InputError(f"line {line}: frame {frame} is listed twice (also on line {seen[(camera, frame)]})",
+                             source=str(path), camera=camera, field="frame")
+        seen[(camera, frame)] = line
+        frames.append(FrameRecord(camera, frame, time))
+    return frames
+
+
+def _read_joint_states_csv(path: Path):
+    """(names, (k,) times, (k, n) positions) from joint_states.csv."""
+    text = read_text(path, what="joint states file", max_bytes=MAX_CSV_BYTES)
+    header, rows = _csv_rows(text, path)
+    if not header or header[0] != "time":
+        raise InputError(f"line 1: the header must be time,<joint name>,..., got {short_repr(header, 80)}",
+                         source=str(path), field="time")
+    names = header[1:]
+    if not names or any(not name for name in names):
+        raise InputError(f"line 1: the header must name every joint column after time, got "
+                         f"{short_repr(header, 80)}", source=str(path), field="joints")
+    repeated = sorted({name for name in names if names.count(name) > 1})
+    if repeated:
+        raise InputError(f"line 1: joint column named twice: {', '.join(repeated)}", source=str(path),
+                         field=repeated[0])
+    if not rows:
+        raise InputError("holds no joint states (one row per time: time,<joint values>)", source=str(path))
+    times = np.empty(len(rows))
+    positions = np.empty((len(rows), len(names)))
+    for i, (line, row) in enumerate(rows):
+        if len(row) != len(header):
+            missing = header[len(row)] if len(row) < len(header) else None
+            raise InputError(f"line {line}: {len(row)} values for the {len(header)} columns of the header",
+                             source=str(path), field=missing or "joints")
+        times[i] = _finite(row[0], f"line {line}: a time", path, field="time")
+        for j, name in enumerate(names):
+            positions[i, j] = _finite(row[j + 1], f"line {line}: a joint value", path, field=name)
+        if i and not times[i] > times[i - 1]:
+            raise InputError(f"line {line}: times must increase from row to row ({times[i]!r} s follows "
+                             f"{times[i - 1]!r} s)", source=str(path), field="time")
+    return names, times, positions
+
+
+def _finite(text: str, what: str, path: Path, **context) -> float:
+    text = text.strip()
+    value = float(text) if _NUMBER.fullmatch(text) else math.nan
+    if not math.isfinite(value):
+        raise InputError(f"{what} must be a finite decimal number, got {short_repr(text)}", source=str(path),
+                         **context)
+    return value
+
+
+# ------------------------------------------------------------------------------------------------------ bags
+
+
+def _typestore():
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_HUMBLE)
+
+
+class _Bag:
+    """A rosbag2 folder or a bare MCAP file, opened for one pass: ``connections``, ``messages(connections)`` ->
+    (connection, log time ns, raw bytes), ``deserialize(raw, msgtype)``. Every failure of the bag library is an
+    :class:`InputError` naming the bag."""
+
+    def __init__(self, path: Path, folder: bool):
+        self.path = path
+        self.folder = folder
+        self._reader = None
+
+    def __enter__(self) -> "_Bag":
+        with self.errors():
+            if self.folder:
+                from rosbags.highlevel import AnyReader
+
+                self._reader = AnyReader([self.path], default_typestore=_typestore())
+                self._reader.open()
+                self.connections = list(self._reader.connections)
+                self.deserialize = self._reader.deserialize
+            else:
+                from rosbags.rosbag2.storage_mcap import McapReader
+
+                store = _typestore()
+                self._reader = McapReader(self.path)
+                self._reader.open()
+                self.connections = list(self._reader.connections)
+                self.deserialize = store.deserialize_cdr
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._reader is not None:
+            try:
+                self._reader.close()
+            except Exception:  # noqa: BLE001 - closing a broken bag must not hide the first error
+                pass
+            self._reader = None
+
+    def messages(self, connections):
+        with self.errors():
+            yield from self._reader.messages(connections=connections) if self.folder else \
+                self._reader.messages(connections)
+
+    def errors(self):
+        return _BagErrors(self.path)
+
+
+class _BagErrors:
+    """Context manager: an exception of the bag library (a corrupt or truncated bag, an unknown message type)
+    becomes an InputError naming the bag; depthguard's own errors pass through."""
+
+    def __init__(self, path: Path):
+        self.path = path
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, exc, tb):
+        if exc is None or isinstance(exc, (DepthguardError, GeneratorExit)) or not isinstance(exc, Exception):
+            return False
+        reason = " ".join(str(exc).split())[:200] or type(exc).__name__
+        raise InputError(f"not a readable ROS 2 bag ({type(exc).__name__}: {reason})", source=str(self.path)) \
+            from None
+
+
+def _check_bag_files(path: Path) -> None:
+    """metadata.yaml and every storage file it lists: regular files within bounds (rosbags opens them itself)."""
+    meta_path = path / "metadata.yaml"
+    text = read_text(meta_path, what="rosbag2 metadata", max_bytes=config.MAX_TEXT_FILE_BYTES)
+    meta = load_yaml(text, source=meta_path)
+    info = meta.get("rosbag2_bagfile_information") if isinstance(meta, dict) else None
+    files = info.get("relative_file_paths") if isinstance(info, dict) else None
+    if not isinstance(files, list) or not files or not all(isinstance(f, str) and f for f in files):
+        raise InputError("not rosbag2 metadata: rosbag2_bagfile_information.relative_file_paths must list the "
+                         "bag's storage files", source=str(meta_path), field="relative_file_paths")
+    for name in files:
+        check_regular_file(path / Path(name).name, what="bag storage file", max_bytes=MAX_BAG_FILE_BYTES)
+
+
+def _open_bag(path: Path, rig, folder: bool) -> Recording:
+    if folder:
+        _check_bag_files(path)
+    rig = _rig_of(rig, (path if folder else path.parent) / "rig.yaml")
+    source = str(path)
+    topics: dict[str, dict[str, object]] = {}  # camera -> {"image_raw": connection, "camera_info": connection}
+    joints_connection = None
+    with _Bag(path, folder) as bag:
+        for connection in bag.connections:
+            match = _CAMERA_TOPIC.fullmatch(connection.topic)
+            if connection.topic == JOINT_STATES_TOPIC:
+                _check_type(connection, _JOINT_STATE, source)
+                joints_connection = connection
+            elif match:
+                kind = match["kind"]
+                _check_type(connection, _IMAGE if kind == "image_raw" else _CAMERA_INFO, source)
+                camera = match["camera"]
+                if camera not in rig.cameras:
+                    raise InputError(f"topic {connection.topic} is of a camera the rig lacks (cameras: "
+                                     f"{', '.join(rig.cameras)})", source=source, camera=camera, field="topic")
+                topics.setdefault(camera, {})[kind] = connection
+        for name in rig.cameras:
+            for kind in ("image_raw", "camera_info"):
+                if kind not in topics.get(name, {}):
+                    raise InputError(f"the bag has no topic /{name}/depth/{kind} ({_IMAGE if kind == 'image_raw' else _CAMERA_INFO})",
+                                     source=source, camera=name, field="topic")
+        if joints_connection is None:
+            raise InputError(f"the bag has no topic {JOINT_STATES_TOPIC} ({_JOINT_STATE})", source=source,
+                             field="topic")
+        image_cameras = {topics[name]["image_raw"].id: name for name in rig.cameras}
+        info_cameras = {topics[name]["camera_info"].id: name for name in rig.cameras}
+        wanted = [joints_connection] + [topics[n][k] for n in rig.cameras for k in ("image_raw", "camera_info")]
+        frames: list[FrameRecord] = []
+        counts = {name: 0 for name in rig.cameras}
+        joint_names, joint_times, joint_rows = None, [], []
+        for connection, _, raw in bag.messages(wanted):
+            with bag.errors():
+                message = bag.deserialize(raw, connection.msgtype)
+            if connection.id in image_cameras:
+                camera = image_cameras[connection.id]
+                _image_array(message, rig.cameras[camera], source, counts[camera], check_only=True)
+                frames.append(FrameRecord(camera, counts[camera], _stamp(message, source, camera, counts[camera])))
+                counts[camera] += 1
+            elif connection.id in info_cameras:
+                _check_camera_info(message, rig.cameras[info_cameras[connection.id]], source)
+            else:
+                index = len(joint_times)
+                names, values = _joint_state(message, source, index)
+                if joint_names is None:
+                    joint_names = names
+                elif set(names) != set(joint_names) or len(names) != len(joint_names):
+                    raise InputError(f"joint state #{index} names the joints {', '.join(names)}, the first one "
+                                     f"{', '.join(joint_names)}", source=source, field="name")
+                else:
+                    order = [names.index(n) for n in joint_names]
+                    values = values[order]
+                time = _stamp(message, source, None, index, what="joint state")
+                if joint_times and not time > joint_times[-1]:
+                    raise InputError(f"joint state #{index} at {time!r} s does not come after the previous one at "
+                                     f"{joint_times[-1]!r} s (header stamps must increase)", source=source,
+                                     field="header.stamp")
+                joint_times.append(time)
+                joint_rows.append(values)
+    for name in rig.cameras:
+        if counts[name] == 0:
+            raise InputError(f"topic /{name}/depth/image_raw holds no images", source=source, camera=name,
+                             field="topic")
+    if not joint_times:
+        raise InputError(f"topic {JOINT_STATES_TOPIC} holds no joint states", source=source, field="topic")
+    _check_order(frames, source, "header stamps in bag order")
+    frames.sort(key=lambda r: r.time)
+
+    def read(sets):
+        # Stream the images in bag order; keep each until its set is answered (sets come in capture-time order,
+        # which a bag written by time keeps: few images wait).
+        pending: dict[tuple[str, int], DepthImage] = {}
+        queue = iter(sets)
+        current = next(queue, None)
+        counts = {name: 0 for name in rig.cameras}
+        with _Bag(path, folder) as bag:
+            # This reader's own connections (a connection belongs to the reader that opened it).
+            cameras = {f"/{name}/depth/image_raw": name for name in rig.cameras}
+            connections = [c for c in bag.connections if c.topic in cameras and c.msgtype == _IMAGE]
+            for connection, _, raw in bag.messages(connections):
+                camera = cameras[connection.topic]
+                index = counts[camera]
+                counts[camera] += 1
+                with bag.errors():
+                    message = bag.deserialize(raw, connection.msgtype)
+                data = _image_array(message, rig.cameras[camera], source, index)
+                time = _stamp(message, source, camera, index)
+                pending[(camera, index)] = depth_image(data, rig.cameras[camera], timestamp=time)
+                while current is not None and all((r.camera, r.frame) in pending for r in current[2]):
+                    frame, set_time, records = current
+                    yield frame, set_time, records, {r.camera: pending.pop((r.camera, r.frame)) for r in records}
+                    current = next(queue, None)
+        if current is not None:
+            raise InputError(f"the bag changed while it was read: frame {current[0]} is incomplete", source=source)
+
+    return Recording(path, "bag", rig, joint_names, joint_times, np.array(joint_rows), frames,
+                     f"{source} {JOINT_STATES_TOPIC}", read)
+
+
+def _check_type(connection, msgtype: str, source: str) -> None:
+    if connection.msgtype != msgtype:
+        raise InputError(f"topic {connection.topic} holds {connection.msgtype}, expected {msgtype}", source=source,
+                         field="topic")
+
+
+def _stamp(message, source: str, camera, index: int, what: str = "image") -> float:
+    """The header stamp in seconds (nanoseconds / 1e9: a time written by :func:`write_bag` reads back equal)."""
+    stamp = message.header.stamp
+    if not (0 <= stamp.nanosec < 1_000_000_000):
+        raise InputError(f"{what} #{index}: header.stamp.nanosec {stamp.nanosec} is not in [0, 1e9)", source=source,
+                         camera=camera, field="header.stamp")
+    return (int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)) / 1e9
+
+
+def _image_array(message, camera: PinholeCamera, source: str, index: int, check_only: bool = False):
+    """A (height, width) uint16 or float32 array of an Image message, checked against the camera."""
+    name = camera.name
+    where = f"image #{index}: "
+    dtype = _ENCODINGS.get(message.encoding)
+    if dtype is None:
+        raise InputError(f"{where}encoding {short_repr(message.encoding)} holds no depth (16UC1: units of "
+                         f"depth_scale, 32FC1: metres)", source=source, camera=name, field="encoding")
+    if (message.height, message.width) != camera.shape:
+        raise InputError(f"{where}image is {message.width}x{message.height} (width x height) but the camera is "
+                         f"{camera.width}x{camera.height}", source=source, camera=name, field="width/height")
+    itemsize = np.dtype(dtype).itemsize
+    row = camera.width * itemsize
+    if message.step < row or message.step % itemsize or len(message.data) != message.step * camera.height:
+        raise InputError(f"{where}step {message.step} and {len(message.data)} data bytes do not hold "
+                         f"{camera.height} rows of {camera.width} {message.encoding} pixels", source=source,
+                         camera=name, field="step")
+    if message.is_bigendian not in (0, 1):
+        raise InputError(f"{where}is_bigendian must be 0 or 1, got {message.is_bigendian}", source=source,
+                         camera=name, field="is_bigendian")
+    if check_only:
+        return None
+    order = ">" if message.is_bigendian else "<"
+    array = np.frombuffer(message.data, dtype=np.dtype(dtype).newbyteorder(order))
+    return array.reshape(camera.height, message.step // itemsize)[:, : camera.width].astype(dtype)
+
+
+def _check_camera_info(message, camera: PinholeCamera, source: str) -> None:
+    """A CameraInfo message agrees with the rig's camera: size, intrinsics, no distortion, binning or ROI."""
+    name = camera.name
+    context = {"source": source, "camera": name}
+    for key in ("width", "height"):
+        if int(getattr(message, key)) != getattr(camera, key):
+            raise InputError(f"camera_info says {key} {getattr(message, key)}, the rig {getattr(camera, key)}",
+                             field=key, **context)
+    k = np.asarray(message.k, dtype=np.float64)
+    if k.shape != (9,) or not np.isfinite(k).all():
+        raise InputError(f"camera_info k must be 9 finite numbers, got {short_repr(k.tolist(), 80)}", field="k",
+                         **context)
+    for key, value in (("fx", k[0]), ("fy", k[4]), ("cx", k[2]), ("cy", k[5])):
+        expected = getattr(camera, key)
+        if not abs(value - expected) <= _INTRINSICS_TOLERANCE * max(1.0, abs(expected)):
+            raise InputError(f"camera_info says {key} {value!r}, the rig {expected!r}", field=key, **context)
+    if k[1] != 0.0 or k[3] != 0.0 or tuple(k[6:]) != (0.0, 0.0, 1.0):
+        raise InputError(f"camera_info k is not a pinhole camera matrix without skew: {k.tolist()}", field="k",
+                         **context)
+    d = np.asarray(message.d, dtype=np.float64)
+    if d.size and not (np.isfinite(d).all() and (d == 0.0).all()):
+        raise InputError(f"camera_info has distortion {short_repr(d.tolist(), 80)}; depthguard needs rectified "
+                         "images (all coefficients zero)", field="d", **context)
+    if message.binning_x > 1 or message.binning_y > 1:
+        raise InputError(f"camera_info has binning {message.binning_x}x{message.binning_y}; the rig's intrinsics "
+                         "are of unbinned images", field="binning", **context)
+    roi = message.roi
+    if roi.width and roi.height and (roi.x_offset, roi.y_offset, roi.width, roi.height) != \
+            (0, 0, camera.width, camera.height):
+        raise InputError("camera_info has a region of interest smaller than the image", field="roi", **context)
+
+
+def _joint_state(message, source: str, index: int):
+    names = [str(n) for n in message.name]
+    values = np.asarray(message.position, dtype=np.float64)
+    if not names:
+        raise InputError(f"joint state #{index} names no joints", source=source, field="name")
+    if len(set(names)) != len(names):
+        raise InputError(f"joint state #{index} names a joint twice: {', '.join(names)}", source=source,
+                         field="name")
+    if values.shape != (len(names),):
+        raise InputError(f"joint state #{index} has {values.size} positions for {len(names)} joint names",
+                         source=source, field="position")
+    if not np.isfinite(values).all():
+        bad = [f"{n}={v}" for n, v in zip(names, values) if not math.isfinite(v)]
+        raise InputError(f"joint state #{index}: positions must be finite, got {', '.join(bad)}", source=source,
+                         field="position")
+    return names, values
+
+
+# ------------------------------------------------------------------------------------------------ writing bags
+
+
+def write_bag(recording: Recording, path, storage: str = "mcap") -> Path:
+    """Write ``recording`` as a ROS 2 bag (the layout of the module docstring) in the new folder ``path``, with
+    the rig as ``rig.yaml`` beside the bag's files; returns ``path`` as a Path.
+
+    Every depth image goes to ``/<camera>/depth/image_raw`` (``16UC1``, or ``32FC1`` for float images) with a
+    ``/<camera>/depth/camera_info`` (frame_id ``<camera>_optical_frame``) of the same stamp, and every recorded
+    joint state to ``/joint_states``. Stamps and log times are the capture times rounded to nanoseconds (the
+    shortest decimal of each time, rounded: a time written with 6 decimals reads back as the same float).
+
+    ``storage``: ``"mcap"`` or ``"sqlite3"``. Raises :class:`InputError` if ``path`` exists or a time is negative or
+    beyond a ROS time (2**31 s).
+    """
+    from rosbags.rosbag2 import Writer
+    from rosbags.rosbag2.enums import StoragePlugin
+
+    if not isinstance(recording, Recording):
+        raise InputError(f"write_bag needs a Recording (open_recording), got {type(recording).__name__}",
+                         field="recording")
+    plugins = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
+    if not isinstance(storage, str) or storage not in plugins:
+        raise InputError(f"storage must be one of {tuple(plugins)}, got {short_repr(storage)}", field="storage")
+    path = check_path(path, "bag folder")
+    if path.exists() or path.is_symlink():
+        raise InputError("exists already; a bag is written into a new folder", source=str(path))
+    store = _typestore()
+    types = store.types
+    Header, Time = types["std_msgs/msg/Header"], types["builtin_interfaces/msg/Time"]
+    Image, CameraInfo = types[_IMAGE], types[_CAMERA_INFO]
+    JointState, RegionOfInterest = types[_JOINT_STATE], types["sensor_msgs/msg/RegionOfInterest"]
+    rig = recording.rig
+
+    def header(ns: int, frame_id: str):
+        return Header(stamp=Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=frame_id)
+
+    infos = {}
+    for name, camera in rig.cameras.items():
+        infos[name] = dict(
+            height=camera.height, width=camera.width, distortion_model="plumb_bob", d=np.zeros(5),
+            k=np.array([camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0]),
+            r=np.eye(3).ravel(),
+            p=np.array([camera.fx, 0.0, camera.cx, 0.0, 0.0, camera.fy, camera.cy, 0.0, 0.0, 0.0, 1.0, 0.0]),
+            binning_x=0, binning_y=0,
+            roi=RegionOfInterest(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))
+    joint_ns = [_nanoseconds(t, "joint state time") for t in recording.joint_times]
+    names = list(recording.joint_names)
+    empty = np.zeros(0)
+    try:
+        with Writer(path, version=Writer.VERSION_LATEST, storage_plugin=plugins[storage]) as writer:
+            joints_out = writer.add_connection(JOINT_STATES_TOPIC, _JOINT_STATE, typestore=store)
+            images_out = {n: writer.add_connection(f"/{n}/depth/image_raw", _IMAGE, typestore=store)
+                          for n in rig.cameras}
+            infos_out = {n: writer.add_connection(f"/{n}/depth/camera_info", _CAMERA_INFO, typestore=store)
+                         for n in rig.cameras}
+            written = 0
+
+            def joints_until(ns_limit):
+                nonlocal written
+                while written < len(joint_ns) and joint_ns[written] <= ns_limit:
+                    ns = joint_ns[written]
+                    message = JointState(header=header(ns, ""), name=names,
+                                         position=np.array(recording.joint_positions[written]), velocity=empty,
+                                         effort=empty)
+                    writer.write(joints_out, ns, store.serialize_cdr(message, _JOINT_STATE))
+                    written += 1
+
+            for frame_set in recording.frame_sets():
+                joints_until(_nanoseconds(frame_set.time, "capture time"))
+                for name, image in frame_set.images.items():
+                    ns = _nanoseconds(image.timestamp, "capture time")
+                    frame_id = f"{name}_optical_frame"
+                    info = CameraInfo(header=header(ns, frame_id), **infos[name])
+                    writer.write(infos_out[name], ns, store.serialize_cdr(info, _CAMERA_INFO))
+                    data = np.ascontiguousarray(image.data, dtype=image.data.dtype.newbyteorder("<"))
+                    encoding = "16UC1" if data.dtype.kind == "u" else "32FC1"
+                    message = Image(header=header(ns, frame_id), height=data.shape[0], width=data.shape[1],
+                                    encoding=encoding, is_bigendian=0, step=data.shape[1] * data.itemsize,
+                                    data=data.view(np.uint8).ravel())
+                    writer.write(images_out[name], ns, store.serialize_cdr(message, _IMAGE))
+            joints_until(math.inf)
+    except DepthguardError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - the bag library's errors, named with the bag
+        reason = " ".join(str(exc).split())[:200] or type(exc).__name__
+        raise InputError(f"cannot write the bag ({type(exc).__name__}: {reason})", source=str(path)) from None
+    save_rig(rig, path / "rig.yaml")
+    return path
+
+
+def _nanoseconds(time: float, what: str) -> int:
+    """A time in seconds as whole nanoseconds: its shortest decimal (repr) rounded, so 0.033333 is 33333000."""
+    if time is None or not math.isfinite(time) or not 0.0 <= time < 2.0**31:
+        raise InputError(f"a {what} of {short_repr(time)} s cannot be a ROS time (0 to 2**31 s)", field="time")
+    return int((Decimal(repr(float(time))) * 1_000_000_000).to_integral_value())
