@@ -15,6 +15,7 @@ from depthguard.depth import DepthImage, OccupancyImage, depth_image, load_depth
 from depthguard.depthspace import frustum_distance, paper_frustum_distance, single_camera_distances
 from depthguard.errors import DepthguardError, DepthImageError, InputError, RigError
 from depthguard.results import DistanceResult, Flag
+from depthguard.recordings import Recording, open_recording
 
 __version__ = "0.1.0"
 
@@ -29,6 +30,7 @@ __all__ = [
     "NoiseModel",
     "OccupancyImage",
     "PinholeCamera",
+    "Recording",
     "Rig",
     "RigError",
     "depth_image",
@@ -36,6 +38,7 @@ __all__ = [
     "load_camera_info",
     "load_depth",
     "load_rig",
+    "open_recording",
     "paper_frustum_distance",
     "prepare_depth",
     "read_depth_file",

@@ -2,7 +2,8 @@
 
     depthguard distance --rig RIG.yaml --depth NAME=PATH --points POINTS [--rho 0.4] [--aggregate hybrid] ...
     depthguard build-map --rig RIG.yaml [--principal NAME] [--d-min M --d-max M --delta-d M] --out MAP
-    depthguard simulate [SCENE.yaml] --out DIR [--seed N] [--duration S]
+    depthguard simulate [SCENE.yaml] --out DIR [--seed N] [--duration S] [--bag]
+    depthguard replay RECORDING --out RESULTS.csv [--robot URDF|iiwa|panda] [--points POINTS] [--rho 0.4] ...
     depthguard demo [--out DIR] [--duration S]
     depthguard fusion-workcell [--out DIR] [--scene SCENE.yaml ...] [--all-frames]
     depthguard scenario-a [--out DIR]
@@ -132,6 +133,29 @@ def _build_parser() -> argparse.ArgumentParser:
                           help="sensor-noise seed (default: the scene's)")
     simulate.add_argument("--duration", type=_SECONDS, default=None,
                           help="simulate only the first S seconds (at least one frame period)")
+    simulate.add_argument("--bag", action="store_true", help="also write the recording as a ROS 2 bag (MCAP) into "
+                                                             "OUT/bag/ (depth images, camera_info, joint_states)")
+
+    replay = commands.add_parser("replay", help="run a recording (folder or ROS 2 bag, SPEC section 12a) through the "
+                                                "monitor in capture-time order, one answer per set of frames")
+    replay.add_argument("recording", metavar="RECORDING", help="a recording folder (rig.yaml, frames.csv, depth/, "
+                                                                "joint_states.csv), a rosbag2 folder or an .mcap file")
+    replay.add_argument("--out", required=True, metavar="RESULTS.csv",
+                        help="results: time,frame,control_point,x,y,z,distance,blind_distance,flags")
+    replay.add_argument("--robot", default="iiwa", metavar="URDF",
+                        help="the recorded robot, filtered out of the images: a URDF file, or 'iiwa' / 'panda' for the "
+                             "models shipped with pybullet_data (default: iiwa); its joints must be the recording's")
+    replay.add_argument("--points", metavar="POINTS",
+                        help="fixed control points (CSV x,y,z or JSON, world frame, metres), named p0, p1, ... "
+                             "(default: the robot's control points, moving with the recorded joints)")
+    replay.add_argument("--rho", type=_METRES, default=config.DEFAULT_RHO,
+                        help=f"surveillance radius, metres, in [{config.RHO_MIN:g}, {config.RHO_MAX:g}]")
+    replay.add_argument("--aggregate", choices=config.AGGREGATES, default=config.DEFAULT_AGGREGATE)
+    replay.add_argument("--invalid", choices=config.INVALID_POLICIES, default=config.DEFAULT_INVALID,
+                        help="pixels without a measurement: occupied (fail-safe), neighbors, free")
+    replay.add_argument("--rig", metavar="RIG.yaml",
+                        help="the rig (default: rig.yaml in the recording, the bag folder or beside the .mcap file)")
+    replay.add_argument("--json", action="store_true", help="also print a JSON summary to standard output")
 
     demo = commands.add_parser("demo", help="the Quick start's main job: the simulated workcell of reference "
                                             "scenario B, each camera's distances against the truth")
@@ -171,6 +195,8 @@ def main(argv=None) -> int:
             return _distance(args)
         if args.command == "simulate":
             return _simulate(args)
+        if args.command == "replay":
+            return _replay(args)
         if args.command == "build-map":
             return _build_map(args)
         if args.command == "real-room":
@@ -277,16 +303,108 @@ def _build_map(args) -> int:
 
 
 def _simulate(args) -> int:
+    from pathlib import Path
+
+    from depthguard.errors import InputError
     from depthguard.simulation import default_workcell, load_workcell, write_episode
 
+    if args.bag and (Path(args.out) / "bag").exists():  # refused before the simulation, not after it
+        raise InputError(f"--bag: {Path(args.out) / 'bag'} exists already; a bag is written into a new folder")
     workcell = load_workcell(args.scene) if args.scene else default_workcell()
     duration = _duration(args.duration, workcell.rate)
     frames = None if duration is None else range(min(workcell.n_frames, int(round(duration * workcell.rate))))
     n = workcell.n_frames if frames is None else len(frames)
     print(f"simulating {n} frames of {', '.join(workcell.rig.cameras)} at {workcell.rate:g} Hz into {args.out}")
     out = write_episode(workcell, args.out, seed=args.seed, progress=True, frames=frames)
-    print(f"wrote {out}: rig.yaml, depth/, intensity/, joint_states.csv, ground_truth.csv, scene.yaml")
+    print(f"wrote {out}: rig.yaml, frames.csv, depth/, intensity/, joint_states.csv, ground_truth.csv, scene.yaml")
+    if args.bag:
+        from depthguard.recordings import open_recording, write_bag
+
+        bag = write_bag(open_recording(out), out / "bag")
+        print(f"wrote {bag}: ROS 2 bag (MCAP) with the same frames and joint states, and rig.yaml")
     return 0
+
+
+def _replay(args) -> int:
+    import csv
+    from pathlib import Path
+
+    import numpy as np
+    from tqdm import tqdm
+
+    from depthguard import DistanceMonitor
+    from depthguard.errors import InputError
+    from depthguard.recordings import open_recording
+
+    out = Path(args.out)
+    if out.exists() and not out.is_file():  # a folder, a FIFO, a device: never written to
+        raise InputError(f"--out {args.out}: exists and is not a regular file")
+    recording = open_recording(args.recording, rig=args.rig)
+    robot = _replay_robot(args.robot)
+    names = recording.joint_names
+    if set(names) != set(robot.joint_names) or len(names) != len(robot.joint_names):
+        missing = [n for n in robot.joint_names if n not in names]
+        unknown = [n for n in names if n not in robot.joint_names]
+        raise InputError(f"the recording's joints are not the robot's ({robot.name}): "
+                         + "; ".join(part for part in (f"missing {', '.join(missing)}" if missing else "",
+                                                       f"not the robot's {', '.join(unknown)}" if unknown else "")
+                                     if part), source=str(recording.path), field="joints")
+    order = [names.index(n) for n in robot.joint_names]  # recording's joint order -> the robot's
+    if args.points is not None:
+        from depthguard._points_io import load_points
+
+        fixed = load_points(args.points)
+        if len(fixed) == 0:
+            raise InputError(f"--points {args.points}: holds no points")
+        point_names = [f"p{i}" for i in range(len(fixed))]
+    else:
+        fixed = None
+        point_names = list(robot.control_point_names)
+    monitor = DistanceMonitor(recording.rig, rho=args.rho, aggregate=args.aggregate, invalid=args.invalid,
+                              robot=robot)
+    partial = out.with_name(out.name + ".partial")  # renamed to --out once every set is answered
+    distances, flagged, answered = [], 0, 0
+    try:
+        with open(partial, "w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(["time", "frame", "control_point", "x", "y", "z", "distance", "blind_distance", "flags"])
+            for frame_set in tqdm(recording.frame_sets(), total=len(recording), unit="set", desc="replaying",
+                                  file=sys.stderr):
+                points = fixed if fixed is not None else \
+                    robot.control_point_positions(recording.joints_at(frame_set.time)[order])
+                camera_joints = {camera: q[order] for camera, q in frame_set.joints.items()}
+                result = monitor.query(frame_set.images, points, camera_joints=camera_joints, now=frame_set.time)
+                for i, name in enumerate(point_names):
+                    flags = result.flags[i].names
+                    writer.writerow([repr(float(frame_set.time)), frame_set.frame, name,
+                                     *(repr(float(c)) for c in points[i]), repr(float(result.distance[i])),
+                                     repr(float(result.blind_distance[i])), ";".join(flags)])
+                    flagged += bool(flags)
+                distances.append(np.asarray(result.distance, dtype=np.float64))
+                answered += 1
+        os.replace(partial, out)
+    finally:
+        if partial.exists():
+            partial.unlink()
+    if args.json:
+        values = np.concatenate(distances) if distances else np.zeros(0)
+        finite = lambda x: None if not math.isfinite(x) else float(x)  # noqa: E731 - inf: nothing within rho
+        print(json.dumps({"recording": str(recording.path), "out": str(out), "frames": answered,
+                          "points": len(point_names), "answers": int(values.size), "flagged": flagged,
+                          "distance_min": finite(values.min()) if values.size else None,
+                          "distance_median": finite(float(np.median(values))) if values.size else None}))
+    else:
+        print(f"replayed {answered} frame sets of {', '.join(recording.rig.cameras)} with {len(point_names)} points "
+              f"each ({flagged} answers flagged) into {out}")
+    return 0
+
+
+def _replay_robot(name: str):
+    """``--robot`` of replay: 'iiwa', 'panda' or a URDF file (as ``distance --robot``)."""
+    from depthguard.robots import RobotModel
+
+    robot = {"iiwa": RobotModel.default, "panda": RobotModel.panda}.get(name)
+    return robot() if robot is not None else RobotModel.from_urdf(name)
 
 
 def _duration(value, rate: float):

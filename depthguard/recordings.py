@@ -344,7 +344,8 @@ def _read_frames_csv(path: Path, rig: Rig) -> list[FrameRecord]:
         camera = cells["camera"]
         if camera not in rig.cameras:
             raise InputError(f"line {line}: no such camera in the rig (cameras: {', '.join(rig.cameras)})",
-                             source=str(path), camera=short_repr(camera), field="camera")
+                             source=str(path), camera=camera if len(camera) <= 40 else camera[:37] + "...",
+                             field="camera")
         if not _WHOLE.fullmatch(cells["frame"]) or int(cells["frame"]) > MAX_FRAME_NUMBER:
             raise InputError(f"line {line}: a frame number must be a whole number in [0, {MAX_FRAME_NUMBER}], got "
                              f"{short_repr(cells['frame'])}", source=str(path), camera=camera, field="frame")
