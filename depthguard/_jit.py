@@ -33,6 +33,7 @@ KERNEL_MODULES = (
     "depthguard.depthgrid._kernels",
     "depthguard.depthspace._frustum",
     "depthguard.depthspace._kernels",
+    "depthguard.freespace._kernels",
     "depthguard.robots._capsule_kernels",
 )
 

@@ -6,8 +6,9 @@ two). The one honest way to reach every combination the product uses is to run t
 :func:`warm_up` runs small real workloads through the public API on a rig of two 32x24 cameras: frame preparation
 (each invalid-pixel policy, with and without a robot rendered, uint16 and float32 frames), single-camera queries
 of one point (the serial kernel) and of several (the parallel one), the depth grid's fusion of two cameras with and
-without a robot and with a blind secondary camera, the monitor, the frustum distance, the baselines and the capsule
-fit. ``tests/test_warmup.py`` checks that after it the command line and the monitor compile nothing.
+without a robot and with a blind secondary camera, the monitor, the frustum distance, the baselines, the capsule
+fit and the free-space memory. ``tests/test_warmup.py`` checks that after it the command line and the monitor compile
+nothing.
 
 Once the kernels are cached it takes a few seconds (mostly imports and loading the cached kernels).
 """
@@ -96,6 +97,7 @@ def _run_workloads() -> None:
     import depthguard as dg
     from depthguard import baselines
     from depthguard.depthgrid import FusedFrames, build_map, free_image, seen_free
+    from depthguard.freespace import FreeSpaceMemory, VoxelBox, seen_free_voxels, squared_distance_transform
     from depthguard.robots._capsules import enclosing_circle, fit_capsule
 
     rig, frames, robot, points = _small_workcell()
@@ -134,6 +136,14 @@ def _run_workloads() -> None:
             monitor.query({"principal": images["principal"]}, pts)
             monitor.query(images, pts)
         baselines.cartesian_region_distances(images["principal"], rig.cameras["principal"], several, 0.3)
+    # The free-space memory (SPEC 8a): the voxels both cameras see free, two updates (without and with a robot).
+    box = VoxelBox([-0.5, -0.5, 0.0], [0.5, 0.5, 1.0], 0.1)
+    cameras = list(rig.cameras.values())
+    seen = seen_free_voxels(box, cameras, [free_image(images[c.name], c) for c in cameras], margin=0.01, pad=1)
+    memory = FreeSpaceMemory(box)
+    memory.update(0.0, seen)
+    memory.update(0.1, seen, robot=np.zeros(box.shape, dtype=bool))
+    squared_distance_transform(seen)
     tangents = np.array([[-0.1, 0.1, -0.1, 0.1], [0.0, 0.2, 0.0, 0.2]])
     dg.frustum_distance([0.0, 0.0, 1.0], tangents, [0.5, np.inf])
     dg.paper_frustum_distance([0.0, 0.0, 1.0], tangents, [0.5, np.inf])

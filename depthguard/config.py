@@ -295,3 +295,24 @@ SELF_FILTER_GEOMETRIES = ("hulls", "capsules", "meshes")
 #: MAX_MESH_FILE_BYTES (a device or a runaway file is never read whole).
 MAX_URDF_BYTES = 16 << 20
 MAX_MESH_FILE_BYTES = 128 << 20
+
+# ----------------------------------------------------------------------------- time-bounded free space (SPEC 8a)
+
+#: Fastest a person (a hand) may move, metres/second: remembered free space shrinks at this speed from wherever a
+#: person may be (ISO 13855's approach speed for hands). A body part moving faster is outside the guarantee.
+FREESPACE_V_MAX = 2.0
+
+#: Largest free-space box, in voxels: its arrival times (float64), the distance transform's work space (int32) and a
+#: boolean mask take 13 bytes a voxel, about 210 MB at this size. A side of at most FREESPACE_MAX_SIDE voxels keeps
+#: every squared distance (in voxels) within int32.
+FREESPACE_MAX_VOXELS = 16_000_000
+FREESPACE_MAX_SIDE = 16384
+
+#: A box side within this many voxels of a whole number of voxels is not grown by a sliver voxel ((0.4 - 0.1) / 0.1
+#: is 3.0000000000000004 in float64). The box is then short by at most this fraction of a voxel, which is safe:
+#: space outside the box counts as possibly occupied.
+FREESPACE_FIT_TOLERANCE = 1e-9
+
+#: Arrival times are lowered by this fraction of the distance they come from (and by one unit in the last place of
+#: the sum), so that float rounding never makes one later than the exact value.
+FREESPACE_ROUNDING = 1e-12

@@ -1,0 +1,319 @@
+"""The free-space memory of SPEC section 8a: a voxel box, which voxels the cameras see entirely free now, and for
+each voxel the earliest time a person could be in it.
+
+SPEC 8a's recursion F_k = erode(F_{k-1}, v_max (t_k - t_{k-1})) u Seen_k u Robot_k is kept in its complement: U_k,
+where a person may be at t_k, is dilate(U_{k-1}, v_max (t_k - t_{k-1})) minus (Seen_k u Robot_k), starting from
+U_0 = everything (never seen = possibly occupied), and space outside the box always counts as U (a person may come
+from outside). It is stored as an arrival time per voxel, a lower bound of the earliest time a person could be
+anywhere in it: a voxel is certified free at time t when its arrival time is later than t.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from depthguard import config
+from depthguard.cameras import PinholeCamera
+from depthguard.errors import InputError, check_real, short_repr
+from depthguard.freespace import _kernels
+
+_SQRT3 = math.sqrt(3.0)
+
+
+class VoxelBox:
+    """A world-aligned box cut into cubes of side ``voxel``.
+
+    Voxel (i, j, k) spans [lo + (i, j, k) * voxel, lo + (i + 1, j + 1, k + 1) * voxel] (metres, world frame). The box
+    asked for is grown to whole voxels along each axis: ``shape`` = ceil((hi - lo) / voxel) (a side within
+    ``config.FREESPACE_FIT_TOLERANCE`` voxels of a whole number is not grown by a sliver), and ``hi`` is the grown
+    box's far corner.
+
+    Args:
+        lo, hi: (3,) metres, world frame: the box's near and far corners, finite, within
+            ``config.COORDINATE_LIMIT`` of the origin, hi > lo on every axis.
+        voxel: the cubes' side, metres, > 0.
+
+    Raises :class:`InputError` naming the field (``lo``, ``hi``, ``voxel``) for anything else, and for a box of
+    more than ``config.FREESPACE_MAX_VOXELS`` voxels or more than ``config.FREESPACE_MAX_SIDE`` along one axis.
+    """
+
+    def __init__(self, lo, hi, voxel: float):
+        lo = _corner(lo, "lo")
+        hi = _corner(hi, "hi")
+        if not np.all(hi > lo):
+            raise InputError(f"hi must exceed lo on every axis, got lo {lo.tolist()}, hi {hi.tolist()}", field="hi")
+        voxel = check_real(voxel, "voxel", minimum=0.0, above_minimum=True, unit="metres", field="voxel")
+        sides = (hi - lo) / voxel
+        if not np.all(sides <= config.FREESPACE_MAX_SIDE + config.FREESPACE_FIT_TOLERANCE):
+            raise InputError(f"a box of {(hi - lo).tolist()} m in voxels of {voxel!r} m has more than "
+                             f"{config.FREESPACE_MAX_SIDE} voxels along an axis (config.FREESPACE_MAX_SIDE)",
+                             field="voxel")
+        shape = tuple(max(int(math.ceil(s - config.FREESPACE_FIT_TOLERANCE)), 1) for s in sides)
+        size = shape[0] * shape[1] * shape[2]
+        if size > config.FREESPACE_MAX_VOXELS:
+            raise InputError(f"a box of {(hi - lo).tolist()} m in voxels of {voxel!r} m has {size} voxels, more than "
+                             f"{config.FREESPACE_MAX_VOXELS} (config.FREESPACE_MAX_VOXELS)", field="voxel")
+        self.lo = lo
+        self.voxel = voxel
+        self.shape = shape
+        self.hi = lo + np.array(shape) * voxel
+        self.lo.setflags(write=False)
+        self.hi.setflags(write=False)
+
+    @property
+    def size(self) -> int:
+        """The number of voxels."""
+        return self.shape[0] * self.shape[1] * self.shape[2]
+
+    def axis_centres(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The voxel centres' x, y and z: three (n_axis,) float64 arrays, metres, world frame."""
+        return tuple(self.lo[a] + (np.arange(self.shape[a]) + 0.5) * self.voxel for a in range(3))
+
+    def __repr__(self) -> str:
+        return f"VoxelBox(lo={self.lo.tolist()}, hi={self.hi.tolist()}, voxel={self.voxel!r}, shape={self.shape})"
+
+
+def _corner(value, name: str) -> np.ndarray:
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError):
+        array = None
+    if array is None or array.dtype.kind not in "fiu" or array.shape != (3,):
+        raise InputError(f"{name} must be 3 real numbers (metres, world frame), got {short_repr(value)}", field=name)
+    array = np.array(array, dtype=np.float64)
+    if not (np.all(np.isfinite(array)) and np.all(np.abs(array) <= config.COORDINATE_LIMIT)):
+        raise InputError(f"{name} must be finite and within +-{config.COORDINATE_LIMIT:g} m "
+                         f"(config.COORDINATE_LIMIT), got {array.tolist()}", field=name)
+    return array
+
+
+def _check_box(box) -> VoxelBox:
+    if not isinstance(box, VoxelBox):
+        raise InputError(f"box must be a VoxelBox, got {type(box).__name__}", field="box")
+    return box
+
+
+# ------------------------------------------------------------------------------------------------- seen free voxels
+
+
+def seen_free_voxels(box: VoxelBox, cameras: Sequence[PinholeCamera], free_images: Sequence, margin: float = 0.0,
+                     pad: int = 0, check: bool = True) -> np.ndarray:
+    """Which voxels of ``box`` some camera sees entirely free now: (nx, ny, nz) bool.
+
+    Camera j sees voxel x free when (the depth grid's confirmation rule, SPEC section 8):
+
+    - all 8 corners of x lie in front of it: optical z >= max(depth_range[0], ``config.NEAR_PLANE_EPSILON``);
+    - the bounding box of the corners' projections, grown by ``pad`` pixels on every side, lies in the image: every
+      pixel (u, v) whose footprint [u - 1/2, u + 1/2] x [v - 1/2, v + 1/2] meets it exists;
+    - every such pixel saw free at least up to the voxel's far depth plus ``margin``: free[v, u] >= z_far + margin,
+      z_far the largest corner depth (no point of the convex voxel lies deeper along any ray).
+
+    A corner (i + a, j + b, k + c) is at lo + (i + a, j + b, k + c) * voxel, its optical coordinates are
+    R[r, 0] * x + R[r, 1] * y + R[r, 2] * z + t[r] with (R, t) = ``T_camera_world``, and it projects to
+    u = fx * x / z + cx, v = fy * y / z + cy (SPEC section 1).
+
+    Args:
+        box: the voxels.
+        cameras: the cameras (:class:`~depthguard.PinholeCamera`).
+        free_images: for each camera, in the same order, an (h, w) float32 array, metres: how far that camera saw
+            free along each pixel (0 = nothing), as :func:`depthguard.depthgrid.free_image` and
+            :func:`~depthguard.depthgrid.seen_free` give (their noise margin already subtracted); or None for a
+            camera that is blind now (stale or missing frame): it sees nothing free.
+        margin: metres a camera must have seen beyond a voxel (calibration error), >= 0.
+        pad: pixels by which a voxel's footprint grows (calibration error), a whole number >= 0.
+        check: validate the arguments (False skips it, for a hot loop whose inputs are known to be good).
+
+    Raises :class:`InputError` naming the field (``box``, ``cameras``, ``free_images``, ``margin``, ``pad``).
+    """
+    if check:
+        _check_box(box)
+        cameras, free_images = _check_views(cameras, free_images)
+        margin = check_real(margin, "margin", minimum=0.0, maximum=config.COORDINATE_LIMIT, unit="metres",
+                            field="margin")
+        if isinstance(pad, bool) or not isinstance(pad, (int, np.integer)) or \
+                not 0 <= pad <= config.MAX_FUSION_PIXELS:
+            raise InputError(f"pad must be a whole number of pixels in [0, {config.MAX_FUSION_PIXELS}], got "
+                             f"{short_repr(pad)}", field="pad")
+    views = [(camera, free) for camera, free in zip(cameras, free_images) if free is not None]
+    out = np.zeros(box.shape, dtype=bool)
+    if not views:
+        return out
+    n = len(views)
+    height = max(camera.height for camera, _ in views)
+    width = max(camera.width for camera, _ in views)
+    levels = width.bit_length()  # runs of 1, 2, 4, ... up to the widest image's width
+    poses = np.empty((n, 12))
+    intrinsics = np.empty((n, 4))
+    z_near = np.empty(n)
+    sizes = np.empty((n, 2), dtype=np.int64)
+    tables = np.empty((n, levels, height, width), dtype=np.float32)
+    for c, (camera, free) in enumerate(views):
+        T_camera_world = camera.T_camera_world
+        poses[c, :9] = T_camera_world[:3, :3].ravel()
+        poses[c, 9:] = T_camera_world[:3, 3]
+        intrinsics[c] = (camera.fx, camera.fy, camera.cx, camera.cy)
+        z_near[c] = max(camera.depth_range[0], config.NEAR_PLANE_EPSILON)
+        sizes[c] = (camera.width, camera.height)
+        # Contiguous and writable: a read-only array is another type to numba, and would compile once more.
+        _kernels.row_min_tables(np.require(free, np.float32, ["C", "W"]), camera.width.bit_length(), tables[c])
+    floor_log2 = np.array([max(m.bit_length() - 1, 0) for m in range(width + 1)], dtype=np.int64)
+    _kernels.seen_free_voxels(box.lo, box.voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, float(margin),
+                              float(pad), out)
+    return out
+
+
+def _check_views(cameras, free_images) -> tuple[list, list]:
+    if isinstance(cameras, (str, bytes)) or not isinstance(cameras, Sequence):
+        raise InputError(f"cameras must be a list of PinholeCamera, got {type(cameras).__name__}", field="cameras")
+    if isinstance(free_images, (str, bytes, np.ndarray)) or not isinstance(free_images, Sequence):
+        raise InputError(f"free_images must be a list with one (h, w) float32 array (or None) per camera, got "
+                         f"{type(free_images).__name__}", field="free_images")
+    if len(free_images) != len(cameras):
+        raise InputError(f"free_images must hold one image per camera: {len(cameras)} cameras, "
+                         f"{len(free_images)} images", field="free_images")
+    for index, camera in enumerate(cameras):
+        if not isinstance(camera, PinholeCamera):
+            raise InputError(f"cameras[{index}] must be a PinholeCamera, got {type(camera).__name__}",
+                             field="cameras")
+    for camera, free in zip(cameras, free_images):
+        if free is None:
+            continue
+        if not isinstance(free, np.ndarray) or free.dtype != np.float32 or free.shape != camera.shape:
+            got = f"dtype {free.dtype}, shape {free.shape}" if isinstance(free, np.ndarray) else type(free).__name__
+            raise InputError(f"must be a float32 array of the camera's shape {camera.shape} (metres seen free), got "
+                             f"{got}", camera=camera.name, field="free_images")
+        if np.isnan(free).any():
+            raise InputError("holds NaN: a pixel that saw nothing is 0", camera=camera.name, field="free_images")
+    return list(cameras), list(free_images)
+
+
+# ----------------------------------------------------------------------------------------- the distance transform
+
+
+def squared_distance_transform(sites) -> np.ndarray:
+    """(nx, ny, nz) int32: for each voxel, the squared Euclidean distance (in voxels, between voxel centres) to the
+    nearest True voxel of ``sites`` ((nx, ny, nz) bool) or to the layer of voxels just outside the array, which
+    counts as True (Felzenszwalb and Huttenlocher's exact transform, parallel over lines). It equals
+    ``scipy.ndimage.distance_transform_edt(~np.pad(sites, 1, constant_values=True))[1:-1, 1:-1, 1:-1] ** 2``.
+    Raises :class:`InputError` for anything but a 3-D bool array with sides of 1 to ``config.FREESPACE_MAX_SIDE``
+    and at most ``config.FREESPACE_MAX_VOXELS`` voxels."""
+    if not isinstance(sites, np.ndarray) or sites.dtype != np.bool_ or sites.ndim != 3 or min(sites.shape) < 1 or \
+            max(sites.shape) > config.FREESPACE_MAX_SIDE or sites.size > config.FREESPACE_MAX_VOXELS:
+        got = f"dtype {sites.dtype}, shape {sites.shape}" if isinstance(sites, np.ndarray) else type(sites).__name__
+        raise InputError(f"sites must be a 3-D bool array of at most {config.FREESPACE_MAX_VOXELS} voxels, got {got}",
+                         field="sites")
+    d2 = np.empty(sites.shape, dtype=np.int32)
+    _kernels.last_axis_of_mask(np.require(sites, np.bool_, ["C", "W"]), d2)
+    _kernels.middle_axis(d2)
+    _kernels.first_axis(d2)
+    return d2
+
+
+# ----------------------------------------------------------------------------------------------------- the memory
+
+
+class FreeSpaceMemory:
+    """Remembered free space (SPEC section 8a): for each voxel of a box, the earliest time a person could be in it.
+
+    ``arrival[x]`` is a lower bound of the earliest time (seconds, the frames' clock) at which a person moving at
+    most ``v_max`` could be anywhere in voxel x, given everything the cameras have seen; voxel x is certified free at
+    time t when ``arrival[x] > t``. It starts at -inf: space never seen is possibly occupied. Each :meth:`update` at
+    time t_k with the voxels seen entirely free now and those entirely inside the robot makes
+
+        U_k = (arrival <= t_k) & ~seen & ~robot                     (where a person may be now)
+        arrival[x] = max(arrival[x], t_k + max(0, D(x, U_k) - voxel * sqrt(3)) / v_max)
+
+    with D the Euclidean distance between voxel centres to the nearest voxel of U_k or of the layer just outside the
+    box (a person may come from outside). Two voxels' boxes are at least their centres' distance minus voxel *
+    sqrt(3) apart, so the new term is a lower bound of the true arrival from U_k; the old arrival time stays a lower
+    bound too (what is seen later only rules out more), so the larger of the two is kept. Keeping it means a frame
+    that adds nothing (a stale camera) leaves the memory as it was instead of costing another voxel * sqrt(3) of
+    free space. U_k voxels get t_k.
+
+    Args:
+        box: the voxels (:class:`VoxelBox`).
+        v_max: the fastest a person may move, metres/second, finite and > 0 (``config.FREESPACE_V_MAX``). A body part
+            moving faster is outside the guarantee.
+
+    Memory: 8 bytes a voxel for ``arrival`` and 4 for the distance transform's work space (``nbytes``).
+    """
+
+    def __init__(self, box: VoxelBox, v_max: float = config.FREESPACE_V_MAX):
+        self.box = _check_box(box)
+        self.v_max = check_real(v_max, "v_max", minimum=0.0, above_minimum=True, unit="metres/second",
+                                field="v_max")
+        self._arrival = np.full(box.shape, -np.inf)
+        self._d2 = np.empty(box.shape, dtype=np.int32)
+        self._time: float | None = None
+        self._no_robot = np.zeros((1, 1, 1), dtype=bool)
+
+    @property
+    def arrival(self) -> np.ndarray:
+        """(nx, ny, nz) float64 seconds, read-only view: each voxel's earliest possible arrival of a person."""
+        view = self._arrival.view()
+        view.setflags(write=False)
+        return view
+
+    @property
+    def time(self) -> float | None:
+        """The time of the last :meth:`update` (seconds), None before the first."""
+        return self._time
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes the memory holds: the arrival times and the distance transform's work space."""
+        return self._arrival.nbytes + self._d2.nbytes
+
+    def update(self, t: float, seen: np.ndarray, robot: np.ndarray | None = None, check: bool = True) -> None:
+        """Take in the frames of time ``t``.
+
+        Args:
+            t: capture time, seconds, finite, at least the last update's (equal is allowed).
+            seen: (nx, ny, nz) bool: the voxels some camera sees entirely free at t (:func:`seen_free_voxels`); all
+                False for a frame in which no camera saw anything (the memory then only ages).
+            robot: (nx, ny, nz) bool or None: the voxels entirely inside the robot's links at t (no person can be
+                there).
+            check: validate the arguments (False skips it, for a hot loop whose inputs are known to be good).
+
+        Raises :class:`InputError` naming ``t``, ``seen`` or ``robot``.
+        """
+        if check:
+            t = check_real(t, "t", unit="seconds", field="t")
+            if self._time is not None and t < self._time:
+                raise InputError(f"t must be at least the last update's time {self._time!r} (frames in time order), "
+                                 f"got {t!r}", field="t")
+            seen = self._check_mask(seen, "seen")
+            if robot is not None:
+                robot = self._check_mask(robot, "robot")
+        t = float(t)
+        use_robot = robot is not None
+        seen = np.require(seen, np.bool_, ["C", "W"])  # as in seen_free_voxels: one type for numba
+        if use_robot:
+            robot = np.require(robot, np.bool_, ["C", "W"])
+        _kernels.last_axis_of_memory(self._arrival, seen, robot if use_robot else self._no_robot, use_robot, t,
+                                     self._d2)
+        _kernels.middle_axis(self._d2)
+        _kernels.first_axis(self._d2)
+        _kernels.advance_arrival(self._d2, t, self.box.voxel, self.box.voxel * _SQRT3, self.v_max,
+                                 config.FREESPACE_ROUNDING, self._arrival)
+        self._time = t
+
+    def free_at(self, t: float) -> np.ndarray:
+        """(nx, ny, nz) bool: the voxels certified free at time ``t`` (seconds, at least the last update's; no voxel
+        before the first update). Valid until the next update: a later update can only certify more."""
+        t = check_real(t, "t", unit="seconds", field="t")
+        if self._time is None:
+            return np.zeros(self.box.shape, dtype=bool)
+        if t < self._time:
+            raise InputError(f"t must be at least the last update's time {self._time!r} (the memory does not know "
+                             f"the past), got {t!r}", field="t")
+        return self._arrival > t
+
+    def _check_mask(self, mask, name: str) -> np.ndarray:
+        if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_ or mask.shape != self.box.shape:
+            got = f"dtype {mask.dtype}, shape {mask.shape}" if isinstance(mask, np.ndarray) else type(mask).__name__
+            raise InputError(f"{name} must be a bool array of the box's shape {self.box.shape}, got {got}", field=name)
+        return mask
