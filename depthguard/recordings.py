@@ -512,8 +512,9 @@ def _open_bag(path: Path, rig, folder: bool) -> Recording:
         for name in rig.cameras:
             for kind in ("image_raw", "camera_info"):
                 if kind not in topics.get(name, {}):
-                    raise InputError(f"the bag has no topic /{name}/depth/{kind} ({_IMAGE if kind == 'image_raw' else _CAMERA_INFO})",
-                                     source=source, camera=name, field="topic")
+                    msgtype = _IMAGE if kind == "image_raw" else _CAMERA_INFO
+                    raise InputError(f"the bag has no topic /{name}/depth/{kind} ({msgtype})", source=source,
+                                     camera=name, field="topic")
         if joints_connection is None:
             raise InputError(f"the bag has no topic {JOINT_STATES_TOPIC} ({_JOINT_STATE})", source=source,
                              field="topic")

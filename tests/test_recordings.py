@@ -254,6 +254,41 @@ def test_replay_of_the_bag_equals_the_folder(episode, replayed, tmp_path, capsys
     assert (tmp_path / "shuffled.csv").read_text() == replayed.read_text()
 
 
+def test_replay_gives_each_camera_its_own_joints(episode, tmp_path, capsys):
+    """Cameras that capture at different times: each frame is self-filtered with the joints at its own capture
+    time, the points come from the joints at the set's latest time."""
+    folder = tmp_path / "staggered"
+    shutil.copytree(episode, folder, ignore=shutil.ignore_patterns("bag", "intensity"))
+    times = {("principal", i): float(f"{i / 30:.6f}") for i in range(FRAMES)}
+    times.update({("second", 0): 0.01, ("second", 1): 0.043333, ("second", 2): float(f"{2 / 30:.6f}")})
+    rows = "".join(f"{camera},{i},{t!r}\n" for (camera, i), t in times.items())
+    (folder / "frames.csv").write_text("camera,frame,time\n" + rows)
+    status, _, err = run(["replay", folder, "--out", tmp_path / "r.csv"], capsys)
+    assert status == 0, err
+    rows = read_csv(tmp_path / "r.csv")[1:]
+    recording = open_recording(folder)  # its joints_at is checked against exact values above and below
+    rig, robot = recording.rig, RobotModel.default()
+
+    def loop(own_times: bool) -> list[list[str]]:
+        monitor = dg.DistanceMonitor(rig, robot=robot)
+        out = []
+        for i in range(FRAMES):
+            frames = {name: dg.load_depth(folder / "depth" / name / f"{i:06d}.png", camera,
+                                          timestamp=times[(name, i)]) for name, camera in rig.cameras.items()}
+            now = max(times[(name, i)] for name in rig.cameras)
+            joints = {name: recording.joints_at(times[(name, i)] if own_times else now) for name in rig.cameras}
+            points = robot.control_point_positions(recording.joints_at(now))
+            result = monitor.query(frames, points, camera_joints=joints, now=now)
+            out += [[repr(now), str(i), name, *(repr(float(c)) for c in points[k]), repr(float(result.distance[k])),
+                     repr(float(result.blind_distance[k])), ";".join(result.flags[k].names)]
+                    for k, name in enumerate(robot.control_point_names)]
+        return out
+
+    assert [r[0] for r in rows[::9]] == ["0.01", "0.043333", repr(float(f"{2 / 30:.6f}"))]
+    assert rows == loop(own_times=True)
+    assert rows != loop(own_times=False)  # the joints per camera matter here: the test can tell
+
+
 def test_replay_json_summary(episode, replayed, tmp_path, capsys):
     status, out, err = run(["replay", episode, "--out", tmp_path / "r.csv", "--json"], capsys)
     assert status == 0, err
@@ -474,9 +509,11 @@ def custom_bag(path: Path, rig: dg.Rig, *, encoding="16UC1", fx_offset=0.0, dist
             for j, t in enumerate(stamps):
                 logged = round(j * 0.05 * 1e9)
                 if images is not None:
-                    data = np.full((camera.height, camera.width), 1000, np.uint16)
+                    data = np.full((camera.height, camera.width), 1000, np.uint16) if encoding != "32FC1" else \
+                        np.full((camera.height, camera.width), 1.25, np.float32)
                     message = T["sensor_msgs/msg/Image"](header=header(t), height=camera.height, width=camera.width,
-                                                         encoding=encoding, is_bigendian=0, step=2 * camera.width,
+                                                         encoding=encoding, is_bigendian=0,
+                                                         step=data.itemsize * camera.width,
                                                          data=data.view(np.uint8).ravel())
                     writer.write(images, logged, store.serialize_cdr(message, message.__msgtype__))
                 if infos is not None:
@@ -499,6 +536,14 @@ def test_a_bag_written_by_another_tool_reads(tmp_path):
     assert [s.frame for s in sets] == [0, 1, 2] and [s.time for s in sets] == [0.0, 0.05, 0.1]
     np.testing.assert_allclose(sets[1].joints["right"], [0.25, -0.5], rtol=0, atol=1e-15)
     assert sets[2].images["left"].data.dtype == np.uint16 and (sets[2].images["left"].data == 1000).all()
+
+
+def test_float_images_in_metres(tmp_path):
+    recording = open_recording(custom_bag(tmp_path / "float", small_rig(), encoding="32FC1"))
+    image = next(iter(recording)).images["right"]
+    assert image.data.dtype == np.float32 and image.depth_scale == 1.0 and (image.data == 1.25).all()
+    copy = write_bag(recording, tmp_path / "copy", storage="sqlite3")  # float images written as 32FC1
+    assert_same_recording(recording, open_recording(copy))
 
 
 BAD_BAGS = {
