@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -55,8 +56,8 @@ class DistanceMonitor:
     A frame passed as a :class:`DepthImage` is prepared once (and filtered with the joints given with it) and reused
     while the same object is passed again; a plain array is checked and prepared on every query.
 
-    With frames of one camera, queries use the single-camera method (SPEC sections 3-7); with frames of several,
-    the depth grid fuses them (SPEC section 8).
+    Which method answers is decided once per query by one rule (:meth:`plan`): the single-camera method (SPEC
+    sections 3-7) when one camera has a usable frame, the depth grid (SPEC section 8) when several have.
     """
 
     def __init__(self, rig: Rig, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
@@ -160,22 +161,20 @@ class DistanceMonitor:
             image = checked_frame(frame, camera)
         else:
             image = depth_image(frame, camera)
-        robot_near = robot_far = robot_exit = None
+        robot_near = robot_far = None
         if self._silhouette is not None:
             if joints is None:
                 raise InputError(f"camera {name!r}: this monitor filters the robot out of its frames: pass the robot's "
                                  "joint positions at the frame's capture time (query(..., joints=...))")
             joints = self.robot.joint_vector(joints)
             robot_near = self._silhouette.render(camera, joints)
-            if len(self.rig.cameras) > 1:
-                # The depth grid needs where the robot ends (case iv); with it, what a camera saw past the padded
-                # robot also stays a surface rather than blind space, and a secondary camera clears the space there.
-                robot_far = self._silhouette.render_far(camera, joints)
-                if name in self.principals:
-                    robot_exit = self._silhouette.render_first_exit(camera, joints)
+            # Where the robot ends along each pixel: what a camera saw past the padded robot then stays a surface
+            # rather than blind space (whether one camera answers or several), a secondary camera clears the space
+            # there, and the depth grid starts the space behind the robot there (case iv).
+            robot_far = self._silhouette.render_far(camera, joints)
         occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels, robot_near=robot_near,
                                   robot_tolerance=self.self_filter_tolerance, robot_far=robot_far)
-        state = _CameraFrame(self, camera, image, occupancy, joints, robot_near, robot_far, robot_exit)
+        state = _CameraFrame(self, camera, image, occupancy, joints, robot_near, robot_far)
         if isinstance(frame, DepthImage):
             self._prepared[name] = (frame, state)
         return state
@@ -203,8 +202,9 @@ class DistanceMonitor:
           also without ``max_age``);
         - ``max_age`` is set and it has no timestamp or is older than ``max_age`` at ``now``.
 
-        With one frame, the single-camera method of SPEC sections 3-6 runs on it. With no usable frame (none given,
-        or every one stale) each point gets distance 0 and the flag ``MISSING_CAMERA`` or ``STALE_CAMERA``.
+        Then :meth:`plan` decides, by one rule, which method answers: none (distance 0, with no usable frame), the
+        single-camera method (one usable frame) or the depth grid (several); a stale or missing camera of the rig
+        flags every answer.
         """
         if not isinstance(check, bool):
             raise InputError(f"check must be True or False, got {short_repr(check)}", field="check")
@@ -235,15 +235,47 @@ class DistanceMonitor:
             timestamp = state.occupancy.timestamp
             if self.is_stale(timestamp, now):
                 stale[name] = timestamp
-                continue
-            usable[name] = state
-        if not usable:
-            return DistanceResult.blind(len(points), Flag.STALE_CAMERA if stale else Flag.MISSING_CAMERA, stale)
-        if len(usable) == 1 and not stale:
-            (state,) = usable.values()
-            return single_camera_distances(state.occupancy, points, self.rho, self.aggregate, self.unseen,
-                                           self.method, check=False)
-        return self._fused(usable, points, list(stale))
+            else:
+                usable[name] = state
+        return self._answer(self.plan(usable, stale), usable, points)
+
+    def plan(self, usable, stale) -> "QueryPlan":
+        """How a query answers, decided once by one rule from which of the rig's cameras have a usable frame
+        (``usable``: names of fresh frames) and which a stale one (``stale``); every other camera of the rig is
+        missing:
+
+        - no usable frame: no camera answers; every point gets distance 0 (``DistanceResult.blind``);
+        - one usable frame: the single-camera method on it (SPEC sections 3-7), the same answer whatever other
+          cameras the rig holds;
+        - several: the depth grid (SPEC section 8) of each principal camera with a usable frame; when none of the
+          principals has one, the first camera of the rig that has takes their place. Every other camera of the rig
+          is a secondary camera; a stale or missing one is blind (it clears nothing).
+
+        Whatever the case, every answer carries ``STALE_CAMERA`` when a camera of the rig has a stale frame and
+        ``MISSING_CAMERA`` when one has none, and ``DistanceResult.principal`` names the camera that answered.
+        """
+        names = [name for name in self.rig.cameras if name in usable]
+        absent = Flag(0)
+        if any(name in stale for name in self.rig.cameras):
+            absent |= Flag.STALE_CAMERA
+        if any(name not in usable and name not in stale for name in self.rig.cameras):
+            absent |= Flag.MISSING_CAMERA
+        if not names:
+            return QueryPlan("blind", (), absent, dict(stale))
+        if len(names) == 1:
+            return QueryPlan("single", (names[0],), absent, dict(stale))
+        principals = tuple(name for name in self.principals if name in usable) or (names[0],)
+        return QueryPlan("fused", principals, absent, dict(stale))
+
+    def _answer(self, plan: "QueryPlan", usable: dict, points: np.ndarray) -> DistanceResult:
+        if plan.kind == "blind":
+            return DistanceResult.blind(len(points), plan.absent, plan.stale)
+        if plan.kind == "single":
+            (name,) = plan.principals
+            result = single_camera_distances(usable[name].occupancy, points, self.rho, self.aggregate, self.unseen,
+                                             self.method, check=False)
+            return _with_flags(result, plan.absent) if plan.absent else result
+        return self._fused(plan, usable, points)
 
     def is_stale(self, timestamp: float | None, now: float | None) -> bool:
         """Whether a frame stamped ``timestamp`` (seconds, or None) counts as blind at ``now`` (see :meth:`query`)."""
@@ -255,17 +287,15 @@ class DistanceMonitor:
             return True
         return self.max_age is not None and now - timestamp > self.max_age
 
-    def _fused(self, usable: dict, points: np.ndarray, stale: list) -> DistanceResult:
-        """The depth grid of every usable principal; per point, the largest answer among the principals whose view
-        holds its whole surveillance region (else the first usable principal's, flagged)."""
+    def _fused(self, plan: "QueryPlan", usable: dict, points: np.ndarray) -> DistanceResult:
+        """The depth grid of each of the plan's principals; per point, the largest answer among the principals
+        whose view holds its whole surveillance region (each is a lower bound), else the first principal's."""
         from depthguard.depthgrid import FusedFrames, build_map
 
         if self.method != "exact":
             raise InputError("fusing several cameras uses the exact method only")
         results = []
-        for name in self.principals:
-            if name not in usable:
-                continue
+        for name in plan.principals:
             grid = self.maps.get(name)
             if grid is None:
                 grid = self.maps[name] = build_map(self.rig, name)
@@ -280,55 +310,63 @@ class DistanceMonitor:
                     margin=self.fusion_margin, pad=self.fusion_pixels, check=False, robot_near=state.robot_near,
                     robot_exit=state.robot_exit))
             results.append(cached[1].distances(points, self.rho, self.aggregate, self.unseen, check=False))
-        if not results:
-            flag = Flag.STALE_CAMERA if any(n in stale for n in self.principals) else Flag.MISSING_CAMERA
-            return DistanceResult.blind(len(points), flag)
         timestamps = {name: state.occupancy.timestamp for name, state in usable.items()}
         invalid_pixels = {n: s.occupancy.invalid_pixels for n, s in usable.items()}
-        stale_flag = Flag.STALE_CAMERA if stale else Flag(0)
         if len(results) == 1:
-            (result,) = results
-            return DistanceResult(distance=result.distance, direction=result.direction, count=result.count,
-                                  invalid_count=result.invalid_count, blind_distance=result.blind_distance,
-                                  flags=tuple(f | stale_flag for f in result.flags) if stale else result.flags,
-                                  timestamps=timestamps, cameras=tuple(usable), invalid_pixels=invalid_pixels,
-                                  principal=(result.cameras[0],) * len(points))
-        holds = np.array([[Flag.REGION_OUTSIDE_VIEW not in f for f in r.flags] for r in results])
-        distances = np.array([r.distance for r in results])
-        candidates = np.where(holds, distances, -np.inf)
-        chosen = np.where(holds.any(axis=0), np.argmax(candidates, axis=0), 0)
+            chosen = np.zeros(len(points), dtype=np.int64)
+        else:
+            holds = np.array([[Flag.REGION_OUTSIDE_VIEW not in f for f in r.flags] for r in results])
+            candidates = np.where(holds, np.array([r.distance for r in results]), -np.inf)
+            chosen = np.where(holds.any(axis=0), np.argmax(candidates, axis=0), 0)
         pick = lambda attr: np.array([getattr(results[c], attr)[i] for i, c in enumerate(chosen)])  # noqa: E731
-        flags = tuple(results[c].flags[i] | stale_flag for i, c in enumerate(chosen))
+        # FusedFrames flags a blind secondary camera STALE_CAMERA; the plan knows whether it was stale or missing.
+        flags = tuple((results[c].flags[i] & ~Flag.STALE_CAMERA) | plan.absent for i, c in enumerate(chosen))
         return DistanceResult(distance=pick("distance"), direction=pick("direction").reshape(-1, 3),
                               count=pick("count"), invalid_count=pick("invalid_count"), flags=flags,
-                              blind_distance=pick("blind_distance"),
-                              timestamps=timestamps, cameras=tuple(usable), invalid_pixels=invalid_pixels,
-                              principal=tuple(results[c].cameras[0] for c in chosen))
+                              blind_distance=pick("blind_distance"), timestamps=timestamps, cameras=tuple(usable),
+                              invalid_pixels=invalid_pixels, principal=tuple(plan.principals[c] for c in chosen))
+
+
+@dataclass(frozen=True)
+class QueryPlan:
+    """How a query answers (:meth:`DistanceMonitor.plan`): ``kind`` "blind", "single" or "fused"; ``principals``:
+    the cameras that answer (the single camera, or the depth grids' principals); ``absent``: the flags every answer
+    carries for the rig's stale and missing cameras; ``stale``: the stale frames' timestamps by camera."""
+
+    kind: str
+    principals: tuple[str, ...]
+    absent: Flag
+    stale: dict
+
+
+def _with_flags(result: DistanceResult, extra: Flag) -> DistanceResult:
+    return replace(result, flags=tuple(f | extra for f in result.flags))
 
 
 class _CameraFrame:
-    """One camera's latest frame as the monitor prepared it: its occupancy, and, when the depth grid needs them,
-    where the robot's body ends along each pixel (for a principal) and how far it saw (for a secondary)."""
+    """One camera's latest frame as the monitor prepared it: its occupancy and, with a robot, where the robot starts
+    and ends along each pixel; what the depth grid needs besides, made when first needed: where each pixel's ray first
+    leaves the robot (as a principal) and how far the camera saw (as a secondary)."""
 
     def __init__(self, monitor: DistanceMonitor, camera, image: DepthImage, occupancy: OccupancyImage, joints,
-                 robot_near=None, robot_far=None, robot_exit=None):
+                 robot_near=None, robot_far=None):
         self._monitor = monitor
         self.camera = camera
         self.image = image
         self.occupancy = occupancy
         self._joints = joints
         self.robot_near = robot_near
-        self.robot_exit = robot_exit
-        self._robot_far = robot_far
+        self.robot_far = robot_far
+        self._robot_exit = None
         self._free = None
 
     @property
-    def robot_far(self):
+    def robot_exit(self):
         if self._monitor._silhouette is None:
             return None
-        if self._robot_far is None:
-            self._robot_far = self._monitor._silhouette.render_far(self.camera, self._joints)
-        return self._robot_far
+        if self._robot_exit is None:
+            self._robot_exit = self._monitor._silhouette.render_first_exit(self.camera, self._joints)
+        return self._robot_exit
 
     @property
     def free(self) -> np.ndarray:

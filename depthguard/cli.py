@@ -119,10 +119,13 @@ def _build_parser() -> argparse.ArgumentParser:
                                                   "section 8) and save it")
     build.add_argument("--rig", required=True, help="rig YAML file")
     build.add_argument("--principal", help="principal camera (default: the rig's principal, else its first camera)")
-    build.add_argument("--d-min", type=_GRID_METRES, default=config.DEPTH_GRID_D_MIN, help="grid start, metres")
-    build.add_argument("--d-max", type=_GRID_METRES, default=None, help="grid end, metres (default: 343 cells)")
-    build.add_argument("--delta-d", type=_GRID_METRES, default=config.DEPTH_GRID_DELTA_D,
-                       help=f"cell depth, metres (at most {config.DEPTH_GRID_MAX_CELLS} cells in all)")
+    build.add_argument("--d-min", type=_GRID_METRES, default=None,
+                       help="grid start, metres (default: from the rig, as the monitor's: where the principal sees the "
+                            "rig's workspace, within its depth_range)")
+    build.add_argument("--d-max", type=_GRID_METRES, default=None, help="grid end, metres (default: from the rig)")
+    build.add_argument("--delta-d", type=_GRID_METRES, default=None,
+                       help=f"cell depth, metres (default {config.DEPTH_GRID_DELTA_D:g}; at most "
+                            f"{config.DEPTH_GRID_MAX_CELLS} cells in all)")
     build.add_argument("--out", required=True, help="map file to write (.npz)")
 
     simulate = commands.add_parser("simulate", help="simulate a workcell and write its frames, rig, joint states "
@@ -280,20 +283,17 @@ def _build_map(args) -> int:
 
     from depthguard.errors import InputError
 
-    d_max = config.DEPTH_GRID_D_MIN + config.DEPTH_GRID_CELLS * config.DEPTH_GRID_DELTA_D if args.d_max is None \
-        else args.d_max
-    if d_max <= args.d_min:
-        raise InputError(f"--d-max ({d_max:g} m) must be larger than --d-min ({args.d_min:g} m)")
-    cells = math.ceil((d_max - args.d_min) / args.delta_d - 1e-9)
-    if cells > config.DEPTH_GRID_MAX_CELLS:
-        raise InputError(f"--delta-d {args.delta_d:g} m gives {cells} cells from {args.d_min:g} to {d_max:g} m; at "
-                         f"most {config.DEPTH_GRID_MAX_CELLS} are supported")
     out = Path(args.out)
     if out.exists() and not out.is_file():  # a folder, a FIFO, a device: never written to
         raise InputError(f"--out {args.out}: exists and is not a regular file")
     rig = load_rig(args.rig)
     start = time.perf_counter()
-    grid = build_map(rig, args.principal, d_min=args.d_min, d_max=args.d_max, delta_d=args.delta_d)
+    try:
+        grid = build_map(rig, args.principal, d_min=args.d_min, d_max=args.d_max, delta_d=args.delta_d)
+    except InputError as exc:
+        if exc.field not in ("d_min", "d_max", "delta_d", "n_cells"):
+            raise
+        raise InputError(f"--{exc.field.replace('_', '-')}: {exc.message}") from None
     save_map(grid, args.out)
     camera = rig.cameras[grid.principal]
     print(f"depth grid of {grid.principal!r} ({camera.width}x{camera.height}x{grid.n_cells} cells, "

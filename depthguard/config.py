@@ -200,11 +200,19 @@ SIM_REACH_RAMP = 0.5
 
 # ------------------------------------------------------------------------------------------------ the depth grid
 
-#: The depth grid of SPEC section 12's scenario B: cells of DEPTH_GRID_DELTA_D metres from DEPTH_GRID_D_MIN, 343 along
-#: each principal pixel (to 3.7182 m).
-DEPTH_GRID_D_MIN = 0.2882
+#: The depth grid's cells are DEPTH_GRID_DELTA_D metres deep along the principal camera's z (SPEC section 12's
+#: scenario B), coarser only when the grid's range needs more than DEPTH_GRID_MAX_CELLS of them. The range itself
+#: comes from the rig (SPEC section 8, "Grid range"; :func:`depthguard.depthgrid.grid_range`): the depths at which
+#: the principal sees the rig's workspace, within its depth_range.
 DEPTH_GRID_DELTA_D = 0.01
-DEPTH_GRID_CELLS = 343
+
+#: The depth grid never starts nearer than this (metres): a camera whose rig entry gives no minimum range.
+DEPTH_GRID_NEAREST = 0.1
+
+#: How deep the depth grid reaches (metres beyond its start) for a principal camera with neither a finite maximum range (depth_range) nor a
+#: workspace in the rig. Regions beyond it are counted occupied and flagged ``outside_grid``: state depth_range or
+#: workspace in the rig to avoid that.
+DEPTH_GRID_UNBOUNDED_END = 10.0
 
 #: Fusion: metres by which a secondary camera's measured surface must lie beyond a cell (on top of its noise margin)
 #: for it to declare the cell free. It covers the rig's calibration error: a camera whose pose is off by this much

@@ -22,6 +22,9 @@ class Flag(enum.IntFlag):
     - ``ROBOT_BLIND_SPOT``: space hidden behind the robot, which one camera cannot see (SPEC section 7), comes
       closer to the point than the reported distance (see ``DistanceResult.blind_distance``): an obstacle there
       could be nearer than the answer.
+    - ``OUTSIDE_GRID``: fused cameras only: the surveillance region reaches depths the principal camera's depth grid
+      does not span (SPEC section 8, "Grid range"); what the principal cannot see there counted occupied, whatever
+      the other cameras saw. Give the rig a ``workspace`` or ``depth_range`` that holds the region.
     """
 
     INSIDE_OBSTACLE = 1
@@ -30,6 +33,7 @@ class Flag(enum.IntFlag):
     STALE_CAMERA = 8
     MISSING_CAMERA = 16
     ROBOT_BLIND_SPOT = 32
+    OUTSIDE_GRID = 64
 
     @property
     def names(self) -> list[str]:
@@ -62,8 +66,9 @@ class DistanceResult:
             conservative distance is ``min(distance, blind_distance)``. With several cameras the depth grid checks
             that space with the other cameras; this is then the distance to what it could not check: space along a
             principal pixel that may lie between two links of the robot, which it takes for the robot.
-        principal: with several cameras, per point the principal camera whose fused answer is reported; empty for
-            a single camera.
+        principal: per point, the camera whose image the answer was computed in: the single camera, or the
+            principal camera of the depth grid whose fused answer is reported; ``""`` when no camera could answer
+            (:meth:`blind`).
     """
 
     distance: np.ndarray
@@ -83,11 +88,12 @@ class DistanceResult:
 
     @classmethod
     def blind(cls, n: int, flag: "Flag", timestamps: dict | None = None) -> "DistanceResult":
-        """The conservative answer for n points when no camera can see (no usable frame): distance 0, zero
-        direction, no contributors, every point flagged ``flag`` (``STALE_CAMERA`` or ``MISSING_CAMERA``)."""
+        """The conservative answer for n points when no camera can see (no usable frame): distance 0 and
+        blind_distance 0, zero direction, no contributors, every point flagged ``flag`` (``STALE_CAMERA`` and/or
+        ``MISSING_CAMERA``), principal ``""``."""
         return cls(distance=np.zeros(n), direction=np.zeros((n, 3)), count=np.zeros(n, dtype=np.int64),
                    invalid_count=np.zeros(n, dtype=np.int64), flags=tuple(flag for _ in range(n)),
-                   timestamps=dict(timestamps or {}), cameras=())
+                   timestamps=dict(timestamps or {}), cameras=(), blind_distance=np.zeros(n), principal=("",) * n)
 
     def __len__(self) -> int:
         return len(self.distance)

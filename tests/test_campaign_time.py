@@ -211,11 +211,19 @@ def test_time_fused(G, mm, layout, clock, data, how_p, how_s, aggregate, rho):
     if isinstance(result, Refused):
         record(kind, result.label)
         return
-    if state_p == STALE:
+    if state_p == STALE and state_s == STALE:
         if not (np.all(result.distance == 0.0) and all(Flag.STALE_CAMERA in f for f in result.flags)):
-            violation(kind, f"{tag}: stale principal counted as fresh",
+            violation(kind, f"{tag}: stale frames counted as fresh",
                       f"{context}: distances {result.distance.tolist()}, flags {[f.names for f in result.flags]}")
-        record(kind, "stale principal: 0 + stale_camera")
+        record(kind, "both stale: 0 + stale_camera")
+        return
+    if state_p == STALE:
+        # The monitor's plan: the fresh secondary answers alone (single camera), every answer flagged.
+        if not (all(Flag.STALE_CAMERA in f for f in result.flags) and set(result.principal) <= {"s"}):
+            violation(kind, f"{tag}: stale principal counted as fresh",
+                      f"{context}: principal {set(result.principal)}, flags {[f.names for f in result.flags]}")
+        outcome = check_result(kind, result, points, wall, rho, aggregate, context=context, tag=tag)
+        record(kind, f"stale principal: secondary alone, flagged; {outcome}")
         return
     outcome = check_result(kind, result, points, wall, rho, aggregate, context=context, tag=tag)
     if state_s == STALE:

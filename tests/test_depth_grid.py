@@ -36,7 +36,9 @@ def frames(r, scene, holes=None):
 def test_map_round_trip_refusal_and_no_code(tmp_path):
     r = rig()
     grid = build_map(r)
-    assert grid.principal == "p" and grid.secondaries == ("s",) and grid.n_cells == 343
+    lo, hi = r.cameras["p"].depth_range  # the grid spans the principal's range (no workspace), in 1 cm cells
+    assert grid.principal == "p" and grid.secondaries == ("s",) and grid.d_min == lo
+    assert grid.delta_d == 0.01 and grid.n_cells == round((hi - lo) / 0.01)
     assert grid.corners.shape == (1, 121, 161, 3)
     save_map(grid, tmp_path / "map.npz")
     again = load_map(tmp_path / "map.npz", r)

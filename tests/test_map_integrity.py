@@ -104,7 +104,7 @@ def test_saved_map_follows_the_documented_format(tmp_path, rig, grid):
     assert header["format"] == FORMAT and header["rig_fingerprint"] == rig.fingerprint()
     assert header["principal"] == "p" and header["secondaries"] == ["s"]
     assert (header["width"], header["height"]) == (8, 6) and header["secondary_sizes"] == [[8, 6]]
-    assert header["d_min"] == config.DEPTH_GRID_D_MIN and header["n_cells"] == config.DEPTH_GRID_CELLS
+    assert header["d_min"] == grid.d_min and header["n_cells"] == grid.n_cells and header["delta_d"] == grid.delta_d
     assert header["sha256"] == checksum(header, corners, offsets)
     again = load_map(path, rig)
     assert np.array_equal(again.corners, grid.corners) and np.array_equal(again.offsets, grid.offsets)

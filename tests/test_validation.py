@@ -22,7 +22,7 @@ from depthguard import config
 
 CAMERA_KEYS = ("name", "width", "height", "fx", "fy", "cx", "cy", "T_world_camera", "depth_range", "depth_scale",
                "noise", "camera_info", "rectified", "distortion")
-RIG_KEYS = ("depth_scale", "principal", "noise", "cameras")
+RIG_KEYS = ("depth_scale", "principal", "noise", "workspace", "cameras")
 
 
 def camera_entry(name="cam", **changes) -> dict:
@@ -651,8 +651,16 @@ def test_non_finite_timestamp_is_stale_in_the_fused_path_too(rig2, clean, clean_
     fresh = monitor.query({"top": hand_frame(clean, "top", 1.0), "side": hand_frame(clean_side, "side", 1.0)},
                           IN_VIEW, now=1.0)
     assert not any(Flag.STALE_CAMERA in f for f in fresh.flags)
-    # the principal stale: no usable principal, distance 0 flagged
-    blind = monitor.query({"top": hand_frame(clean, "top", timestamp), "side": hand_frame(clean_side, "side", 1.0)},
+    # the principal stale: the fresh camera answers alone (the monitor's plan), every answer flagged
+    alone = monitor.query({"top": hand_frame(clean, "top", timestamp), "side": hand_frame(clean_side, "side", 1.0)},
+                          IN_VIEW, now=1.0)
+    side_only = dg.DistanceMonitor(dg.Rig({"side": rig2.cameras["side"]})).query(
+        {"side": hand_frame(clean_side, "side", 1.0)}, IN_VIEW)
+    assert all(Flag.STALE_CAMERA in f for f in alone.flags) and set(alone.principal) == {"side"}
+    assert np.array_equal(alone.distance, side_only.distance)
+    # both stale: no camera answers, distance 0 flagged
+    blind = monitor.query({"top": hand_frame(clean, "top", timestamp), "side": hand_frame(clean_side, "side",
+                                                                                          timestamp)},
                           IN_VIEW, now=1.0)
     assert_blind(blind, Flag.STALE_CAMERA)
     # the secondary stale: it clears nothing (the principal's own answer at most) and the result is flagged

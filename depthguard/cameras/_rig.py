@@ -3,7 +3,7 @@
 A rig file holds exactly these keys; any other key (a typo such as ``fxx``, ``depth_rnage`` or ``principle``) is an
 error that lists them:
 
-- the rig: ``depth_scale``, ``principal``, ``noise``, ``cameras``;
+- the rig: ``depth_scale``, ``principal``, ``noise``, ``workspace``, ``cameras``;
 - each camera: ``name``, ``width``, ``height``, ``fx``, ``fy``, ``cx``, ``cy``, ``T_world_camera``, ``depth_range``,
   ``depth_scale``, ``noise``, ``camera_info``, ``rectified``, ``distortion``;
 - a noise model: ``a``, ``b``, ``c``, ``k`` (or the word ``none``).
@@ -55,11 +55,16 @@ class Rig:
         cameras: name -> :class:`PinholeCamera`.
         depth_scale: metres per unit of ``uint16`` depth images (cameras may override it).
         principal: the principal camera's name for the depth grid, or None.
+        workspace: (2, 3) float64 metres, world frame, or None: the box [lo, hi] that holds everything to be watched,
+            the robot and every control point's surveillance region (rho around it). Each principal's depth grid
+            spans the depths at which it sees this box (SPEC section 8, "Grid range"); without it, the camera's
+            depth_range.
     """
 
     cameras: dict[str, PinholeCamera]
     depth_scale: float = config.DEFAULT_DEPTH_SCALE
     principal: str | None = None
+    workspace: np.ndarray | None = None
 
     def __post_init__(self):
         if not isinstance(self.cameras, dict):
@@ -84,6 +89,8 @@ class Rig:
         if self.principal is not None and self.principal not in self.cameras:
             raise RigError(f"{self.principal!r} names no camera of the rig (cameras: {', '.join(self.cameras)})",
                            field="principal")
+        if self.workspace is not None:
+            object.__setattr__(self, "workspace", _workspace_box(self.workspace))
 
     def camera(self, name: str) -> PinholeCamera:
         """The camera called ``name``; a :class:`RigError` listing the rig's cameras if there is none."""
@@ -98,6 +105,8 @@ class Rig:
         d = {"depth_scale": self.depth_scale}
         if self.principal is not None:
             d["principal"] = self.principal
+        if self.workspace is not None:
+            d["workspace"] = self.workspace.tolist()
         d["cameras"] = [camera.to_dict() for camera in self.cameras.values()]
         return d
 
@@ -183,6 +192,8 @@ class _RigFile(BaseModel):
     depth_scale: _DepthScale = config.DEFAULT_DEPTH_SCALE
     principal: Optional[_Name] = None
     noise: _NoiseValue = None
+    workspace: Optional[Annotated[list[Annotated[list[_Finite], Field(min_length=3, max_length=3)]],
+                                  Field(min_length=2, max_length=2)]] = None
     cameras: Annotated[list[_CameraEntry], Field(min_length=1)]
 
 
@@ -251,7 +262,27 @@ def rig_from_dict(data, base_dir=".") -> Rig:
         if camera.name in cameras:
             raise RigError("appears twice in the rig", camera=camera.name, field="name")
         cameras[camera.name] = camera
-    return Rig(cameras=cameras, depth_scale=rig_file.depth_scale, principal=rig_file.principal)
+    return Rig(cameras=cameras, depth_scale=rig_file.depth_scale, principal=rig_file.principal,
+               workspace=rig_file.workspace)
+
+
+def _workspace_box(value) -> np.ndarray:
+    """The rig's workspace as a read-only (2, 3) float64 array [lo, hi], world frame, metres: finite, within
+    ``config.COORDINATE_LIMIT``, lo < hi on every axis; else :class:`RigError` naming the field."""
+    try:
+        box = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise RigError(f"must be [[x, y, z], [x, y, z]] (the box's lowest and highest corner, world frame, metres), "
+                       f"got {short_repr(value)}", field="workspace") from None
+    if box.shape != (2, 3) or not np.all(np.abs(box) <= config.COORDINATE_LIMIT):
+        raise RigError(f"must be [[x, y, z], [x, y, z]] with finite coordinates within {config.COORDINATE_LIMIT:g} m "
+                       f"(the box's lowest and highest corner, world frame), got {short_repr(value)}",
+                       field="workspace")
+    if not np.all(box[0] < box[1]):
+        raise RigError(f"the lowest corner {box[0].tolist()} must lie below the highest {box[1].tolist()} on every "
+                       "axis", field="workspace")
+    box.setflags(write=False)
+    return box
 
 
 def _camera_from(entry: _CameraEntry, depth_scale: float, rig_noise: NoiseModel, base_dir: Path) -> PinholeCamera:

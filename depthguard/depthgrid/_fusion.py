@@ -209,12 +209,18 @@ class FusedFrames:
                                             unseen == "occupied", *near_inside, config.MIN_DIRECTION_NORM, *cells,
                                             distance, direction_camera, count, invalid_count, flags, unchecked)
         stale = Flag.STALE_CAMERA if self._stale else Flag(0)
+        # The region's depths [Z - rho, Z + rho], within the camera's range, that the grid does not span.
+        z = points_camera[:, 2]
+        z_lo, z_hi = camera.depth_range
+        with np.errstate(invalid="ignore"):
+            leaves = (np.minimum(z + rho, z_hi) > grid.d_max) | (np.maximum(z - rho, z_lo) < grid.d_min)
+        outside = (Flag(0), Flag.OUTSIDE_GRID)
         return DistanceResult(
             distance=distance,
             direction=direction_camera @ camera.T_world_camera[:3, :3].T,
             count=count,
             invalid_count=invalid_count,
-            flags=tuple(Flag(int(f)) | stale for f in flags),
+            flags=tuple(Flag(int(f)) | stale | outside[bool(out)] for f, out in zip(flags, leaves)),
             timestamps={camera.name: principal.timestamp},
             cameras=(camera.name,) + self.secondaries,
             invalid_pixels={camera.name: principal.invalid_pixels},

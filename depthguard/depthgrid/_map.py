@@ -171,46 +171,95 @@ class DepthGridMap:
         object.__setattr__(self, "_rig_checked", fingerprint)
 
 
-def build_map(rig: Rig, principal: str | None = None, d_min: float = config.DEPTH_GRID_D_MIN,
-              d_max: float | None = None, delta_d: float = config.DEPTH_GRID_DELTA_D,
-              n_cells: int | None = None) -> DepthGridMap:
+def grid_range(rig: Rig, principal: str | None = None) -> tuple[float, float]:
+    """(d_min, d_max), metres along ``principal``'s optical z: the depths its depth grid spans by default (SPEC
+    section 8, "Grid range").
+
+    The depths at which the camera sees the rig's workspace box (the smallest and largest z of its corners), within
+    the camera's depth_range, whichever is tighter; never nearer than ``config.DEPTH_GRID_NEAREST``. Without a
+    workspace, the camera's depth_range; a camera with no finite maximum range then reaches
+    ``config.DEPTH_GRID_UNBOUNDED_END`` metres beyond the grid's start. A surveillance region that leaves the grid is
+    counted occupied there and flagged ``outside_grid``. A workspace the camera cannot see in front of it within its
+    range is an error.
+    """
+    if not isinstance(rig, Rig):
+        raise InputError(f"grid_range needs a Rig, got {type(rig).__name__}")
+    principal = _principal_name(rig, principal)
+    camera = rig.camera(principal)
+    z_lo, z_hi = camera.depth_range
+    d_min = max(float(z_lo), config.DEPTH_GRID_NEAREST)
+    d_max = float(z_hi)
+    if rig.workspace is not None:
+        lo, hi = rig.workspace
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        z = camera.world_to_camera(corners)[:, 2]
+        d_min, d_max = max(d_min, float(z.min())), min(d_max, float(z.max()))
+        if not d_min < d_max:
+            raise InputError(f"camera {principal!r} sees no part of the rig's workspace within its depth range "
+                             f"{list(camera.depth_range)} (the box spans z from {z.min():.3g} to {z.max():.3g} m in "
+                             "its optical frame)", camera=principal, field="workspace")
+    if not math.isfinite(d_max):
+        d_max = d_min + config.DEPTH_GRID_UNBOUNDED_END
+    d_max = min(d_max, config.COORDINATE_LIMIT)
+    if not d_min < d_max:
+        raise InputError(f"camera {principal!r} has no depths for a grid: depth_range {list(camera.depth_range)}, "
+                         f"and the grid starts at {config.DEPTH_GRID_NEAREST:g} m at the nearest", camera=principal,
+                         field="depth_range")
+    return d_min, d_max
+
+
+def _principal_name(rig: Rig, principal) -> str:
+    if principal is not None and not isinstance(principal, str):
+        raise InputError(f"principal must be a camera name, got {short_repr(principal)}", field="principal")
+    return principal or rig.principal or next(iter(rig.cameras))
+
+
+def build_map(rig: Rig, principal: str | None = None, d_min: float | None = None, d_max: float | None = None,
+              delta_d: float | None = None, n_cells: int | None = None) -> DepthGridMap:
     """Build the depth grid map of ``rig`` for ``principal`` (default: the rig's principal, else its first camera).
 
     The grid spans [d_min, d_max] in cells of ``delta_d`` metres, or ``n_cells`` cells (give d_max or n_cells, not
-    both; defaults: SPEC section 12's d_min = 0.2882 m, delta_d = 0.01 m, 343 cells, to 3.7182 m). Every other
-    camera of the rig is a secondary camera. Ranges: d_min > 0, delta_d >= MIN_DELTA_D metres, n_cells (given or
-    resulting) 1 to ``config.DEPTH_GRID_MAX_CELLS``, d_max <= ``config.COORDINATE_LIMIT``; else :class:`InputError`.
+    both). Defaults: the range :func:`grid_range` gives for the rig (its workspace and the camera's depth_range), in
+    cells of ``config.DEPTH_GRID_DELTA_D`` (1 cm), coarser when the range needs more than
+    ``config.DEPTH_GRID_MAX_CELLS``. Every other camera of the rig is a secondary camera. Ranges: d_min > 0, delta_d
+    >= MIN_DELTA_D metres, n_cells (given or resulting) 1 to ``config.DEPTH_GRID_MAX_CELLS``, d_max <=
+    ``config.COORDINATE_LIMIT``; else :class:`InputError`.
     """
     if not isinstance(rig, Rig):
         raise InputError(f"build_map needs a Rig, got {type(rig).__name__}")
-    if principal is not None and not isinstance(principal, str):
-        raise InputError(f"principal must be a camera name, got {short_repr(principal)}", field="principal")
-    principal = principal or rig.principal or next(iter(rig.cameras))
+    principal = _principal_name(rig, principal)
     camera = rig.camera(principal)
     secondaries = tuple(name for name in rig.cameras if name != principal)
     if not secondaries:
         raise InputError(f"a depth grid needs a secondary camera; the rig has only {principal!r}")
-    d_min = _real(d_min, "d_min", InputError)
-    delta_d = _real(delta_d, "delta_d", InputError)
-    if not d_min > 0:
-        raise InputError(f"d_min must be a positive number of metres, got {d_min!r}", field="d_min")
-    if not delta_d >= MIN_DELTA_D:
-        raise InputError(f"delta_d must be at least {MIN_DELTA_D:g} metres, got {delta_d!r}", field="delta_d")
     if n_cells is not None and d_max is not None:
         raise InputError("give d_max or n_cells, not both", field="n_cells")
+    default_min, default_max = grid_range(rig, principal) if d_min is None or (d_max is None and n_cells is None) \
+        else (None, None)
+    d_min = _real(default_min if d_min is None else d_min, "d_min", InputError)
+    if not d_min > 0:
+        raise InputError(f"d_min must be a positive number of metres, got {d_min!r}", field="d_min")
+    if d_max is None and n_cells is None:
+        if not default_max > d_min:
+            raise InputError(f"d_min ({d_min:g} m) lies beyond the grid's default end {default_max:g} m: give d_max",
+                             field="d_min")
+        d_max = default_max
+        if delta_d is None:  # the default cell depth, coarser if the range needs more cells than the grid holds
+            delta_d = max(config.DEPTH_GRID_DELTA_D, (d_max - d_min) / config.DEPTH_GRID_MAX_CELLS)
+    delta_d = _real(config.DEPTH_GRID_DELTA_D if delta_d is None else delta_d, "delta_d", InputError)
+    if not delta_d >= MIN_DELTA_D:
+        raise InputError(f"delta_d must be at least {MIN_DELTA_D:g} metres, got {delta_d!r}", field="delta_d")
     if n_cells is None:
-        if d_max is None:
-            d_max = config.DEPTH_GRID_D_MIN + config.DEPTH_GRID_CELLS * config.DEPTH_GRID_DELTA_D
         d_max = _real(d_max, "d_max", InputError)
         if not d_min < d_max <= config.COORDINATE_LIMIT:
             raise InputError(f"d_max must be larger than d_min ({d_min:g}) and at most {config.COORDINATE_LIMIT:g} "
                              f"metres, got {d_max!r}", field="d_max")
         cells = (d_max - d_min) / delta_d
-        if not cells <= config.DEPTH_GRID_MAX_CELLS:
+        if not cells <= config.DEPTH_GRID_MAX_CELLS * (1 + 1e-12):
             raise InputError(f"[{d_min:g}, {d_max:g}] m in cells of {delta_d:g} m is {math.ceil(cells)} cells; at "
                              f"most {config.DEPTH_GRID_MAX_CELLS} are supported (config.DEPTH_GRID_MAX_CELLS)",
                              field="delta_d")
-        n_cells = max(1, int(math.ceil(cells - 1e-9)))
+        n_cells = min(config.DEPTH_GRID_MAX_CELLS, max(1, int(math.ceil(cells - 1e-9))))
     if isinstance(n_cells, bool) or not isinstance(n_cells, numbers.Integral) or \
             not 1 <= n_cells <= config.DEPTH_GRID_MAX_CELLS:
         raise InputError(f"n_cells must be a whole number from 1 to {config.DEPTH_GRID_MAX_CELLS}, got "

@@ -125,4 +125,5 @@ def single_camera_distances(occupancy: OccupancyImage, points_world, rho: float 
         cameras=(camera.name,),
         invalid_pixels={camera.name: occupancy.invalid_pixels},
         blind_distance=blind_distance,
+        principal=(camera.name,) * len(distance),
     )
