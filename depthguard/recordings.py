@@ -187,7 +187,7 @@ class Recording:
                 not math.isfinite(float(time)):
             raise InputError(f"a time must be a finite number of seconds, got {short_repr(time)}", field="time")
         time = float(time)
-        first, last = self.joint_times[0], self.joint_times[-1]
+        first, last = float(self.joint_times[0]), float(self.joint_times[-1])
         if not first <= time <= last:
             what = f"frame {frame} captured at {time!r} s" if frame is not None else f"time {time!r} s"
             raise InputError(f"{what} is outside the recorded joint states ({first!r} to {last!r} s); joints are "
@@ -387,8 +387,8 @@ def _read_joint_states_csv(path: Path):
         for j, name in enumerate(names):
             positions[i, j] = _finite(row[j + 1], f"line {line}: a joint value", path, field=name)
         if i and not times[i] > times[i - 1]:
-            raise InputError(f"line {line}: times must increase from row to row ({times[i]!r} s follows "
-                             f"{times[i - 1]!r} s)", source=str(path), field="time")
+            raise InputError(f"line {line}: times must increase from row to row ({float(times[i])!r} s follows "
+                             f"{float(times[i - 1])!r} s)", source=str(path), field="time")
     return names, times, positions
 
 
@@ -646,7 +646,7 @@ def _check_camera_info(message, camera: PinholeCamera, source: str) -> None:
     if k.shape != (9,) or not np.isfinite(k).all():
         raise InputError(f"camera_info k must be 9 finite numbers, got {short_repr(k.tolist(), 80)}", field="k",
                          **context)
-    for key, value in (("fx", k[0]), ("fy", k[4]), ("cx", k[2]), ("cy", k[5])):
+    for key, value in (("fx", float(k[0])), ("fy", float(k[4])), ("cx", float(k[2])), ("cy", float(k[5]))):
         expected = getattr(camera, key)
         if not abs(value - expected) <= _INTRINSICS_TOLERANCE * max(1.0, abs(expected)):
             raise InputError(f"camera_info says {key} {value!r}, the rig {expected!r}", field=key, **context)
