@@ -6,10 +6,10 @@ stamped in the future (100 s ahead, and just beyond the clock skew tolerance). F
 every check, so the monitor itself must not trust the stamp), or given as plain arrays (no timestamp).
 
 The rule (README, SPEC sections 8 and 11): a frame older than ``max_age`` at ``now`` is stale; so is a frame stamped
-later than ``now`` by more than ``config.CLOCK_SKEW_TOLERANCE`` (0.01 s if the library does not define it): its time
-is wrong. A stale frame never counts as fresh: the monitor raises a DepthguardError, or answers distance 0 with the
-flag STALE_CAMERA for every point (for a stale secondary camera: it clears nothing, and every point whose distance is
-positive carries STALE_CAMERA).
+later than ``now`` by more than ``SKEW`` (0.01 s, stated in campaign_support; the library's
+``config.CLOCK_SKEW_TOLERANCE`` may not be looser): its time is wrong. A stale frame never counts as fresh: the
+monitor raises a DepthguardError, or answers distance 0 with the flag STALE_CAMERA for every point (for a stale
+secondary camera: it clears nothing, and every point whose distance is positive carries STALE_CAMERA).
 
 Safe readings where the rule is silent (stated here, applied below):
 
@@ -55,7 +55,7 @@ from campaign_support import (
     violation,
     wall_image,
 )
-from depthguard import Flag
+from depthguard import Flag, config
 
 AGGREGATES = ["min", "mean", "hybrid"]
 FRESH, STALE, EITHER = "fresh", "stale", "either"
@@ -90,6 +90,10 @@ def frame_state(t, now, max_age) -> str:
     if future > SKEW - band or (max_age is not None and age > max_age - band):
         return EITHER
     return FRESH
+
+
+def test_the_library_s_clock_skew_is_no_looser_than_the_campaign_s():
+    assert 0 <= config.CLOCK_SKEW_TOLERANCE <= SKEW
 
 
 @st.composite

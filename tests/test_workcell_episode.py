@@ -10,6 +10,28 @@ import pytest
 import depthguard as dg
 from depthguard.experiments import workcell
 
+#: Footprints of discretisation a single-camera distance may exceed the truth by (see :func:`allowed_excess`).
+FOOTPRINTS = 2.5
+#: Metres of depth quantisation on top: the sensor's uint16 millimetre images round by 0.5 mm, float32 adds ~1e-7.
+QUANTISATION = 1e-3
+
+
+def allowed_excess(camera, points, rho=workcell.RHO):
+    """(m,) metres: how much ``camera``'s single-camera distance at ``points`` ((m, 3) float64, world frame) may
+    exceed the true distance without being wrong. Stated here, not taken from the code under test:
+
+    - a pixel's depth is sampled on its centre ray but stands for its whole footprint, z/f wide at optical depth z.
+      The nearest obstacle point Q of a point P within rho lies at most rho deeper than P, so one footprint at Q is
+      at most (max(z_P, 0.1 m) + rho) / f (the floor covers points at or behind the optical centre);
+    - the exact discretisation bound (tests/test_judge_pybullet.py) is at most sqrt(2) footprints at a silhouette
+      (the diagonal neighbour's frustum covers Q; measured there: never above 0.61); the simulated sensor drops pixels
+      along depth edges and ``invalid="neighbors"`` fills each from the nearest depth around it, one more pixel
+      away: sqrt(2) + 1 = 2.41 footprints, rounded up to FOOTPRINTS = 2.5;
+    - plus QUANTISATION for the millimetre images.
+    """
+    depth = camera.world_to_camera(np.asarray(points, dtype=np.float64))[:, 2]
+    return FOOTPRINTS * (np.maximum(depth, 0.1) + rho) / camera.fx + QUANTISATION
+
 
 @pytest.fixture(scope="module")
 def episode():
@@ -21,15 +43,30 @@ def episode():
     return workcell.run(scene, progress=False, frames=range(0, scene.n_frames, 6))
 
 
-def test_never_silently_above_the_truth(episode):
-    tolerance = workcell.tolerance(episode)
+@pytest.fixture(scope="module")
+def allowed(episode):
+    """(cameras, t, m) metres: :func:`allowed_excess` of each camera at each frame's control points, from the scene's
+    own cameras and trajectory (not from the episode's record)."""
+    from depthguard.simulation import default_workcell
+
+    scene = default_workcell()
+    points = [scene.control_points_at(t) for t in episode.times]
+    return np.array([[allowed_excess(scene.rig.cameras[name], p) for p in points] for name in episode.cameras])
+
+
+def test_the_demo_judges_no_more_loosely_than_this_test(episode, allowed):
+    """The demo's summary counts misses with its own tolerance: loosening it must fail here."""
+    assert np.all(workcell.tolerance(episode) <= allowed + 1e-12)
+
+
+def test_never_silently_above_the_truth(episode, allowed):
     flag = int(dg.Flag.ROBOT_BLIND_SPOT)
     for k in range(len(episode.cameras)):
-        above = episode.reported[k] > episode.truth + tolerance[k]
+        above = episode.reported[k] > episode.truth + allowed[k]
         flagged = (episode.flags[k] & flag) != 0
         assert not np.any(above & ~flagged), episode.cameras[k]
         conservative = np.minimum(episode.reported[k], episode.blind[k])
-        assert np.all(conservative <= episode.truth + tolerance[k]), episode.cameras[k]
+        assert np.all(conservative <= episode.truth + allowed[k]), episode.cameras[k]
 
 
 def _rows(episode, kind):
