@@ -49,6 +49,13 @@ class DistanceMonitor:
         fusion_margin: metres (finite, >= 0) a secondary camera must have seen beyond a cell to clear it (the rig's
             calibration error, on top of the noise margin). fusion_pixels: pixels, in [0,
             ``config.MAX_FUSION_PIXELS``], by which a cell's footprint grows in a secondary camera.
+        memory: remember free space over time (SPEC section 8a): space no camera sees now counts free while no person
+            moving at ``v_max`` could have reached it since it was last seen free. It needs frame timestamps and the
+            rig's ``workspace`` (the box remembered, in voxels of ``memory_voxel`` metres); without a workspace
+            there is no memory (``self.memory`` is None). Fused answers only; an answer that rests on it is flagged
+            ``remembered``. A body part moving faster than v_max is outside the guarantee.
+        v_max: metres/second, finite, > 0: the fastest a person may move (default 2.0, ISO 13855's hand speed).
+        memory_voxel: metres, > 0: the memory's voxel side.
 
     Every argument is checked here, once: a wrong type or a value out of range raises
     :class:`~depthguard.errors.InputError` naming it.
@@ -66,7 +73,8 @@ class DistanceMonitor:
                  hole_pixels: int = config.DEFAULT_NEIGHBOR_HOLE_PIXELS, robot=None, self_filter: str = "hulls",
                  self_filter_tolerance: float = config.SELF_FILTER_TOLERANCE, principals=None, maps=None,
                  fusion_margin: float = config.DEFAULT_FUSION_MARGIN,
-                 fusion_pixels: int = config.DEFAULT_FUSION_PIXELS):
+                 fusion_pixels: int = config.DEFAULT_FUSION_PIXELS, memory: bool = config.DEFAULT_MEMORY,
+                 v_max: float = config.FREESPACE_V_MAX, memory_voxel: float = config.FREESPACE_VOXEL):
         if not isinstance(rig, Rig):
             raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}", field="rig")
         self.rig = rig
@@ -99,6 +107,16 @@ class DistanceMonitor:
             from depthguard.self_filter import RobotSilhouette  # needs OpenGL: only with a robot
 
             self._silhouette = RobotSilhouette(robot, geometry=self.self_filter)
+        self.memory = None
+        if not isinstance(memory, bool):
+            raise InputError(f"memory must be True or False, got {short_repr(memory)}", field="memory")
+        if memory and rig.workspace is not None:
+            from depthguard.freespace import FreeSpaceMemory, VoxelBox
+
+            self.memory = FreeSpaceMemory(VoxelBox(rig.workspace[0], rig.workspace[1], memory_voxel), v_max)
+        self._remembered: set[int] = set()  # ids of the frames the memory has taken in
+        self._seen_now = None  # voxels the frames of the last memory update saw free
+        self._free_now = None  # (free, box, remembered only) behind the fused frames last built
         self._prepared: dict[str, tuple[object, _CameraFrame]] = {}
         self._fused_frames: dict[str, tuple[tuple, object]] = {}  # principal -> (its frames, their FusedFrames)
 
@@ -237,7 +255,27 @@ class DistanceMonitor:
                 stale[name] = timestamp
             else:
                 usable[name] = state
+        if self.memory is not None:
+            self._remember(usable)
         return self._answer(self.plan(usable, stale), usable, points)
+
+    def _remember(self, usable: dict) -> None:
+        """Take the usable frames the memory has not seen into it (SPEC section 8a), as of the earliest capture time
+        among them: a voxel a frame saw free at t_j was free at t_j, and dating it earlier only shortens how long it
+        is remembered. A frame without a timestamp, or older than the memory's last update, adds nothing."""
+        last = self.memory.time if self.memory.time is not None else -math.inf
+        new = [state for state in usable.values() if id(state) not in self._remembered
+               and state.occupancy.timestamp is not None and state.occupancy.timestamp >= last]
+        if not new:
+            return
+        from depthguard.freespace import seen_free_voxels
+
+        t = min(state.occupancy.timestamp for state in new)
+        seen = seen_free_voxels(self.memory.box, [state.camera for state in new], [state.free for state in new],
+                                margin=self.fusion_margin, pad=self.fusion_pixels, check=False)
+        self.memory.update(t, seen, check=False)
+        self._seen_now = seen
+        self._remembered = {id(state) for state in usable.values()}
 
     def plan(self, usable, stale) -> "QueryPlan":
         """How a query answers, decided once by one rule from which of the rig's cameras have a usable frame
@@ -308,7 +346,7 @@ class DistanceMonitor:
                 cached = self._fused_frames[name] = (key, FusedFrames(
                     grid, self.rig, state.occupancy, secondaries, robot_far=state.robot_far,
                     margin=self.fusion_margin, pad=self.fusion_pixels, check=False, robot_near=state.robot_near,
-                    robot_exit=state.robot_exit))
+                    robot_exit=state.robot_exit, remembered=self._remembered_free(usable)))
             results.append(cached[1].distances(points, self.rho, self.aggregate, self.unseen, check=False))
         timestamps = {name: state.occupancy.timestamp for name, state in usable.items()}
         invalid_pixels = {n: s.occupancy.invalid_pixels for n, s in usable.items()}
@@ -320,11 +358,32 @@ class DistanceMonitor:
             chosen = np.where(holds.any(axis=0), np.argmax(candidates, axis=0), 0)
         pick = lambda attr: np.array([getattr(results[c], attr)[i] for i, c in enumerate(chosen)])  # noqa: E731
         # FusedFrames flags a blind secondary camera STALE_CAMERA; the plan knows whether it was stale or missing.
-        flags = tuple((results[c].flags[i] & ~Flag.STALE_CAMERA) | plan.absent for i, c in enumerate(chosen))
-        return DistanceResult(distance=pick("distance"), direction=pick("direction").reshape(-1, 3),
+        flags = [(results[c].flags[i] & ~Flag.STALE_CAMERA) | plan.absent for i, c in enumerate(chosen)]
+        distance = pick("distance")
+        if self._free_now is not None:
+            from depthguard.freespace._near import voxels_within
+
+            # An answer rests on memory when space nearer than it counts free only because it is remembered.
+            rests = voxels_within(self._free_now[2], self._free_now[1], points, np.minimum(distance, self.rho))
+            flags = [f | Flag.REMEMBERED if r else f for f, r in zip(flags, rests)]
+        return DistanceResult(distance=distance, direction=pick("direction").reshape(-1, 3),
                               count=pick("count"), invalid_count=pick("invalid_count"), flags=flags,
                               blind_distance=pick("blind_distance"), timestamps=timestamps, cameras=tuple(usable),
                               invalid_pixels=invalid_pixels, principal=tuple(plan.principals[c] for c in chosen))
+
+    def _remembered_free(self, usable: dict):
+        """(free voxels, box) for FusedFrames: what the memory certifies free at the latest capture time of the
+        usable frames (None without memory). Keeps, for the flag, the part of it that no frame of the last update
+        saw free: ``self._free_now`` = (free, remembered only)."""
+        self._free_now = None
+        if self.memory is None or self.memory.time is None:
+            return None
+        times = [state.occupancy.timestamp for state in usable.values() if state.occupancy.timestamp is not None]
+        if not times:
+            return None
+        free = self.memory.free_at(max(max(times), self.memory.time))
+        self._free_now = (free, self.memory.box, free & ~self._seen_now)
+        return free, self.memory.box
 
 
 @dataclass(frozen=True)

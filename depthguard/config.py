@@ -310,6 +310,10 @@ MAX_MESH_FILE_BYTES = 128 << 20
 #: person may be (ISO 13855's approach speed for hands). A body part moving faster is outside the guarantee.
 FREESPACE_V_MAX = 2.0
 
+#: The monitor remembers free space (SPEC 8a) by default, in voxels of FREESPACE_VOXEL metres over the rig's workspace.
+DEFAULT_MEMORY = True
+FREESPACE_VOXEL = 0.04
+
 #: Largest free-space box, in voxels: its arrival times (float64), the distance transform's work space (int32) and a
 #: boolean mask take 13 bytes a voxel, about 210 MB at this size. A side of at most FREESPACE_MAX_SIDE voxels keeps
 #: every squared distance (in voxels) within int32.
@@ -324,3 +328,7 @@ FREESPACE_FIT_TOLERANCE = 1e-9
 #: Arrival times are lowered by this fraction of the distance they come from (and by one unit in the last place of
 #: the sum), so that float rounding never makes one later than the exact value.
 FREESPACE_ROUNDING = 1e-12
+
+#: seen_free_voxels cuts the box's x slabs into this many runs per numba thread (each run projects one plane of
+#: lattice points more than it needs; more runs balance the threads better).
+FREESPACE_CHUNKS_PER_THREAD = 4

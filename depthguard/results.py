@@ -25,6 +25,9 @@ class Flag(enum.IntFlag):
     - ``OUTSIDE_GRID``: fused cameras only: the surveillance region reaches depths the principal camera's depth grid
       does not span (SPEC section 8, "Grid range"); what the principal cannot see there counted occupied, whatever
       the other cameras saw. Give the rig a ``workspace`` or ``depth_range`` that holds the region.
+    - ``REMEMBERED``: fused cameras with the free-space memory (SPEC section 8a): space nearer than the reported
+      distance counted free only because it was seen free a moment ago and no person moving at ``v_max`` can have
+      reached it since; no camera sees it free now.
     """
 
     INSIDE_OBSTACLE = 1
@@ -34,6 +37,7 @@ class Flag(enum.IntFlag):
     MISSING_CAMERA = 16
     ROBOT_BLIND_SPOT = 32
     OUTSIDE_GRID = 64
+    REMEMBERED = 128
 
     @property
     def names(self) -> list[str]:

@@ -215,19 +215,26 @@ def test_time_fused(G, mm, layout, clock, data, how_p, how_s, aggregate, rho):
     if isinstance(result, Refused):
         record(kind, result.label)
         return
-    if state_p == STALE and state_s == STALE:
-        if not (np.all(result.distance == 0.0) and all(Flag.STALE_CAMERA in f for f in result.flags)):
+    blind = len(result.principal) > 0 and set(result.principal) == {""}
+    if state_p == STALE and (state_s == STALE or (state_s == EITHER and blind)):
+        if not (blind and np.all(result.distance == 0.0) and all(Flag.STALE_CAMERA in f for f in result.flags)):
             violation(kind, f"{tag}: stale frames counted as fresh",
                       f"{context}: distances {result.distance.tolist()}, flags {[f.names for f in result.flags]}")
         record(kind, "both stale: 0 + stale_camera")
         return
     if state_p == STALE:
-        # The monitor's plan: the fresh secondary answers alone (single camera), every answer flagged.
-        if not (all(Flag.STALE_CAMERA in f for f in result.flags) and set(result.principal) <= {"s"}):
+        # The monitor's plan: the fresh secondary answers alone, by the single-camera method (whose own campaigns
+        # judge it against the geometry), every answer flagged.
+        if not (all(Flag.STALE_CAMERA in f for f in result.flags) and set(result.principal) == {"s"}):
             violation(kind, f"{tag}: stale principal counted as fresh",
                       f"{context}: principal {set(result.principal)}, flags {[f.names for f in result.flags]}")
-        outcome = check_result(kind, result, points, wall, rho, aggregate, context=context, tag=tag)
-        record(kind, f"stale principal: secondary alone, flagged; {outcome}")
+        camera_s = rig.cameras["s"]
+        alone = dg.single_camera_distances(dg.prepare_depth(dg.depth_image(secondary, camera_s), camera_s),
+                                           to_world(G, points), rho, aggregate)
+        if not np.array_equal(result.distance, alone.distance):
+            violation(kind, f"{tag}: the secondary alone answered otherwise than the single-camera method",
+                      f"{context}: {result.distance.tolist()} != {alone.distance.tolist()}")
+        record(kind, "stale principal: secondary alone, flagged")
         return
     outcome = check_result(kind, result, points, wall, rho, aggregate, context=context, tag=tag)
     if state_s == STALE:

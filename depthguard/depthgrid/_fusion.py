@@ -90,13 +90,17 @@ class FusedFrames:
             robot's body ends as the robot too. No camera can clear space that near a surface it sees (its noise
             margin forbids it), so without this every point on the robot would find "occupied" cells at its own
             surface.
+        remembered: optional (free, box): the voxels of ``box`` (:class:`depthguard.freespace.VoxelBox`) that the
+            free-space memory certifies free at these frames' time (``free``: box.shape bool, from
+            :meth:`depthguard.freespace.FreeSpaceMemory.free_at`). A cell that no secondary camera clears is then free
+            when every voxel it touches is (SPEC section 8a). The caller flags the answers that rest on it.
     """
 
     def __init__(self, grid: DepthGridMap, rig: Rig, principal: OccupancyImage, secondaries: dict,
                  robot_far: np.ndarray | None = None, margin: float = config.DEFAULT_FUSION_MARGIN,
                  pad: int = config.DEFAULT_FUSION_PIXELS, robot_tolerance: float = config.SELF_FILTER_TOLERANCE,
                  check: bool = True, robot_near: np.ndarray | None = None,
-                 robot_exit: np.ndarray | None = None):
+                 robot_exit: np.ndarray | None = None, remembered=None):
         if check:
             if not isinstance(grid, DepthGridMap) or not isinstance(rig, Rig) or \
                     not isinstance(principal, OccupancyImage):
@@ -175,6 +179,7 @@ class FusedFrames:
         self._cells = np.zeros(camera.shape + (grid.n_cells,), dtype=np.uint8)
         # Per pixel, one run of cells known free, to skip without reading them: (first << 32) | last.
         self._free_run = np.full(camera.shape, _kernels.NO_FREE_RUN, dtype=np.int64)
+        self._memory = _NO_MEMORY if remembered is None else _memory_tuple(remembered, camera)
 
     def distances(self, points_world, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
                   unseen: str = config.DEFAULT_UNSEEN, check: bool = True) -> DistanceResult:
@@ -203,7 +208,7 @@ class FusedFrames:
                       z_max)
             near_inside = (config.NEAR_PLANE_EPSILON, config.INSIDE_TOLERANCE)
             cells = (grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets, self._eroded, self._sizes,
-                     self._z_near, self._margin, self._cells, self._free_run, config.FUSION_ROW_CHUNKS)
+                     self._z_near, self._margin, self._cells, self._memory, self._free_run, config.FUSION_ROW_CHUNKS)
             with parallel_chunksize(1):
                 _kernels.fused_query_points(points_camera, float(rho), *common, config.AGGREGATES.index(aggregate),
                                             unseen == "occupied", *near_inside, config.MIN_DIRECTION_NORM, *cells,
@@ -226,3 +231,26 @@ class FusedFrames:
             invalid_pixels={camera.name: principal.invalid_pixels},
             blind_distance=unchecked,
         )
+
+
+_NO_MEMORY = (np.zeros((0, 0, 0), dtype=np.uint8), np.zeros(_kernels.MEM_GEOMETRY_SIZE))
+
+
+def _memory_tuple(remembered, camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
+    """The kernels' form of (free voxels, their box) for principal ``camera``: (uint8 voxels, geometry)."""
+    from depthguard.freespace import VoxelBox
+
+    try:
+        free, box = remembered
+    except (TypeError, ValueError):
+        raise InputError("remembered must be (free voxels, VoxelBox)", field="remembered") from None
+    if not isinstance(box, VoxelBox) or not isinstance(free, np.ndarray) or free.dtype != np.bool_ or \
+            free.shape != box.shape:
+        raise InputError("remembered must be (a bool array of the box's shape, the VoxelBox)", field="remembered")
+    geometry = np.empty(_kernels.MEM_GEOMETRY_SIZE)
+    geometry[_kernels.MEM_LO:_kernels.MEM_LO + 3] = box.lo
+    geometry[_kernels.MEM_INV_VOXEL] = 1.0 / box.voxel
+    geometry[_kernels.MEM_R:_kernels.MEM_R + 9] = camera.T_world_camera[:3, :3].ravel()
+    geometry[_kernels.MEM_T:_kernels.MEM_T + 3] = camera.T_world_camera[:3, 3]
+    geometry[_kernels.MEM_INTRINSICS:] = (1.0 / camera.fx, 1.0 / camera.fy, camera.cx, camera.cy)
+    return np.ascontiguousarray(free, dtype=np.uint8), geometry

@@ -206,10 +206,11 @@ CLASSIFY_RUN = 8  # cells classified together: neighbours share a face, projecte
 
 
 @kernel()
-def classify_run(u, v, k_a, k_b, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin, cells):
+def classify_run(u, v, k_a, k_b, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin, cells, memory):
     """Classify cells k_a..k_b (at most 64) of principal pixel (u, v) into cells[v, u, k]: 1 when some secondary
-    camera saw through the whole cell, else 2 (occupied, or hidden from every camera). Each face between two cells is
-    projected once per camera.
+    camera saw through the whole cell, else 3 when the free-space memory (``memory``, :func:`remembered_cells`)
+    certifies every voxel the cell touches, else 2 (occupied, or hidden from every camera). Each face between two cells
+    is projected once per camera.
 
     A camera is first asked about the whole run at once: the run's footprint lies within the box of its two end
     faces' corners and its largest depth at one of them (depth is linear along each corner ray), so if the camera
@@ -240,23 +241,102 @@ def classify_run(u, v, k_a, k_b, d_min, delta_d, corners, offsets, eroded, sizes
                                     max(y_hi0, y_hi1), max(far0, far1) + margin):
                     cleared |= bit
             ok0, x_lo0, x_hi0, y_lo0, y_hi0, far0 = ok1, x_lo1, x_hi1, y_lo1, y_hi1, far1
+    remembered = np.uint64(0)
+    if cleared != everything:
+        remembered = remembered_cells(u, v, k_a, k_b, d_min, delta_d, memory)
     for i in range(k_b - k_a + 1):
-        cells[v, u, k_a + i] = 1 if (cleared >> np.uint64(i)) & np.uint64(1) else 2
+        bit = np.uint64(1) << np.uint64(i)
+        cells[v, u, k_a + i] = 1 if (cleared & bit) != np.uint64(0) else (
+            3 if (remembered & bit) != np.uint64(0) else 2)
+
+
+#: Layout of the free-space memory's geometry, ``memory[1]`` (float64): the voxel box's low corner (world, metres),
+#: 1 / voxel side, the principal's rotation and translation (optical frame -> world, row-major), 1/fx, 1/fy, cx, cy.
+MEM_LO, MEM_INV_VOXEL, MEM_R, MEM_T, MEM_INTRINSICS, MEM_GEOMETRY_SIZE = 0, 3, 4, 13, 16, 20
+
+
+@kernel(inline=True)
+def _face_bounds(u, v, z, geo):
+    """The world-frame bounding box (x_lo, x_hi, y_lo, y_hi, z_lo, z_hi) of principal pixel (u, v)'s footprint at
+    optical depth z: its 4 corners on the frustum's edge rays."""
+    lo0 = np.inf
+    lo1 = np.inf
+    lo2 = np.inf
+    hi0 = -np.inf
+    hi1 = -np.inf
+    hi2 = -np.inf
+    for dv in range(2):
+        for du in range(2):
+            x = (u - 0.5 + du - geo[MEM_INTRINSICS + 2]) * geo[MEM_INTRINSICS] * z
+            y = (v - 0.5 + dv - geo[MEM_INTRINSICS + 3]) * geo[MEM_INTRINSICS + 1] * z
+            w0 = geo[MEM_R] * x + geo[MEM_R + 1] * y + geo[MEM_R + 2] * z + geo[MEM_T]
+            w1 = geo[MEM_R + 3] * x + geo[MEM_R + 4] * y + geo[MEM_R + 5] * z + geo[MEM_T + 1]
+            w2 = geo[MEM_R + 6] * x + geo[MEM_R + 7] * y + geo[MEM_R + 8] * z + geo[MEM_T + 2]
+            lo0 = min(lo0, w0)
+            lo1 = min(lo1, w1)
+            lo2 = min(lo2, w2)
+            hi0 = max(hi0, w0)
+            hi1 = max(hi1, w1)
+            hi2 = max(hi2, w2)
+    return lo0, hi0, lo1, hi1, lo2, hi2
+
+
+@kernel(inline=True)
+def _voxels_free(free, geo, lo0, hi0, lo1, hi1, lo2, hi2):
+    """Whether every voxel that the world box [lo, hi] (grown by 1e-9 m against rounding) touches is certified free
+    in ``free`` (uint8, 1 = free); not when the box leaves the voxels' box (or holds NaN)."""
+    inv = geo[MEM_INV_VOXEL]
+    nx, ny, nz = free.shape
+    i0 = np.floor((lo0 - 1e-9 - geo[MEM_LO]) * inv)
+    i1 = np.floor((hi0 + 1e-9 - geo[MEM_LO]) * inv)
+    j0 = np.floor((lo1 - 1e-9 - geo[MEM_LO + 1]) * inv)
+    j1 = np.floor((hi1 + 1e-9 - geo[MEM_LO + 1]) * inv)
+    k0 = np.floor((lo2 - 1e-9 - geo[MEM_LO + 2]) * inv)
+    k1 = np.floor((hi2 + 1e-9 - geo[MEM_LO + 2]) * inv)
+    if not (0.0 <= i0 and i1 < nx and 0.0 <= j0 and j1 < ny and 0.0 <= k0 and k1 < nz):
+        return False
+    for i in range(int(i0), int(i1) + 1):
+        for j in range(int(j0), int(j1) + 1):
+            for k in range(int(k0), int(k1) + 1):
+                if free[i, j, k] == 0:
+                    return False
+    return True
+
+
+@kernel()
+def remembered_cells(u, v, k_a, k_b, d_min, delta_d, memory):
+    """Bit i set when cell k_a + i (k_a..k_b, at most 64) of principal pixel (u, v) lies wholly in voxels that the
+    free-space memory certifies free (SPEC section 8a). ``memory``: (free, geometry): free (nx, ny, nz) uint8, 1 for a
+    voxel no person can have reached yet, of zero size for no memory; geometry (MEM_GEOMETRY_SIZE,) float64 as
+    MEM_LO.. describe. A cell lies within the box of its 8 corners (it is convex), whose voxels are checked."""
+    free, geo = memory
+    if free.size == 0:
+        return np.uint64(0)
+    out = np.uint64(0)
+    a0, a1, b0, b1, c0, c1 = _face_bounds(u, v, d_min + k_a * delta_d, geo)
+    for i in range(k_b - k_a + 1):
+        e0, e1, f0, f1, g0, g1 = _face_bounds(u, v, d_min + (k_a + i + 1) * delta_d, geo)
+        if _voxels_free(free, geo, min(a0, e0), max(a1, e1), min(b0, f0), max(b1, f1), min(c0, g0), max(c1, g1)):
+            out |= np.uint64(1) << np.uint64(i)
+        a0, a1, b0, b1, c0, c1 = e0, e1, f0, f1, g0, g1
+    return out
 
 
 @kernel(inline=True)
 def _next_not_free(cells, v, u, k, k_end, step):
     """The first cell from k towards k_end (inclusive, by step +-1) not known to be free, or k_end + step."""
-    while k != k_end + step and cells[v, u, k] == 1:
+    while k != k_end + step and (cells[v, u, k] & 1) != 0:  # 1: seen free now, 3: remembered free
         k += step
     return k
 
 
 @kernel()
-def occupied_in(u, v, k_lo, k_hi, highest, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin, cells):
+def occupied_in(u, v, k_lo, k_hi, highest, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin, cells,
+                memory):
     """The highest (or lowest) occupied cell in k_lo..k_hi of principal pixel (u, v), -1 for none.
 
-    cells[v, u, k] caches each cell's class for the frame: 0 unknown, 1 free, 2 occupied. A cell met unknown is
+    cells[v, u, k] caches each cell's class for the frame: 0 unknown, 1 free (seen), 2 occupied, 3 free (remembered:
+    no camera sees through it now, but the free-space memory says no person can be there yet). A cell met unknown is
     classified with the next few in the walk's direction (:func:`classify_run`). Threads that query different
     control points may classify the same cell at once; each writes the same byte, a function of this frame's images
     alone, so whichever write lands, the cache holds the right class.
@@ -273,10 +353,10 @@ def occupied_in(u, v, k_lo, k_hi, highest, d_min, delta_d, corners, offsets, ero
         if cells[v, u, k] == 0:
             if highest:
                 classify_run(u, v, max(k - CLASSIFY_RUN + 1, k_end), k, d_min, delta_d, corners, offsets, eroded,
-                             sizes, z_near, margin, cells)
+                             sizes, z_near, margin, cells, memory)
             else:
                 classify_run(u, v, k, min(k + CLASSIFY_RUN - 1, k_end), d_min, delta_d, corners, offsets, eroded,
-                             sizes, z_near, margin, cells)
+                             sizes, z_near, margin, cells, memory)
         if cells[v, u, k] == 2:
             return k
         k += step
@@ -322,20 +402,20 @@ def cell_index(z, d_min, delta_d, n_cells):
 
 @kernel(inline=True)
 def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, d_min, delta_d, corners, offsets, eroded, sizes, z_near,
-              margin, cells, free_run):
+              margin, cells, memory, free_run):
     """:func:`nearest_confirmed`'s walk down and up from cell k_star (or from the ends of the known free run holding
     it) to the first occupied cell each way within k_lo..k_hi. Returns (k_left, k_right), -1 for none, or (-2, -2)
     when k_star's own cell is occupied. Records the free run found between them."""
     # np.bool_, not a literal True or False, for which numba would compile occupied_in twice.
     if not in_run and occupied_in(u, v, k_star, k_star, np.bool_(False), d_min, delta_d, corners, offsets, eroded,
-                                  sizes, z_near, margin, cells) >= 0:
+                                  sizes, z_near, margin, cells, memory) >= 0:
         return -2, -2
     down_from = run_lo - 1 if in_run else k_star - 1
     up_from = run_hi + 1 if in_run else k_star + 1
     k_left = occupied_in(u, v, k_lo, down_from, np.bool_(True), d_min, delta_d, corners, offsets, eroded, sizes, z_near,
-                         margin, cells)
+                         margin, cells, memory)
     k_right = occupied_in(u, v, up_from, k_hi, np.bool_(False), d_min, delta_d, corners, offsets, eroded, sizes,
-                          z_near, margin, cells)
+                          z_near, margin, cells, memory)
     # Everything between the two is free now.
     free_lo = k_left + 1 if k_left >= 0 else (min(k_lo, run_lo) if in_run else k_lo)
     free_hi = k_right - 1 if k_right >= 0 else (max(k_hi, run_hi) if in_run else k_hi)
@@ -345,7 +425,7 @@ def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, d_min, delta_d, 
 
 @kernel()
 def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, u, v, d_min, delta_d, n_cells,
-                      corners, offsets, eroded, sizes, z_near, margin, cells, free_run):
+                      corners, offsets, eroded, sizes, z_near, margin, cells, memory, free_run):
     """The nearest occupied part of [lo, hi] along principal pixel (u, v)'s frustum, nearer than ``bound2``: the
     part [lo, certain_to] is occupied as it stands (a measured surface's own cell; certain_to <= lo for none), and so
     are the parts outside the grid [d_min, d_max], which no camera can check; the rest is candidate cells.
@@ -397,7 +477,7 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
         k_right = -1
     else:
         k_left, k_right = _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, d_min, delta_d, corners,
-                                    offsets, eroded, sizes, z_near, margin, cells, free_run)
+                                    offsets, eroded, sizes, z_near, margin, cells, memory, free_run)
         if k_left == -2:  # z*'s own cell is occupied
             return d2, z
     # Down: the occupied cell found, else the part occupied as it stands below; up alike.
@@ -422,7 +502,7 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
 
 @kernel(inline=True)
 def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_from, bound2, d_min, delta_d, n_cells,
-                   corners, offsets, eroded, sizes, z_near, margin, cells, free_run):
+                   corners, offsets, eroded, sizes, z_near, margin, cells, memory, free_run):
     """Squared distance from P to what is occupied along principal pixel (u, v) after fusion, its depth z*, and
     whether that came from a candidate of a pixel without a measurement. (inf, 0, False) if nothing nearer than
     ``bound2``.
@@ -444,16 +524,16 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
                 best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs,
                                                   surface_cell_end(zs, d_min, delta_d),
                                                   min(ze, z_far), bound2, u, v, d_min, delta_d, n_cells, corners,
-                                                  offsets, eroded, sizes, z_near, margin, cells, free_run)
+                                                  offsets, eroded, sizes, z_near, margin, cells, memory, free_run)
         else:  # no measurement: the whole segment is a candidate
             best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs, zs, min(ze, z_far), bound2, u, v,
                                               d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin,
-                                              cells, free_run)
+                                              cells, memory, free_run)
             from_invalid = best2 < np.inf
     if blind_from <= z_far:  # case (iv): behind the robot
         d2, z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, blind_from, blind_from, z_far, min(best2, bound2), u,
                                   v, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin,
-                                  cells, free_run)
+                                  cells, memory, free_run)
         if d2 < best2:
             best2, best_z = d2, z
             from_invalid = False
@@ -470,7 +550,8 @@ N_ACC = 12
 
 @kernel()
 def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, certain, blind_from, fx, fy, cx, cy,
-               prune_min, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, free_run,
+               prune_min, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, memory,
+               free_run,
                scratch, acc):
     """One control point P = (X, Y, Z) (metres, principal optical frame) against the rows v_first, v_first + v_step,
     ... <= v_last of its surveillance region (``spans``): what the principal camera says is possibly occupied and
@@ -547,7 +628,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
             if not answered:
                 d2, z, from_invalid = pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, np.float64(z_end[v, u]),
                                                      certain[v, u], bf, bound2, d_min, delta_d, n_cells, corners,
-                                                     offsets, eroded, sizes, z_near, margin, cells, free_run)
+                                                     offsets, eroded, sizes, z_near, margin, cells, memory, free_run)
             if d2 >= rho2:
                 continue
             if d2 < best2 or (d2 == best2 and (v < best_v or (v == best_v and u < best_u))):
@@ -646,6 +727,7 @@ def fused_finish(X, Y, Z, aggregate, region, acc, fx, fy, cx, cy, inside_tol, mi
 def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, unchecked_from, unchecked_block_min,
                        block, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, near_eps, inside_tol,
                        min_direction, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells,
+                       memory,
                        free_run, row_chunks, distance, direction, count, invalid_count, flags, unchecked):
     """Distances from the (n, 3) control points (metres, principal optical frame) to what the principal camera says
     is possibly occupied and the secondary cameras do not clear, aggregated as ``aggregate``; the fused counterpart
@@ -677,7 +759,7 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
         fused_rows(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, int(region[i, 6]) + c,
                    int(region[i, 7]), row_chunks, spans[i], z_start, z_end, certain, blind_from, fx, fy, cx, cy,
                    aggregate == AGG_MIN, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin,
-                   cells, free_run, scratch[t], acc[i, c])
+                   cells, memory, free_run, scratch[t], acc[i, c])
     for i in range(n):
         d, k, m, g = fused_finish(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], aggregate, region[i],
                                   acc[i], fx, fy, cx, cy, inside_tol, min_direction, direction[i])
