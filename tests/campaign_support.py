@@ -693,12 +693,9 @@ def _worker_main():
     os.dup2(devnull, 1)
     for line in sys.stdin:
         request = json.loads(line)
-        try:
-            from PIL import EpsImagePlugin
+        from PIL import EpsImagePlugin  # pillow is a dependency: a missing one must fail, never pass silently
 
-            EpsImagePlugin.gs_binary = None  # look for Ghostscript again: an attempt would show in the audit hook
-        except ImportError:
-            pass
+        EpsImagePlugin.gs_binary = None  # look for Ghostscript again: an attempt would show in the audit hook
         try:
             code, out, err, stats = run_cli(request["argv"], seconds=request["seconds"], trace=request["trace"])
             reply = {"code": code if isinstance(code, int) or code is None else str(code), "stdout": out,

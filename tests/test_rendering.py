@@ -23,7 +23,10 @@ import shutil
 import xml.etree.ElementTree as ET
 
 import numpy as np
+import pybullet as p
+import pybullet_data
 import pytest
+import trimesh
 from scipy.spatial.transform import Rotation
 
 import depthguard as dg
@@ -365,9 +368,6 @@ def _iiwa_collision_links(urdf_path):
 def test_kuka_iiwa_mask_matches_pybullet(renderer, tmp_path):
     """pybullet draws the URDF's visual meshes; a copy of the URDF whose visuals are the collision STL files makes
     it draw exactly the geometry depthguard renders. Link frames from pybullet's forward kinematics."""
-    p = pytest.importorskip("pybullet")
-    pybullet_data = pytest.importorskip("pybullet_data")
-    trimesh = pytest.importorskip("trimesh")
     import pybullet_scenes as ps
 
     source = os.path.join(pybullet_data.getDataPath(), "kuka_iiwa")

@@ -23,6 +23,7 @@ import threading
 import xml.etree.ElementTree as ET
 
 import numpy as np
+import pybullet
 import pytest
 import trimesh
 
@@ -34,8 +35,6 @@ from depthguard.robots import ControlPoint, LinkCapsule, RobotModel, default_rob
 from depthguard.robots import _capsule_kernels as kernels
 from depthguard.robots._capsules import _hull_vertices, capsule_volume, enclosing_circle, segment_distances
 from depthguard.robots._urdf import _sphere_mesh
-
-pybullet = pytest.importorskip("pybullet")
 
 #: pybullet's poses and Jacobians are rounded to float32 (relative 6e-8 on a robot about 1.3 m tall).
 PYBULLET_TOL = 1e-6

@@ -25,6 +25,7 @@ import math
 
 import coal
 import numpy as np
+import pybullet
 import pytest
 import trimesh
 import yaml
@@ -430,7 +431,6 @@ def test_end_effector_traces_the_hexagon(wc):
 # -------------------------------------------------------------------------------------------- ground truth
 
 def test_ground_truth_against_coal_and_pybullet(wc):
-    pybullet = pytest.importorskip("pybullet")
     from scipy.spatial.transform import Rotation
 
     client = pybullet.connect(pybullet.DIRECT)
