@@ -183,6 +183,14 @@ def test_seen_free_voxels_of_a_camera_seeing_nothing_and_the_near_limit():
     seen = seen_free_voxels(box, [camera], [exact], margin=0.01)
     assert seen[:, :, :3].all() and not seen[:, :, 3].any()
     assert not seen_free_voxels(box, [camera], [exact - np.float32(1e-6)])[:, :, 3].any()
+    # A box wider than the view: only the voxels whose whole footprint (grown by pad) lies in the image are seen.
+    wide = VoxelBox([-2.0, -0.05, 1.0], [2.0, 0.05, 1.1], 0.1)
+    u_lo = 50.0 * (wide.lo[0] + np.arange(40) * 0.1) / 1.0 + 31.5  # the near face's corners are the widest
+    u_hi = 50.0 * (wide.lo[0] + np.arange(1, 41) * 0.1) / 1.0 + 31.5
+    for pad in (0, 3):
+        inside = (np.ceil(u_lo - 0.5) - pad >= 0) & (np.floor(u_hi + 0.5) + pad <= 63)
+        np.testing.assert_array_equal(seen_free_voxels(wide, [camera], [far], pad=pad)[:, 0, 0], inside)
+        assert 3 <= inside.sum() <= 30
     # Voxels nearer than the camera's minimum range are not seen.
     near = dg.PinholeCamera("c", 64, 48, 50.0, 50.0, 31.5, 23.5, np.eye(4), depth_range=(1.0, 8.0))
     seen = seen_free_voxels(box, [near], [far])

@@ -25,53 +25,72 @@ from depthguard._jit import kernel
 
 @kernel(parallel=True)
 def row_min_tables(free, levels, table):
-    """table[l, r, q] = the smallest free[r, q : q + 2^l], for l < levels and q + 2^l <= w (the rest is not
-    written). free: (h, w) float32; table: (>= levels, >= h, >= w) float32."""
+    """table[l, q, r] = the smallest free[r, q : q + 2^l], for l < levels and q + 2^l <= w (the rest is not
+    written): a sparse table of each row, stored column-major so that the rows of one footprint lie side by side.
+    free: (h, w) float32; table: (>= levels, >= w, >= h) float32."""
     h, w = free.shape
-    for p in prange(h):
-        r = np.int64(p)
-        for q in range(w):
-            table[0, r, q] = free[r, q]
-        for level in range(1, levels):
-            half = np.int64(1) << (level - 1)
-            for q in range(w - 2 * half + 1):
-                table[level, r, q] = min(table[level - 1, r, q], table[level - 1, r, q + half])
+    for p in prange(w):
+        q = np.int64(p)
+        for r in range(h):
+            table[0, q, r] = free[r, q]
+    for level in range(1, levels):
+        half = np.int64(1) << (level - 1)
+        for p in prange(w - 2 * half + 1):
+            q = np.int64(p)
+            for r in range(h):
+                table[level, q, r] = min(table[level - 1, q, r], table[level - 1, q + half, r])
 
 
 @kernel(inline=True)
 def row_min(table, floor_log2, r, a, b):
     """The smallest value of row r between columns a and b (inclusive, a <= b) of the image ``table`` holds."""
     level = floor_log2[b - a + 1]
-    return min(table[level, r, a], table[level, r, b - (np.int64(1) << level) + 1])
+    return min(table[level, a, r], table[level, b - (np.int64(1) << level) + 1, r])
 
 
 @kernel(inline=True)
-def camera_sees_voxel(lo, voxel, i, j, k, pose, intrinsics, z_near, width, height, table, floor_log2, margin, pad):
-    """Whether one camera sees voxel (i, j, k) of the box with corner ``lo`` and side ``voxel`` entirely free.
+def project_plane(lo, voxel, i, pose, intrinsics, plane):
+    """plane[j, k] = (u, v, z): the lattice point lo + (i, j, k) * voxel (world, metres) in one camera, its image
+    coordinates (pixels; garbage where z <= 0) and optical depth (metres), for j <= ny, k <= nz.
 
     pose: (12,) the world -> optical rotation row by row, then the translation. intrinsics: (4,) fx, fy, cx, cy.
-    Each corner is placed, transformed and projected as written, in this order, as ``seen_free_voxels``' docstring
-    says (the tests' judge does the same arithmetic)."""
+    Each point is placed, transformed and projected as written, in this order, as ``seen_free_voxels``' docstring
+    says (the tests' judge does the same arithmetic). Neighbouring voxels share corners: each is projected once."""
     fx = intrinsics[0]
     fy = intrinsics[1]
     cx = intrinsics[2]
     cy = intrinsics[3]
+    x = lo[0] + i * voxel
+    for j in range(plane.shape[0]):
+        y = lo[1] + j * voxel
+        for k in range(plane.shape[1]):
+            z = lo[2] + k * voxel
+            pz = pose[6] * x + pose[7] * y + pose[8] * z + pose[11]
+            px = pose[0] * x + pose[1] * y + pose[2] * z + pose[9]
+            py = pose[3] * x + pose[4] * y + pose[5] * z + pose[10]
+            plane[j, k, 0] = fx * px / pz + cx
+            plane[j, k, 1] = fy * py / pz + cy
+            plane[j, k, 2] = pz
+
+
+@kernel(inline=True)
+def camera_sees_voxel(near, far_side, j, k, z_near, width, height, table, floor_log2, margin, pad):
+    """Whether one camera sees voxel (i, j, k) entirely free, from its corners projected in that camera: the planes
+    x = i (``near``) and x = i + 1 (``far_side``) of :func:`project_plane`."""
     x_lo = np.inf
     x_hi = -np.inf
     y_lo = np.inf
     y_hi = -np.inf
     far = 0.0
     for corner in range(8):
-        x = lo[0] + (i + (corner & 1)) * voxel
-        y = lo[1] + (j + ((corner >> 1) & 1)) * voxel
-        z = lo[2] + (k + ((corner >> 2) & 1)) * voxel
-        pz = pose[6] * x + pose[7] * y + pose[8] * z + pose[11]
+        plane = far_side if corner & 1 else near
+        jj = j + ((corner >> 1) & 1)
+        kk = k + ((corner >> 2) & 1)
+        pz = plane[jj, kk, 2]
         if not pz >= z_near:  # NaN-safe: a NaN depth is not in front
             return False
-        px = pose[0] * x + pose[1] * y + pose[2] * z + pose[9]
-        py = pose[3] * x + pose[4] * y + pose[5] * z + pose[10]
-        u = fx * px / pz + cx
-        v = fy * py / pz + cy
+        u = plane[jj, kk, 0]
+        v = plane[jj, kk, 1]
         x_lo = min(x_lo, u)
         x_hi = max(x_hi, u)
         y_lo = min(y_lo, v)
@@ -95,28 +114,43 @@ def camera_sees_voxel(lo, voxel, i, j, k, pose, intrinsics, z_near, width, heigh
 
 
 @kernel(parallel=True)
-def seen_free_voxels(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad, out):
+def seen_free_voxels(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad, chunks, out):
     """out[i, j, k] = whether some camera sees voxel (i, j, k) of the box with corner ``lo`` ((3,) metres, world)
     and side ``voxel`` entirely free.
 
     Per camera c: poses[c] (12,) world -> optical (rotation rows, translation); intrinsics[c] (fx, fy, cx, cy);
     z_near[c] the nearest depth a corner may have (metres); sizes[c] (width, height); tables[c] its free image's
     row-minimum table (:func:`row_min_tables`). floor_log2[n] = floor(log2(n)) for n >= 1. margin: metres;
-    pad: pixels (float64, a whole number). out: (nx, ny, nz) bool."""
+    pad: pixels (float64, a whole number). out: (nx, ny, nz) bool.
+
+    The slabs i = 0..nx-1 are cut into ``chunks`` runs, one task each; a task walks its slabs in order, projecting
+    each plane of lattice points once per camera (the plane x = i + 1 of slab i is the plane x = i of slab i + 1).
+    Within a column, the camera that saw the last voxel is asked first (the answer is the same; it comes sooner)."""
     nx, ny, nz = out.shape
     n_cameras = poses.shape[0]
-    for p in prange(nx * ny):
-        ij = np.int64(p)
-        i = ij // ny
-        j = ij - i * ny
-        for k in range(nz):
-            seen = False
+    n_chunks = max(min(chunks, nx), 1)
+    for p in prange(n_chunks):
+        chunk = np.int64(p)
+        first = chunk * nx // n_chunks
+        stop = (chunk + 1) * nx // n_chunks
+        planes = np.empty((n_cameras, 2, ny + 1, nz + 1, 3))
+        for c in range(n_cameras):
+            project_plane(lo, voxel, first, poses[c], intrinsics[c], planes[c, first % 2])
+        for i in range(first, stop):
             for c in range(n_cameras):
-                if camera_sees_voxel(lo, voxel, i, j, k, poses[c], intrinsics[c], z_near[c], sizes[c, 0],
-                                     sizes[c, 1], tables[c], floor_log2, margin, pad):
-                    seen = True
-                    break
-            out[i, j, k] = seen
+                project_plane(lo, voxel, i + 1, poses[c], intrinsics[c], planes[c, (i + 1) % 2])
+            for j in range(ny):
+                last = 0
+                for k in range(nz):
+                    seen = False
+                    for m in range(n_cameras):
+                        c = (last + m) % n_cameras
+                        if camera_sees_voxel(planes[c, i % 2], planes[c, (i + 1) % 2], j, k, z_near[c], sizes[c, 0],
+                                             sizes[c, 1], tables[c], floor_log2, margin, pad):
+                            seen = True
+                            last = c
+                            break
+                    out[i, j, k] = seen
 
 
 # ----------------------------------------------------------------------------------------- the distance transform
@@ -171,39 +205,42 @@ def last_axis_of_memory(arrival, seen, robot, use_robot, t, d2):
 
 
 @kernel(inline=True)
-def _lower_envelope(f, n, v, fv, z, out):
+def _lower_envelope(f, n, v, fv, zn, zd, out):
     """out[q] = min over sites p of (q - p)^2 + f(p), for q in 0..n-1 (Felzenszwalb-Huttenlocher). Sites: p in
-    0..n-1 with f(p) = f[p] (finite, whole numbers), and the padding p = -1 and p = n with f = 0. v, fv: (n + 2,)
-    int64 and z: (n + 3,) float64 work space (the envelope's parabolas, their values and where each starts)."""
+    0..n-1 with f(p) = f[p] (whole numbers), and the padding p = -1 and p = n with f = 0. Work space, (n + 2,) int64
+    each: v, fv the envelope's parabolas and their values; zn / zd where each starts, as a fraction (zd > 0), so that
+    every comparison is exact in integers (|zn * den| stays below 2^63 for sides up to config.FREESPACE_MAX_SIDE)."""
     top = 0
     v[0] = -1
     fv[0] = 0
-    z[0] = -np.inf
+    zn[0] = -1  # the padding's parabola starts at -inf: it is never popped (top > 0 below)
+    zd[0] = 0
     for q in range(n + 1):
         fq = np.int64(0) if q == n else np.int64(f[q])
-        s = 0.0
-        while True:  # pop the parabolas the new one hides; the padding at -1 is never popped (z[0] = -inf)
+        while True:  # pop the parabolas the new one hides: where it starts, s = num / den, is at or before theirs
             p = v[top]
-            s = ((fq + q * q) - (fv[top] + p * p)) / (2.0 * (q - p))
-            if s <= z[top]:
+            num = (fq + q * q) - (fv[top] + p * p)
+            den = 2 * (q - p)
+            if top > 0 and num * zd[top] <= zn[top] * den:
                 top -= 1
             else:
                 break
         top += 1
         v[top] = q
         fv[top] = fq
-        z[top] = s
-    z[top + 1] = np.inf
+        zn[top] = num
+        zd[top] = den
+    last = top
     top = 0
     for q in range(n):
-        while z[top + 1] < q:
+        while top < last and zn[top + 1] < q * zd[top + 1]:
             top += 1
         d = q - v[top]
         out[q] = d * d + fv[top]
 
 
 @kernel(inline=True)
-def _envelope_slab(slab, lines, f, v, fv, z, out):
+def _envelope_slab(slab, lines, f, v, fv, zn, zd, out):
     """Transform every line along the first axis of ``slab`` ((m, nz) int32 view) in place, through ``lines`` ((nz,
     m) int64 work space: the slab transposed so each line is contiguous)."""
     m, nz = slab.shape
@@ -213,7 +250,7 @@ def _envelope_slab(slab, lines, f, v, fv, z, out):
     for k in range(nz):
         for q in range(m):
             f[q] = lines[k, q]
-        _lower_envelope(f, m, v, fv, z, out)
+        _lower_envelope(f, m, v, fv, zn, zd, out)
         for q in range(m):
             lines[k, q] = out[q]
     for q in range(m):
@@ -232,8 +269,9 @@ def middle_axis(d2):
         out = np.empty(ny, dtype=np.int64)
         v = np.empty(ny + 2, dtype=np.int64)
         fv = np.empty(ny + 2, dtype=np.int64)
-        z = np.empty(ny + 3, dtype=np.float64)
-        _envelope_slab(d2[i], lines, f, v, fv, z, out)
+        zn = np.empty(ny + 2, dtype=np.int64)
+        zd = np.empty(ny + 2, dtype=np.int64)
+        _envelope_slab(d2[i], lines, f, v, fv, zn, zd, out)
 
 
 @kernel(parallel=True)
@@ -247,8 +285,9 @@ def first_axis(d2):
         out = np.empty(nx, dtype=np.int64)
         v = np.empty(nx + 2, dtype=np.int64)
         fv = np.empty(nx + 2, dtype=np.int64)
-        z = np.empty(nx + 3, dtype=np.float64)
-        _envelope_slab(d2[:, j, :], lines, f, v, fv, z, out)
+        zn = np.empty(nx + 2, dtype=np.int64)
+        zd = np.empty(nx + 2, dtype=np.int64)
+        _envelope_slab(d2[:, j, :], lines, f, v, fv, zn, zd, out)
 
 
 @kernel(parallel=True)

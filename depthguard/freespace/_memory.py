@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import numba
 import numpy as np
 
 from depthguard import config
@@ -149,7 +150,7 @@ def seen_free_voxels(box: VoxelBox, cameras: Sequence[PinholeCamera], free_image
     intrinsics = np.empty((n, 4))
     z_near = np.empty(n)
     sizes = np.empty((n, 2), dtype=np.int64)
-    tables = np.empty((n, levels, height, width), dtype=np.float32)
+    tables = np.empty((n, levels, width, height), dtype=np.float32)
     for c, (camera, free) in enumerate(views):
         T_camera_world = camera.T_camera_world
         poses[c, :9] = T_camera_world[:3, :3].ravel()
@@ -160,8 +161,9 @@ def seen_free_voxels(box: VoxelBox, cameras: Sequence[PinholeCamera], free_image
         # Contiguous and writable: a read-only array is another type to numba, and would compile once more.
         _kernels.row_min_tables(np.require(free, np.float32, ["C", "W"]), camera.width.bit_length(), tables[c])
     floor_log2 = np.array([max(m.bit_length() - 1, 0) for m in range(width + 1)], dtype=np.int64)
+    chunks = min(box.shape[0], config.FREESPACE_CHUNKS_PER_THREAD * numba.get_num_threads())
     _kernels.seen_free_voxels(box.lo, box.voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, float(margin),
-                              float(pad), out)
+                              float(pad), chunks, out)
     return out
 
 
