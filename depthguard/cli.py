@@ -79,6 +79,7 @@ def _whole(minimum: int, maximum: int):
 _METRES = _real(config.RHO_MIN, config.RHO_MAX, "metres")
 _GRID_METRES = _real(0.0, config.COORDINATE_LIMIT, "metres", above_minimum=True)
 _SECONDS = _real(0.0, math.inf, "seconds", above_minimum=True)
+_SPEED = _real(0.0, config.COORDINATE_LIMIT, "metres/second", above_minimum=True)
 
 
 def _build_parser() -> argparse.ArgumentParser:
@@ -158,6 +159,13 @@ def _build_parser() -> argparse.ArgumentParser:
                         help="pixels without a measurement: occupied (fail-safe), neighbors, free")
     replay.add_argument("--rig", metavar="RIG.yaml",
                         help="the rig (default: rig.yaml in the recording, the bag folder or beside the .mcap file)")
+    memory = replay.add_mutually_exclusive_group()
+    memory.add_argument("--v-max", type=_SPEED, default=config.FREESPACE_V_MAX,
+                        help="the free-space memory's fastest person, metres/second (default "
+                             f"{config.FREESPACE_V_MAX:g}, ISO 13855's hand speed; SPEC section 8a); the memory "
+                             "needs a workspace in the rig")
+    memory.add_argument("--no-memory", action="store_true",
+                        help="do not remember free space: only what the cameras see now clears space")
     replay.add_argument("--json", action="store_true", help="also print a JSON summary to standard output")
 
     demo = commands.add_parser("demo", help="the Quick start's main job: the simulated workcell of reference "
@@ -166,12 +174,13 @@ def _build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--duration", type=_SECONDS, default=None,
                       help="only the first S seconds, at least one frame (1/30 s) (default: all 12)")
 
-    fusion = commands.add_parser("fusion-workcell", help="issue 4: scenario B's shadow and hidden-hand cases, each "
-                                                         "camera alone against both fused through the depth grid")
+    fusion = commands.add_parser("fusion-workcell", help="scenario B's shadow and hidden-hand cases: a camera alone "
+                                                         "against all fused through the depth grid, without and with "
+                                                         "the free-space memory")
     fusion.add_argument("--out", default="out/fusion-workcell", help="output folder for plots and summary.json")
     fusion.add_argument("--scene", action="append", metavar="SCENE", help="a camera layout (scene YAML) to run "
                                                                            "(repeatable; default: scenario_b.yaml and "
-                                                                           "scenario_b_across.yaml)")
+                                                                           "scenario_b_four.yaml)")
     fusion.add_argument("--all-frames", action="store_true", help="simulate the whole episode (default: the two "
                                                                   "cases and 0.5 s around them)")
 
@@ -361,7 +370,7 @@ def _replay(args) -> int:
         fixed = None
         point_names = list(robot.control_point_names)
     monitor = DistanceMonitor(recording.rig, rho=args.rho, aggregate=args.aggregate, invalid=args.invalid,
-                              robot=robot)
+                              robot=robot, memory=not args.no_memory, v_max=args.v_max)
     partial = out.with_name(out.name + ".partial")  # renamed to --out once every set is answered
     distances, flagged, answered = [], 0, 0
     try:

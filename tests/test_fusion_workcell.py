@@ -58,19 +58,22 @@ def allowed(across, episode):
     error, not a tolerance)."""
     points = [across.control_points_at(t) for t in episode.times]
     singles = []
-    for name in episode.methods[:-1]:
+    cameras = [m for m in episode.methods if m not in fw.FUSED_METHODS]
+    for name in cameras:
         camera = across.rig.cameras[name]
         depth = np.array([camera.world_to_camera(p)[:, 2] for p in points])
         singles.append(FOOTPRINTS * (np.maximum(depth, 0.1) + RHO) / camera.fx + QUANTISATION)
     assert episode.methods[0] == across.rig.principal
-    return np.stack(singles + [singles[0]])
+    return np.stack(singles + [singles[0]] * len(fw.FUSED_METHODS))
 
 
 def test_the_experiment_judges_no_more_loosely_than_these_tests(episode, allowed):
     """The experiment's summary counts misses with its own tolerance (the fused one: the larger of the cameras'):
     loosening it must fail here."""
-    assert np.all(episode.tolerance[:-1] <= allowed[:-1] + 1e-12)
-    assert np.all(episode.tolerance[-1] <= allowed[:-1].max(axis=0) + 1e-12)
+    n = len(fw.FUSED_METHODS)
+    assert episode.methods[-n:] == fw.FUSED_METHODS
+    assert np.all(episode.tolerance[:-n] <= allowed[:-n] + 1e-12)
+    assert np.all(episode.tolerance[-n:] <= allowed[:-n].max(axis=0) + 1e-12)
 
 
 def _case(episode, kind):
@@ -113,11 +116,19 @@ def test_the_second_camera_sees_the_hidden_hand(across):
     assert np.count_nonzero(frame.label["second"] == hand) > 200
 
 
-def test_fused_distances_never_exceed_the_truth(episode, allowed):
-    reported, tolerance, _ = _method(episode, allowed, fw.FUSED, np.ones(len(episode.times), dtype=bool))
+@pytest.mark.parametrize("method", fw.FUSED_METHODS)
+def test_fused_distances_never_exceed_the_truth(episode, allowed, method):
+    reported, tolerance, _ = _method(episode, allowed, method, np.ones(len(episode.times), dtype=bool))
     # inf ("nothing within rho") is right when the truth is beyond rho: compare min(reported, rho).
     excess = np.minimum(reported, RHO) - (episode.truth + tolerance)
     assert np.all(excess <= 0), f"largest excess over truth + tolerance: {excess.max() * 1e3:.1f} mm"
+
+
+def test_memory_only_clears(episode):
+    """With the free-space memory, a fused distance is never below the one without it (memory only clears cells)."""
+    without = episode.reported[episode.methods.index(fw.FUSED)]
+    remembered = episode.reported[episode.methods.index(fw.FUSED_MEMORY)]
+    assert np.all(remembered >= without - 1e-9)
 
 
 def test_shadow_case_fusion_removes_only_what_a_camera_saw(episode, allowed):
@@ -167,12 +178,13 @@ def _fake_episode():
                        [0.2, inf]])
     fused = np.array([[inf, inf], [inf, inf], [0.1, inf], [inf, inf], [0.2, inf], [0.19, inf], [0.2, inf],
                       [0.2, inf]])
-    reported = np.stack([principal, second, fused])
+    reported = np.stack([principal, second, fused, fused])
     flags = np.zeros(reported.shape, dtype=np.int64)
     flags[0, 4:7, 0] = int(dg.Flag.ROBOT_BLIND_SPOT)
     blind = np.full(reported.shape, np.inf)
     blind[0, 4:7, 0] = 0.15
-    return fw.Episode(layout="fake", times=t, control_points=("a", "b"), methods=("principal", "second", fw.FUSED),
+    return fw.Episode(layout="fake", times=t, control_points=("a", "b"),
+                      methods=("principal", "second") + fw.FUSED_METHODS,
                       eyes={"principal": np.zeros(3), "second": np.ones(3)}, truth=truth, reported=reported,
                       blind=blind, flags=flags, tolerance=np.full(reported.shape, 0.01),
                       spans=[("walk", 0.0, 1.0), ("shadow", 1.0, 4.0), ("hidden_hand", 4.0, 7.0)], seconds=1.0)
@@ -185,6 +197,10 @@ def test_summary_counts_on_a_hand_made_episode():
     assert principal["shadow"]["far_pairs"] == 6 and principal["shadow"]["false_alarms"] == 5
     assert second["shadow"]["false_alarms"] == 1 and fused["shadow"]["false_alarms"] == 1
     assert layout["false_alarms_removed"] == pytest.approx(1 - 1 / 5)
+    assert layout["false_alarms_removed_with_memory"] == pytest.approx(1 - 1 / 5)
+    # useful: of the 6 shadow pairs truly beyond rho + 5 cm, 5 reported below rho by the principal camera
+    assert principal["shadow"]["useful_far_pairs"] == 6
+    assert principal["shadow"]["useful_alarm_fraction"] == pytest.approx(5 / 6)
     # Hidden hand (frames 4-6, point a 0.2 m from the hand): the principal camera reports a at 0.3 and inf (misses,
     # flagged) and at 0.19 (right); inf for b, 1 m from everything, is right.
     assert principal["hidden_hand"]["misses"] == 2 and principal["hidden_hand"]["flagged_misses"] == 2

@@ -42,10 +42,18 @@ RHO = single.RHO
 CASES = ("shadow", "hidden_hand")
 #: Seconds simulated before and after each case by default.
 MARGIN = 0.5
-#: The name of the fused result among the methods (the others are camera names).
+#: The names of the fused results among the methods (the others are camera names): without and with the free-space
+#: memory (SPEC section 8a).
 FUSED = "fused"
-#: The packaged layouts, in the package's simulation folder.
-SCENES = ("scenario_b.yaml", "scenario_b_across.yaml")
+FUSED_MEMORY = "fused+memory"
+FUSED_METHODS = (FUSED, FUSED_MEMORY)
+#: The packaged layouts, in the package's simulation folder, and those run by default: the published two-camera
+#: layout and the four-camera reference layout (issue 8).
+SCENES = ("scenario_b.yaml", "scenario_b_across.yaml", "scenario_b_four.yaml")
+DEFAULT_SCENES = ("scenario_b.yaml", "scenario_b_four.yaml")
+#: "Useful" (issue 8): the share of (frame, control point) pairs truly farther than rho + USEFUL_MARGIN that are
+#: reported below rho.
+USEFUL_MARGIN = 0.05
 
 
 @dataclass
@@ -56,7 +64,7 @@ class Episode:
     layout: str                # the scene's name (its file name without .yaml)
     times: np.ndarray          # (t,) seconds
     control_points: tuple      # (m,) names
-    methods: tuple             # (k,) camera names, then FUSED
+    methods: tuple             # (k,) camera names, then FUSED and FUSED_MEMORY
     eyes: dict                 # camera name -> (3,) its optical centre, metres, world frame
     truth: np.ndarray          # (t, m) metres: to the nearest obstacle or background surface
     reported: np.ndarray       # (k, t, m) metres (inf: nothing within rho)
@@ -80,14 +88,17 @@ def case_frames(workcell, margin: float = MARGIN) -> list[int]:
 
 
 def methods_of(rig) -> tuple[str, ...]:
-    """The methods compared on ``rig``: each camera alone (the principal camera first), then the fused cameras."""
+    """The methods compared on ``rig``: each camera alone (the principal camera first; with more than two cameras,
+    the principal camera only), then the cameras fused without and with the free-space memory."""
     if len(rig.cameras) < 2:
         raise InputError(f"fusion needs at least two depth cameras, the scene has {', '.join(rig.cameras)}",
                          field="cameras")
-    if FUSED in rig.cameras:
-        raise InputError(f"a camera is named {FUSED!r}, the name of the fused result; rename it", field="cameras")
+    for name in FUSED_METHODS:
+        if name in rig.cameras:
+            raise InputError(f"a camera is named {name!r}, the name of a fused result; rename it", field="cameras")
     principal = rig.principal or next(iter(rig.cameras))
-    return (principal,) + tuple(name for name in rig.cameras if name != principal) + (FUSED,)
+    others = tuple(name for name in rig.cameras if name != principal) if len(rig.cameras) == 2 else ()
+    return (principal,) + others + FUSED_METHODS
 
 
 def run(workcell=None, layout: str | None = None, frames=None, duration: float | None = None,
@@ -101,12 +112,13 @@ def run(workcell=None, layout: str | None = None, frames=None, duration: float |
     workcell = workcell or default_workcell()
     robot = workcell.robot
     methods = methods_of(workcell.rig)
-    cameras = methods[:-1]
+    cameras = methods[:-len(FUSED_METHODS)]
     # Single cameras as in the demo (workcell.run). invalid="neighbors" fills the sensor's small dropouts along the
     # robot's edges; large holes stay occupied. The fused monitor uses the same policy for the principal camera.
     options = dict(rho=RHO, aggregate="hybrid", invalid="neighbors", robot=robot)
     monitors = {name: dg.DistanceMonitor(dg.Rig({name: workcell.rig.cameras[name]}), **options) for name in cameras}
-    fused = dg.DistanceMonitor(workcell.rig, **options)
+    fused = dg.DistanceMonitor(workcell.rig, memory=False, **options)
+    remembering = dg.DistanceMonitor(workcell.rig, memory=True, **options)
     background = [p for parts in workcell.background().values() for p in parts]
     if duration is not None:
         frames = range(min(workcell.n_frames, int(round(duration * workcell.rate))))
@@ -119,7 +131,9 @@ def run(workcell=None, layout: str | None = None, frames=None, duration: float |
                       desc=f"{layout}: simulating, one camera and two", unit="frame"):
         points = robot.control_point_positions(frame.joints)
         results = [monitors[c].query({c: frame.depth[c]}, points, joints=frame.joints) for c in cameras]
-        results.append(fused.query({c: frame.depth[c] for c in cameras}, points, joints=frame.joints))
+        every = dict(frame.depth)
+        results.append(fused.query(every, points, joints=frame.joints))
+        results.append(remembering.query(every, points, joints=frame.joints, now=frame.time))
         single.record(rows, frame, points, results, workcell, cameras, background)
     seconds = time.perf_counter() - start
     per_method = {key: np.moveaxis(np.array(rows[key]), 1, 0) for key in ("reported", "blind", "flags", "depth")}
@@ -127,7 +141,8 @@ def run(workcell=None, layout: str | None = None, frames=None, duration: float |
     # of the cameras' (the principal's pixels make the grid's cells, the others' pixels clear them).
     singles = single.tolerance(SimpleNamespace(depth_of_truth=per_method["depth"],
                                                fx=np.array([workcell.rig.cameras[c].fx for c in cameras])))
-    tolerance = np.concatenate([singles, singles.max(axis=0, keepdims=True)])
+    fused_tolerance = singles.max(axis=0, keepdims=True)
+    tolerance = np.concatenate([singles] + [fused_tolerance] * len(FUSED_METHODS))
     return Episode(layout=layout, times=np.array(rows["times"]), control_points=robot.control_point_names,
                    methods=methods, eyes={c: workcell.rig.cameras[c].T_world_camera[:3, 3].copy() for c in cameras},
                    truth=np.array(rows["truth"]), reported=per_method["reported"], blind=per_method["blind"],
@@ -150,24 +165,33 @@ def counts(episode: Episode, k: int, rows: np.ndarray) -> dict:
     - ``false_alarms``: pairs whose truth is at least rho + tolerance (``far_pairs``) reported below rho;
     - ``misses``: pairs whose min(reported, rho) is above truth + tolerance, split into ``flagged_misses``
       (``robot_blind_spot`` set: a single camera says it cannot see there) and ``unflagged_misses``;
-    - ``largest_excess_m``: the largest min(reported, rho) - truth.
+    - ``largest_excess_m``: the largest min(reported, rho) - truth;
+    - ``useful_alarm_fraction``: among the pairs truly farther than rho + USEFUL_MARGIN, the share reported below
+      rho (issue 8's measure of usefulness);
+    - ``remembered``: pairs whose answer rests on the free-space memory (flag ``remembered``).
     """
     truth, reported, tol = episode.truth[rows], episode.reported[k][rows], episode.tolerance[k][rows]
     flagged = (episode.flags[k][rows] & int(dg.Flag.ROBOT_BLIND_SPOT)) != 0
     far = truth >= RHO + tol
     alarms = far & (reported < RHO)
+    far_useful = truth >= RHO + USEFUL_MARGIN
+    useful_alarms = far_useful & (reported < RHO)
     above = np.minimum(reported, RHO) > truth + tol
     return {"pairs": int(truth.size), "far_pairs": int(far.sum()), "false_alarms": int(alarms.sum()),
             "false_alarm_fraction": float(alarms.sum() / far.sum()) if far.any() else 0.0,
             "misses": int(above.sum()), "flagged_misses": int((above & flagged).sum()),
             "unflagged_misses": int((above & ~flagged).sum()),
             "largest_excess_m": float(np.max(np.minimum(reported, RHO) - truth, initial=-np.inf)),
-            "min_truth": float(truth.min(initial=np.inf)), "min_reported": float(reported.min(initial=np.inf))}
+            "min_truth": float(truth.min(initial=np.inf)), "min_reported": float(reported.min(initial=np.inf)),
+            "useful_far_pairs": int(far_useful.sum()),
+            "useful_alarm_fraction": float(useful_alarms.sum() / far_useful.sum()) if far_useful.any() else 0.0,
+            "remembered": int(((episode.flags[k][rows] & int(dg.Flag.REMEMBERED)) != 0).sum())}
 
 
 def summary(episodes: list[Episode]) -> dict:
     """Per layout, method and case: :func:`counts`, which flags were set, and the share of the principal camera's
-    false alarms in the shadow case that fusion removes (``false_alarms_removed``; None when it has none)."""
+    false alarms in the shadow case that fusion removes, without and with the memory (``false_alarms_removed``,
+    ``false_alarms_removed_with_memory``; None when it has none)."""
     out = {"rho": RHO, "layouts": {}}
     for episode in episodes:
         methods = {}
@@ -181,12 +205,14 @@ def summary(episodes: list[Episode]) -> dict:
             }
         principal = methods[episode.methods[0]]["by_case"]["shadow"]["false_alarms"]
         fused = methods[FUSED]["by_case"]["shadow"]["false_alarms"]
+        remembered = methods[FUSED_MEMORY]["by_case"]["shadow"]["false_alarms"]
         out["layouts"][episode.layout] = {
             "frames": len(episode.times), "seconds": episode.seconds,
             "eyes": {c: [round(float(x), 3) for x in eye] for c, eye in episode.eyes.items()},
             "cases": {kind: [[start, end] for name, start, end in episode.spans if name == kind] for kind in CASES},
             "methods": methods,
             "false_alarms_removed": None if principal == 0 else 1.0 - fused / principal,
+            "false_alarms_removed_with_memory": None if principal == 0 else 1.0 - remembered / principal,
         }
     return out
 
@@ -202,8 +228,9 @@ def plot(episode: Episode, out: Path) -> list[Path]:
 
     top = 0.6
     clip = lambda d: np.where(np.isfinite(d), np.minimum(d, top), np.nan)  # noqa: E731 (inf: nothing within rho)
-    principal, fused = 0, episode.methods.index(FUSED)
-    styles = {principal: dict(color="tab:red", lw=1.2), fused: dict(color="tab:blue", lw=1.6)}
+    principal, fused, memory = 0, episode.methods.index(FUSED), episode.methods.index(FUSED_MEMORY)
+    styles = {principal: dict(color="tab:red", lw=1.2), fused: dict(color="tab:blue", lw=1.6),
+              memory: dict(color="tab:purple", lw=1.2, ls="-.")}
     blind_flag = int(dg.Flag.ROBOT_BLIND_SPOT)
     written = []
     for kind in CASES:
@@ -221,7 +248,7 @@ def plot(episode: Episode, out: Path) -> list[Path]:
             ax.axvspan(start, end, color="#eeeeee", lw=0)
         ax.plot(times, clip(episode.truth[rows].min(axis=1)), "k-", lw=2, label="truth")
         for k, method in enumerate(episode.methods):
-            label = "fused (depth grid)" if k == fused else f"{method} alone"
+            label = {fused: "fused (depth grid)", memory: "fused, with memory"}.get(k, f"{method} alone")
             style = styles.get(k, dict(color="tab:green", lw=1.0, ls="--"))
             ax.plot(times, clip(episode.reported[k][rows].min(axis=1)), label=label, **style)
         ax.axhline(RHO, color="grey", ls=":", lw=0.8)
@@ -233,7 +260,7 @@ def plot(episode: Episode, out: Path) -> list[Path]:
         for j, name in enumerate(episode.control_points[:9]):
             ax = fig.add_subplot(grid[1 + j // 3, j % 3], sharex=fig.axes[0])
             ax.plot(times, clip(episode.truth[rows, j]), "k-", lw=1.5)
-            for k in (principal, fused):
+            for k in (principal, fused, memory):
                 ax.plot(times, clip(episode.reported[k][rows, j]), **styles[k])
             flagged = (episode.flags[principal][rows, j] & blind_flag) != 0
             ax.plot(times[flagged], np.zeros(flagged.sum()), "|", color="tab:red", ms=4,
@@ -256,32 +283,34 @@ def plot(episode: Episode, out: Path) -> list[Path]:
     return written
 
 
-def scene_paths() -> list[Path]:
-    """The packaged layouts' scene files."""
+def scene_paths(names=SCENES) -> list[Path]:
+    """The packaged layouts' scene files (``names``: file names, default all)."""
     from importlib import resources
 
     folder = resources.files("depthguard.simulation")
-    return [Path(str(folder.joinpath(name))) for name in SCENES]
+    return [Path(str(folder.joinpath(name))) for name in names]
 
 
 def main(out="out/fusion-workcell", duration: float | None = None, scenes=None, progress: bool = True,
          all_frames: bool = False) -> int:
-    """Run every layout (``scenes``: scene files, default both packaged ones), print the table, write one plot per
+    """Run every layout (``scenes``: scene files, default DEFAULT_SCENES), print the table, write one plot per
     case and layout and summary.json into ``out``. By default only the cases' frames (:func:`case_frames`) are
     simulated; ``all_frames`` simulates the whole episode, ``duration`` its first seconds."""
     from depthguard.simulation import load_workcell
 
-    paths = [Path(p) for p in scenes] if scenes else scene_paths()
+    paths = [Path(p) for p in scenes] if scenes else scene_paths(DEFAULT_SCENES)
     if len({path.stem for path in paths}) < len(paths):
         raise InputError(f"two scene files share a name ({', '.join(str(p) for p in paths)}): plots and summary are "
                          "keyed by the file name", field="scenes")
     workcells = [load_workcell(path) for path in paths]  # a bad scene file fails before any work
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    print("Reference scenario B, the 2016 paper's shadow and hidden-hand cases: each depth camera alone (robot "
-          "filtered out)\nagainst both fused through the principal camera's depth grid; rho = "
-          f"{RHO} m, hybrid, invalid='neighbors'.\nFalse alarm: reported < rho while the truth >= rho + tolerance. "
-          "Miss: min(reported, rho) > truth + tolerance;\nflagged: with robot_blind_spot.\n")
+    print("Reference scenario B, the 2016 paper's shadow and hidden-hand cases: depth cameras alone (robot "
+          "filtered out)\nagainst all of them fused through the principal camera's depth grid, without and with the "
+          f"free-space memory;\nrho = {RHO} m, hybrid, invalid='neighbors'. False alarm: reported < rho while the "
+          "truth >= rho + tolerance;\nuseful: the share of pairs truly farther than rho + "
+          f"{USEFUL_MARGIN:g} m reported below rho (issue 8: at most 10 % with two cameras,\n5 % with four). "
+          "Miss: min(reported, rho) > truth + tolerance; flagged: with robot_blind_spot.\n")
     episodes, plots = [], []
     for path, workcell in zip(paths, workcells):
         frames = range(workcell.n_frames) if all_frames else None
@@ -293,17 +322,20 @@ def main(out="out/fusion-workcell", duration: float | None = None, scenes=None, 
     for layout, figures in result["layouts"].items():
         eyes = "; ".join(f"{c} at ({', '.join(f'{x:g}' for x in eye)})" for c, eye in figures["eyes"].items())
         print(f"{layout}: {eyes}; {figures['frames']} frames in {figures['seconds']:.1f} s")
-        print(f"  {'case':12s} {'method':10s} {'min truth':>9s} {'min rep.':>9s} {'false alarms':>17s} "
-              f"{'misses (flagged)':>17s}")
+        print(f"  {'case':12s} {'method':13s} {'min truth':>9s} {'min rep.':>9s} {'false alarms':>17s} "
+              f"{'useful':>7s} {'misses (flagged)':>17s} {'remembered':>10s}")
         for kind in CASES:
             for method, numbers in figures["methods"].items():
                 row = numbers["by_case"][kind]
                 alarms = f"{row['false_alarms']}/{row['far_pairs']} {row['false_alarm_fraction']:6.1%}"
-                print(f"  {kind:12s} {method:10s} {row['min_truth']:9.3f} {row['min_reported']:9.3f} {alarms:>17s} "
-                      f"{row['misses']:>8d} ({row['flagged_misses']})")
-        removed = figures["false_alarms_removed"]
-        removed = "n/a (the principal camera alone has none)" if removed is None else f"{removed:.1%}"
-        fused = figures["methods"][FUSED]["all_frames"]["misses"]
-        print(f"  shadow case, false alarms removed by fusion: {removed}; fused misses over all frames: {fused}\n")
+                print(f"  {kind:12s} {method:13s} {row['min_truth']:9.3f} {row['min_reported']:9.3f} {alarms:>17s} "
+                      f"{row['useful_alarm_fraction']:7.1%} {row['misses']:>8d} ({row['flagged_misses']}) "
+                      f"{row['remembered']:>10d}")
+        removed, with_memory = figures["false_alarms_removed"], figures["false_alarms_removed_with_memory"]
+        removed = "n/a (the principal camera alone has none)" if removed is None else \
+            f"{removed:.1%} (with memory {with_memory:.1%})"
+        misses = [figures["methods"][m]["all_frames"]["misses"] for m in FUSED_METHODS]
+        print(f"  shadow case, false alarms removed by fusion: {removed}; fused misses over all frames: {misses[0]} "
+              f"(with memory {misses[1]})\n")
     print("Plots: " + ", ".join(str(p) for p in plots) + f"; numbers: {out / 'summary.json'}")
     return 0

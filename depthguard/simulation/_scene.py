@@ -16,6 +16,7 @@ Top-level keys::
     render_segments: 24       # segments around rendered spheres and capsules (default config.SIM_PRIMITIVE_SEGMENTS)
     depth_scale: 0.001        # metres per uint16 unit of the depth images (default 0.001)
     principal: principal      # the principal depth camera (rig key, SPEC section 2)
+    workspace: [[x, y, z], [x, y, z]]   # optional rig key: the box watched (depth grid range, free-space memory)
     cameras: [...]            # depth cameras (at least one)
     intensity_cameras: [...]  # optional intensity (grey-level) cameras
     robot: {...}
@@ -273,7 +274,7 @@ class Workcell:
                 cameras[name] = cam.replace(width=w, height=h, fx=cam.fx * w / cam.width, fy=cam.fy * h / cam.height,
                                             cx=(cam.cx + 0.5) * w / cam.width - 0.5,
                                             cy=(cam.cy + 0.5) * h / cam.height - 0.5)
-            return Rig(cameras=cameras, depth_scale=rig.depth_scale, principal=rig.principal)
+            return Rig(cameras=cameras, depth_scale=rig.depth_scale, principal=rig.principal, workspace=rig.workspace)
 
         fields = {name: getattr(self, name) for name in self.__dataclass_fields__}
         fields.update(rig=scale_rig(self.rig), intensity_rig=scale_rig(self.intensity_rig))
@@ -317,9 +318,10 @@ def workcell_from_dict(data, base_dir=".") -> Workcell:
     segments = top.integer("render_segments", default=config.SIM_PRIMITIVE_SEGMENTS, minimum=6)
     depth_scale = top.number("depth_scale", default=config.DEFAULT_DEPTH_SCALE, positive=True)
     principal = top.get("principal", default=None)
+    workspace = top.get("workspace", default=None)
     base_dir = Path(base_dir)
 
-    rig, sensors, noise_d = _depth_cameras(top, depth_scale, principal, base_dir)
+    rig, sensors, noise_d = _depth_cameras(top, depth_scale, principal, base_dir, workspace)
     intensity_rig, noise_i = _intensity_cameras(top, depth_scale, base_dir, taken=set(rig.cameras))
     intensity_noise = {**noise_d, **noise_i}
 
@@ -378,15 +380,18 @@ def _camera_entry(section: Section, extra_keys=()) -> dict:
     return entry
 
 
-def _rig(entries: list[dict], depth_scale: float, principal, field: str) -> Rig:
+def _rig(entries: list[dict], depth_scale: float, principal, field: str, workspace=None) -> Rig:
+    data = {"depth_scale": depth_scale, "principal": principal, "cameras": entries}
+    if workspace is not None:
+        data["workspace"] = workspace
     try:
-        return rig_from_dict({"depth_scale": depth_scale, "principal": principal, "cameras": entries})
+        return rig_from_dict(data)
     except RigError as exc:
         where = field if exc.camera is None else f"{field}[{exc.camera}]"
         raise SceneError(exc.message, field=f"{where}.{exc.field}" if exc.field else where) from None
 
 
-def _depth_cameras(top: Section, depth_scale: float, principal, base_dir: Path):
+def _depth_cameras(top: Section, depth_scale: float, principal, base_dir: Path, workspace=None):
     sections = top.sections("cameras")
     if not sections:
         raise SceneError("needs at least one depth camera", field="cameras")
@@ -400,7 +405,7 @@ def _depth_cameras(top: Section, depth_scale: float, principal, base_dir: Path):
         noise[name] = section.number("noise_sigma", default=config.SIM_INTENSITY_NOISE, minimum=0.0)
         section.done()
         entries.append(entry)
-    rig = _rig(entries, depth_scale, principal, "cameras")
+    rig = _rig(entries, depth_scale, principal, "cameras", workspace)
     return rig, sensors, noise
 
 
