@@ -5,7 +5,12 @@ Nothing here is fast or clever: every pixel is visited, every piece of every fun
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
+
+#: Two distances closer than this (metres) tie: ``min`` may then answer with either nearest point.
+TIE = 1e-9
 
 
 def g_of_z(X, Y, Z, a0, a1, b0, b1, z):
@@ -43,6 +48,12 @@ def frustum_distance_pieces(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
         best_g = np.where(better, g, best_g)
         best_z = np.where(better, z, best_z)
     return np.sqrt(best_g), best_z
+
+
+def frustum_point(X, Y, Z, a0, a1, b0, b1, z):
+    """The point of the frustum's slice at depth z nearest to (X, Y, Z): (..., 3), elementwise."""
+    z = np.asarray(z, np.float64)
+    return np.stack(np.broadcast_arrays(np.clip(X, a0 * z, a1 * z), np.clip(Y, b0 * z, b1 * z), z), axis=-1)
 
 
 def frustum_distance_brute(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi, iterations=200):
@@ -100,7 +111,8 @@ def query_reference(occupancy, points_world, rho, aggregate, unseen, inside_tol=
     """The whole single-camera query, scanning every pixel of the image with the piecewise twin.
 
     Returns (distance (n,), direction (n, 3) world, count (n,), invalid_count (n,), flag bits (n,),
-    blind distance (n,)).
+    blind distance (n,), tied): tied[i] is a (k, 3) array of the world unit directions ``min`` may answer with for
+    point i (every nearest point within TIE of the answer), empty for the other aggregates.
     """
     camera = occupancy.camera
     a0, a1, b0, b1 = pixel_tangents(camera)
@@ -117,6 +129,7 @@ def query_reference(occupancy, points_world, rho, aggregate, unseen, inside_tol=
     out_invalid = np.zeros(n, dtype=np.int64)
     out_flags = np.zeros(n, dtype=np.int64)
     out_blind = np.full(n, np.inf)
+    tied = [np.zeros((0, 3)) for _ in range(n)]
     for i, P in enumerate(points_camera):
         X, Y, Z = P
         s_view, normal = view_boundary(camera, P)
@@ -159,6 +172,12 @@ def query_reference(occupancy, points_world, rho, aggregate, unseen, inside_tol=
                 out_flags[i] = flags | (4 if inv[k] else 0)
             else:
                 out_d[i], out_flags[i] = np.inf, flags
+            if 0 < out_d[i] < np.inf:
+                ties = np.abs(d - out_d[i]) <= TIE
+                units = [(P - nearest[ties]) / d[ties, None]]
+                if abs(unseen_d - out_d[i]) <= TIE:
+                    units.append(normal[None])
+                tied[i] = np.concatenate(units) @ R_world_camera.T
             continue
         count = len(d) + (1 if unseen_d < np.inf else 0)
         out_invalid[i] = inv.sum()
@@ -178,7 +197,34 @@ def query_reference(occupancy, points_world, rho, aggregate, unseen, inside_tol=
         all_d = np.concatenate([d, [unseen_d] if unseen_d < np.inf else []])
         out_d[i] = all_d.mean() if aggregate == "mean" else all_d.min()
     out_flags |= np.where(out_blind < out_d, 32, 0)
-    return out_d, out_dir, out_count, out_invalid, out_flags, out_blind
+    return out_d, out_dir, out_count, out_invalid, out_flags, out_blind, tied
+
+
+def assert_same_answers(result, distance, direction, count, invalid_count, flags, blind=None, tied=None,
+                        distance_tol=1e-10, direction_tol=1e-9):
+    """Hold a kernel's :class:`depthguard.DistanceResult` against its twin's answers ((n,) arrays, direction (n, 3)
+    world): distances (and blind distances, when given) to ``distance_tol`` metres; counts, invalid counts and flag
+    bits exactly; directions: zero where the distance is 0 or inf; where it is positive and finite, both unit vectors
+    agreeing to ``direction_tol``, or both zero (the aggregated directions cancelled), or, for ``min``, the kernel's
+    is one of ``tied[i]`` (another nearest point at the same distance)."""
+    n = len(distance)
+    np.testing.assert_allclose(result.distance, distance, rtol=0, atol=distance_tol)
+    assert np.array_equal(result.count, count), (result.count, count)
+    assert np.array_equal(result.invalid_count, invalid_count), (result.invalid_count, invalid_count)
+    assert [int(f) for f in result.flags] == [int(f) for f in flags], ([int(f) for f in result.flags], list(flags))
+    if blind is not None:
+        np.testing.assert_allclose(result.blind_distance, blind, rtol=0, atol=distance_tol)
+    got = np.asarray(result.direction)
+    norm = np.linalg.norm(got, axis=1)
+    for i in range(n):
+        if not 0 < distance[i] < np.inf:
+            assert norm[i] == 0 and not np.any(direction[i]), (i, distance[i], got[i], direction[i])
+            continue
+        assert norm[i] == 0 or abs(norm[i] - 1) <= direction_tol, (i, got[i])
+        if np.all(np.abs(got[i] - direction[i]) <= direction_tol):
+            continue
+        others = np.zeros((0, 3)) if tied is None else tied[i]
+        assert np.any(np.all(np.abs(others - got[i]) <= direction_tol, axis=1)), (i, got[i], direction[i], others)
 
 
 def paper_query_reference(occupancy, points_world, rho, aggregate):
@@ -281,18 +327,24 @@ def camera_clears_reference(corners_j, offset_j, free_j, z_near_j, z0, z1, u, v,
 
 
 def fused_query_reference(grid, principal, frees, z_nears, points_world, rho, unseen, robot_far=None, margin=0.01,
-                          pad=1, inside_tol=1e-12, robot_slack=0.0, robot_near=None):
+                          pad=1, inside_tol=1e-12, robot_slack=0.0, robot_near=None, min_direction=1e-9):
     """The fused query of SPEC section 8 by brute force: for every principal pixel, every grid cell that comes
     within rho is classified (certain, candidate confirmed by all secondaries, or cleared) and the pixel's distance
     is the smallest over its occupied pieces.
 
-    Returns {aggregate: (distance (n,), count (n,))} for "min", "mean" and "hybrid".
+    Returns {aggregate: :class:`FusedAnswer`} for "min", "mean" and "hybrid": distances, counts, unit directions
+    (from the nearest obstacle point towards the control point, SPEC section 6; world frame), invalid counts (the
+    contributing pixels whose nearest point is a candidate of a pixel without a measurement), flag bits and the
+    directions ``min`` may answer with on a tie. Flags: INSIDE_OBSTACLE, REGION_OUTSIDE_VIEW, INVALID_PIXELS_USED
+    and OUTSIDE_GRID (the region's depths [Z - rho, Z + rho], within the camera's range, leave [d_min, d_max]).
     """
     camera = principal.camera
     a0, a1, b0, b1 = pixel_tangents(camera)
     z_min = camera.depth_range[0]
     d_min, dd, n_cells = grid.d_min, grid.delta_d, grid.n_cells
     d_max = d_min + n_cells * dd
+    z_lo, z_hi = camera.depth_range
+    R_world_camera = camera.T_world_camera[:3, :3]
     zs_img = principal.z_start.astype(np.float64)
     ze_img = principal.z_end.astype(np.float64)
     certain_img = (principal.invalid == 0) | (principal.z_start != np.float32(z_min))
@@ -305,14 +357,21 @@ def fused_query_reference(grid, principal, frees, z_nears, points_world, rho, un
         hides = np.isinf(principal.blind) & (robot_far > 0) & certain_img & (zs_img < robot_near)
         ze_img = np.where(hides, np.minimum(ze_img, robot_near), ze_img)
         blind_img = np.where(hides, robot_far + robot_slack, blind_img)
-    out = {a: (np.full(len(points_world), np.inf), np.zeros(len(points_world), dtype=np.int64))
+    blind_img = blind_img.astype(np.float32).astype(np.float64)  # a start depth, held as float32 like the images
+    n = len(points_world)
+    out = {a: FusedAnswer(np.full(n, np.inf), np.zeros(n, dtype=np.int64), np.zeros((n, 3)),
+                          np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), [np.zeros((0, 3))] * n)
            for a in ("min", "mean", "hybrid")}
     for i, P in enumerate(camera.world_to_camera(points_world)):
         X, Y, Z = P
-        s_view, _ = view_boundary(camera, P)
+        s_view, normal = view_boundary(camera, P)
+        flags = (2 if s_view < rho else 0) | \
+            (64 if min(Z + rho, z_hi) > grid.d_max or max(Z - rho, z_lo) < d_min else 0)
+        for a in out:
+            out[a].flags[i] = flags
         if unseen == "occupied" and s_view <= inside_tol:
             for a in out:
-                out[a][0][i], out[a][1][i] = 0.0, 1
+                out[a].distance[i], out[a].count[i] = 0.0, 1
             continue
         z_far = Z + rho
         per_pixel = []
@@ -321,12 +380,18 @@ def fused_query_reference(grid, principal, frees, z_nears, points_world, rho, un
                 tang = (a0[v, u], a1[v, u], b0[v, u], b1[v, u])
 
                 def dist(lo, hi):
+                    """Distances and nearest depths of the pieces [lo, hi] of the pixel's frustum."""
                     lo, hi = np.broadcast_arrays(np.asarray(lo, float), np.asarray(hi, float))
                     d = np.full(lo.shape, np.inf)
+                    z = np.zeros(lo.shape)
                     ok = lo <= hi
                     if ok.any():
-                        d[ok] = frustum_distance_pieces(X, Y, Z, *tang, lo[ok], hi[ok])[0]
-                    return d
+                        d[ok], z[ok] = frustum_distance_pieces(X, Y, Z, *tang, lo[ok], hi[ok])
+                    return d, z
+
+                def nearest(lo, hi):
+                    d, z = dist(lo, hi)
+                    return float(d), float(z)
 
                 def occupied(k):
                     return not any(camera_clears_reference(grid.corners[j], grid.offsets[j], frees[j], z_nears[j],
@@ -334,50 +399,94 @@ def fused_query_reference(grid, principal, frees, z_nears, points_world, rho, un
                                    for j in range(len(frees)))
 
                 def candidates(lo, hi):
-                    best = np.inf
+                    """The nearest occupied cell's piece of [lo, hi]: (distance, depth)."""
+                    best, best_z = np.inf, 0.0
                     if lo > hi:
-                        return best
+                        return best, best_z
                     if lo < d_min:
-                        best = min(best, float(dist(lo, min(hi, d_min))))
+                        best, best_z = min((best, best_z), nearest(lo, min(hi, d_min)), key=lambda t: t[0])
                     if hi > d_max:
-                        best = min(best, float(dist(max(lo, d_max), hi)))
+                        best, best_z = min((best, best_z), nearest(max(lo, d_max), hi), key=lambda t: t[0])
                     k = np.arange(max(int((max(lo, d_min) - d_min) // dd) - 1, 0),
                                   min(int((min(hi, d_max) - d_min) // dd) + 2, n_cells))
-                    d = dist(np.maximum(lo, d_min + k * dd), np.minimum(hi, d_min + (k + 1) * dd))
-                    for kk, dk in zip(k, d):
+                    d, z = dist(np.maximum(lo, d_min + k * dd), np.minimum(hi, d_min + (k + 1) * dd))
+                    for kk, dk, zk in zip(k, d, z):
                         if dk < min(best, rho) and occupied(kk):
-                            best = dk
-                    return best
+                            best, best_z = dk, zk
+                    return best, best_z
 
                 zs, ze, bf = zs_img[v, u], ze_img[v, u], blind_img[v, u]
                 first = min(zs, bf)
-                if first > z_far or float(dist(first, np.inf)) >= rho:
+                if first > z_far or nearest(first, np.inf)[0] >= rho:
                     continue
-                d = np.inf
+                d, z, from_invalid = np.inf, 0.0, False
                 if zs <= z_far:
                     if certain_img[v, u]:
                         if zs >= Z:
-                            d = float(dist(zs, ze))
+                            d, z = nearest(zs, ze)
                         else:
                             cell_end = d_min + (np.floor((zs - d_min) / dd) + 1) * dd if zs >= d_min else d_min
-                            d = float(dist(zs, min(cell_end, ze)))
+                            d, z = nearest(zs, min(cell_end, ze))
                             if cell_end < ze:
-                                d = min(d, candidates(cell_end, min(ze, z_far)))
-                    else:
-                        d = candidates(zs, min(ze, z_far))
+                                d, z = min((d, z), candidates(cell_end, min(ze, z_far)), key=lambda t: t[0])
+                    else:  # no measurement: a candidate of a pixel without one
+                        d, z = candidates(zs, min(ze, z_far))
+                        from_invalid = d < np.inf
                 if bf <= z_far:
-                    d = min(d, candidates(bf, z_far))
+                    d_blind, z_blind = candidates(bf, z_far)
+                    if d_blind < d:
+                        d, z, from_invalid = d_blind, z_blind, False
                 if d < rho:
-                    per_pixel.append(d)
+                    unit = (P - frustum_point(X, Y, Z, *tang, z)) / d if d > 0 else np.zeros(3)
+                    per_pixel.append((d, v, u, unit, from_invalid))
         unseen_d = s_view if (unseen == "occupied" and s_view < rho) else np.inf
-        all_d = np.array(per_pixel + ([unseen_d] if unseen_d < np.inf else []))
-        if len(all_d) == 0:
+        d = np.array([p[0] for p in per_pixel])
+        units = np.array([p[3] for p in per_pixel]).reshape(-1, 3)
+        invalid = np.array([p[4] for p in per_pixel], dtype=bool)
+        if len(d) == 0 and unseen_d == np.inf:
             continue
-        inside = all_d.min() <= inside_tol
-        for a in out:
-            out[a][1][i] = 1 if a == "min" else len(all_d)
-            out[a][0][i] = 0.0 if inside else (all_d.mean() if a == "mean" else all_d.min())
+        # min: the nearest pixel, the first in (v, u) order among equals; the boundary if strictly nearer.
+        m = out["min"]
+        k = np.lexsort(([p[2] for p in per_pixel], [p[1] for p in per_pixel], d))[0] if len(d) else None
+        m.count[i] = 1
+        if k is not None and d[k] <= inside_tol:
+            m.distance[i], m.invalid_count[i] = 0.0, invalid[k]
+            m.flags[i] |= 1 | (4 if invalid[k] else 0)
+        elif k is None or unseen_d < d[k]:
+            m.distance[i], m.direction[i] = unseen_d, R_world_camera @ normal
+        else:
+            m.distance[i], m.invalid_count[i], m.direction[i] = d[k], invalid[k], R_world_camera @ units[k]
+            m.flags[i] |= 4 if invalid[k] else 0
+        if 0 < m.distance[i] < np.inf:
+            ties = [units[np.abs(d - m.distance[i]) <= TIE]] + \
+                ([normal[None]] if abs(unseen_d - m.distance[i]) <= TIE else [])
+            m.tied[i] = np.concatenate(ties) @ R_world_camera.T
+        # mean and hybrid: every contributing pixel and the boundary.
+        all_d = np.concatenate([d, [unseen_d] if unseen_d < np.inf else []])
+        total = units.sum(axis=0) + (normal if unseen_d < np.inf else 0.0)
+        for a in ("mean", "hybrid"):
+            o = out[a]
+            o.count[i], o.invalid_count[i] = len(all_d), invalid.sum()
+            o.flags[i] |= 4 if invalid.any() else 0
+            if all_d.min() <= inside_tol:
+                o.distance[i] = 0.0
+                o.flags[i] |= 1
+                continue
+            o.distance[i] = all_d.mean() if a == "mean" else all_d.min()
+            if np.linalg.norm(total) > min_direction * len(all_d):
+                o.direction[i] = R_world_camera @ (total / np.linalg.norm(total))
     return out
+
+
+class FusedAnswer(NamedTuple):
+    """One aggregate's answers of :func:`fused_query_reference` for n points."""
+
+    distance: np.ndarray  # (n,) metres, inf: nothing within rho
+    count: np.ndarray  # (n,) int
+    direction: np.ndarray  # (n, 3) world unit vectors, zero where there is none
+    invalid_count: np.ndarray  # (n,) int
+    flags: np.ndarray  # (n,) int flag bits
+    tied: list  # n (k, 3) arrays: the directions min may answer with (every nearest point within TIE)
 
 
 def random_rotation(rng) -> np.ndarray:

@@ -98,9 +98,14 @@ def test_fused_kernel_equals_brute_force_twin(index):
     reference = naive.fused_query_reference(grid, principal, [frees["s"]], [0.3], points, 0.4, "occupied")
     for aggregate in ("min", "hybrid", "mean"):
         result = fused_distances(grid, r, principal, frees, points, 0.4, aggregate)
-        distance, count = reference[aggregate]
-        assert np.allclose(result.distance, distance, atol=1e-10), (aggregate, result.distance, distance)
-        assert np.array_equal(result.count, count)
+        assert_equals_twin(result, reference[aggregate])
+
+
+def assert_equals_twin(result, twin):
+    """A fused result against :func:`naive.fused_query_reference`'s answer: distances, directions, counts, invalid
+    counts, flags; no region between links is left unchecked (the twin has no robot_exit): blind distances inf."""
+    naive.assert_same_answers(result, twin.distance, twin.direction, twin.count, twin.invalid_count, twin.flags,
+                              np.full(len(twin.distance), np.inf), twin.tied)
 
 
 @pytest.mark.parametrize("index", range(4))
@@ -208,9 +213,9 @@ def test_fused_kernel_equals_twin_behind_a_robot():
     slack = 0.02 + p.noise.margin(robot_far.astype(np.float64))
     reference = naive.fused_query_reference(grid, principal, [frees["s"]], [0.3], points, 0.4, "occupied",
                                             robot_far=robot_far, robot_slack=slack)
-    for aggregate in ("min", "hybrid"):
+    for aggregate in ("min", "hybrid", "mean"):
         result = fused_distances(grid, r, principal, frees, points, 0.4, aggregate, robot_far=robot_far)
-        assert np.allclose(result.distance, reference[aggregate][0], atol=1e-10), aggregate
+        assert_equals_twin(result, reference[aggregate])
     # The hand hidden from p but seen by s counts; the single camera could only flag it.
     truth = scene_distance([hand], points)
     fused = fused_distances(grid, r, principal, frees, points, 0.4, "min", robot_far=robot_far)
@@ -294,8 +299,7 @@ def test_fused_kernel_equals_twin_with_robot_far_and_holes():
         for aggregate in ("min", "hybrid", "mean"):
             result = fused_distances(grid, r, principal, frees, points, 0.4, aggregate, robot_far=robot_far,
                                      robot_near=near)
-            assert np.allclose(result.distance, reference[aggregate][0], atol=1e-10), aggregate
-            assert np.array_equal(result.count, reference[aggregate][1]), aggregate
+            assert_equals_twin(result, reference[aggregate])
 
 
 def test_space_between_two_links_is_flagged_not_checked():

@@ -34,9 +34,20 @@ def test_exact_distance_matches_brute_force_and_pieces():
     distance, nearest = dg.frustum_distance(points, tangents, z_range)
     args = (*points.T, *tangents.T, *z_range.T)
     brute = naive.frustum_distance_brute(*args)
-    pieces, _ = naive.frustum_distance_pieces(*args)
+    pieces, z_star = naive.frustum_distance_pieces(*args)
     assert np.abs(distance - brute).max() < 1e-8
     assert np.abs(distance - pieces).max() < 1e-12
+    # The same nearest point as the twin's (a convex set's nearest point is unique), hence the same direction, the
+    # unit vector from it towards the point (SPEC section 6), where the distance is positive; both are the point
+    # itself where it is 0. Below a millimetre the direction's rounding grows as 1e-16 / distance: compared there
+    # through the nearest point only.
+    expected = naive.frustum_point(*points.T, *tangents.T, z_star)
+    np.testing.assert_allclose(nearest, expected, rtol=0, atol=1e-12)
+    apart = distance > 1e-3
+    unit = (points - nearest)[apart] / distance[apart, None]
+    expected_unit = (points - expected)[apart] / pieces[apart, None]
+    np.testing.assert_allclose(np.linalg.norm(unit, axis=1), 1.0, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(unit, expected_unit, rtol=0, atol=1e-9)
     # The nearest point lies on the segment and is as far as reported.
     assert np.allclose(np.linalg.norm(points - nearest, axis=1), distance, atol=1e-12)
     z = nearest[:, 2]
