@@ -329,6 +329,6 @@ FREESPACE_FIT_TOLERANCE = 1e-9
 #: the sum), so that float rounding never makes one later than the exact value.
 FREESPACE_ROUNDING = 1e-12
 
-#: seen_free_voxels cuts the box's x slabs into this many runs per numba thread (each run projects one plane of
-#: lattice points more than it needs; more runs balance the threads better).
-FREESPACE_CHUNKS_PER_THREAD = 4
+#: seen_free_voxels tests blocks of this many voxels a side whole first, then their halves, down to single voxels
+#: (a power of 2): where a camera sees a whole block free, its voxels cost nothing more.
+FREESPACE_BLOCK = 8

@@ -7,12 +7,14 @@ Two jobs:
   meets the corners' projected bounding box (grown by ``pad`` pixels) inside the image, and each of them free at
   least up to the voxel's largest corner depth plus ``margin``. A per-row sparse table of each free image (the
   minimum over every run of 2^l pixels of a row) answers "the smallest free value of row r between columns a and b"
-  with two reads, so a voxel costs a few operations per row of its footprint.
+  with two reads, so a box costs a few operations per row of its footprint. Blocks of voxels are tested whole
+  first, then halved where no camera sees them whole: most voxels of a scene are settled a block at a time.
 - The exact squared Euclidean distance transform of Felzenszwalb and Huttenlocher ("Distance transforms of sampled
   functions", Theory of Computing 8, 2012): one pass per axis, the last axis by two sweeps, the others by the lower
-  envelope of parabolas. The box is padded by one layer of "possibly occupied" voxels on every side (a person may
-  come from outside), which each 1-D transform sees as two sites of value 0 at positions -1 and n. Squared distances
-  are in voxel units (whole numbers; ``int32`` keeps up to 2^31 - 1, far above 3 * (config.FREESPACE_MAX_SIDE + 1)^2).
+  envelope of parabolas, in integers (no rounding anywhere). The box is padded by one layer of "possibly occupied"
+  voxels on every side (a person may come from outside), which each 1-D transform sees as two sites of value 0 at
+  positions -1 and n. Squared distances are in voxel units: at most 3 * (config.FREESPACE_MAX_SIDE + 1)^2, about
+  8e8, within ``int32``.
 """
 
 import numpy as np
@@ -49,48 +51,39 @@ def row_min(table, floor_log2, r, a, b):
 
 
 @kernel(inline=True)
-def project_plane(lo, voxel, i, pose, intrinsics, plane):
-    """plane[j, k] = (u, v, z): the lattice point lo + (i, j, k) * voxel (world, metres) in one camera, its image
-    coordinates (pixels; garbage where z <= 0) and optical depth (metres), for j <= ny, k <= nz.
+def project_point(lo, voxel, i, j, k, pose, intrinsics, out):
+    """out[:] = (u, v, z): the lattice point lo + (i, j, k) * voxel (world, metres) in one camera, its image
+    coordinates (pixels; garbage where z <= 0) and optical depth (metres).
 
     pose: (12,) the world -> optical rotation row by row, then the translation. intrinsics: (4,) fx, fy, cx, cy.
-    Each point is placed, transformed and projected as written, in this order, as ``seen_free_voxels``' docstring
-    says (the tests' judge does the same arithmetic). Neighbouring voxels share corners: each is projected once."""
-    fx = intrinsics[0]
-    fy = intrinsics[1]
-    cx = intrinsics[2]
-    cy = intrinsics[3]
+    The point is placed, transformed and projected as written, in this order, as ``seen_free_voxels``' docstring
+    says (the tests' judge does the same arithmetic)."""
     x = lo[0] + i * voxel
-    for j in range(plane.shape[0]):
-        y = lo[1] + j * voxel
-        for k in range(plane.shape[1]):
-            z = lo[2] + k * voxel
-            pz = pose[6] * x + pose[7] * y + pose[8] * z + pose[11]
-            px = pose[0] * x + pose[1] * y + pose[2] * z + pose[9]
-            py = pose[3] * x + pose[4] * y + pose[5] * z + pose[10]
-            plane[j, k, 0] = fx * px / pz + cx
-            plane[j, k, 1] = fy * py / pz + cy
-            plane[j, k, 2] = pz
+    y = lo[1] + j * voxel
+    z = lo[2] + k * voxel
+    pz = pose[6] * x + pose[7] * y + pose[8] * z + pose[11]
+    px = pose[0] * x + pose[1] * y + pose[2] * z + pose[9]
+    py = pose[3] * x + pose[4] * y + pose[5] * z + pose[10]
+    out[0] = intrinsics[0] * px / pz + intrinsics[2]
+    out[1] = intrinsics[1] * py / pz + intrinsics[3]
+    out[2] = pz
 
 
 @kernel(inline=True)
-def camera_sees_voxel(near, far_side, j, k, z_near, width, height, table, floor_log2, margin, pad):
-    """Whether one camera sees voxel (i, j, k) entirely free, from its corners projected in that camera: the planes
-    x = i (``near``) and x = i + 1 (``far_side``) of :func:`project_plane`."""
+def camera_sees_box(corners, z_near, width, height, table, floor_log2, margin, pad):
+    """Whether one camera sees a box of voxels entirely free, from its 8 corners in that camera (``corners``: (8, 3)
+    u, v, z as :func:`project_point` gives them). The confirmation rule of ``seen_free_voxels``."""
     x_lo = np.inf
     x_hi = -np.inf
     y_lo = np.inf
     y_hi = -np.inf
     far = 0.0
     for corner in range(8):
-        plane = far_side if corner & 1 else near
-        jj = j + ((corner >> 1) & 1)
-        kk = k + ((corner >> 2) & 1)
-        pz = plane[jj, kk, 2]
+        pz = corners[corner, 2]
         if not pz >= z_near:  # NaN-safe: a NaN depth is not in front
             return False
-        u = plane[jj, kk, 0]
-        v = plane[jj, kk, 1]
+        u = corners[corner, 0]
+        v = corners[corner, 1]
         x_lo = min(x_lo, u)
         x_hi = max(x_hi, u)
         y_lo = min(y_lo, v)
@@ -114,43 +107,95 @@ def camera_sees_voxel(near, far_side, j, k, z_near, width, height, table, floor_
 
 
 @kernel(parallel=True)
-def seen_free_voxels(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad, chunks, out):
-    """out[i, j, k] = whether some camera sees voxel (i, j, k) of the box with corner ``lo`` ((3,) metres, world)
-    and side ``voxel`` entirely free.
+def seen_free_voxels(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad, block, out):
+    """out[i, j, k] = True where some camera sees voxel (i, j, k) of the box with corner ``lo`` ((3,) metres, world)
+    and side ``voxel`` entirely free; out (nx, ny, nz) bool comes all False.
 
     Per camera c: poses[c] (12,) world -> optical (rotation rows, translation); intrinsics[c] (fx, fy, cx, cy);
     z_near[c] the nearest depth a corner may have (metres); sizes[c] (width, height); tables[c] its free image's
     row-minimum table (:func:`row_min_tables`). floor_log2[n] = floor(log2(n)) for n >= 1. margin: metres;
-    pad: pixels (float64, a whole number). out: (nx, ny, nz) bool.
+    pad: pixels (float64, a whole number).
 
-    The slabs i = 0..nx-1 are cut into ``chunks`` runs, one task each; a task walks its slabs in order, projecting
-    each plane of lattice points once per camera (the plane x = i + 1 of slab i is the plane x = i of slab i + 1).
-    Within a column, the camera that saw the last voxel is asked first (the answer is the same; it comes sooner)."""
+    Coarse to fine, in blocks of ``block`` (a power of 2) voxels a side, one column of blocks per task: a camera that
+    sees a whole block free sees every voxel in it free (the voxel's corners project inside the convex hull of the
+    block's, and lie no deeper than its deepest corner), so a block is first tested whole, then its 8 halves, and so
+    on down to single voxels. Only a block that is not seen whole has its inner lattice points projected (once per
+    camera). Each test asks first the camera that saw the last box (the answer is the same; it comes sooner)."""
     nx, ny, nz = out.shape
     n_cameras = poses.shape[0]
-    n_chunks = max(min(chunks, nx), 1)
-    for p in prange(n_chunks):
-        chunk = np.int64(p)
-        first = chunk * nx // n_chunks
-        stop = (chunk + 1) * nx // n_chunks
-        planes = np.empty((n_cameras, 2, ny + 1, nz + 1, 3))
-        for c in range(n_cameras):
-            project_plane(lo, voxel, first, poses[c], intrinsics[c], planes[c, first % 2])
-        for i in range(first, stop):
-            for c in range(n_cameras):
-                project_plane(lo, voxel, i + 1, poses[c], intrinsics[c], planes[c, (i + 1) % 2])
-            for j in range(ny):
-                last = 0
-                for k in range(nz):
-                    seen = False
-                    for m in range(n_cameras):
-                        c = (last + m) % n_cameras
-                        if camera_sees_voxel(planes[c, i % 2], planes[c, (i + 1) % 2], j, k, z_near[c], sizes[c, 0],
-                                             sizes[c, 1], tables[c], floor_log2, margin, pad):
-                            seen = True
-                            last = c
-                            break
-                    out[i, j, k] = seen
+    nbx = (nx + block - 1) // block
+    nby = (ny + block - 1) // block
+    levels = 1
+    while (np.int64(1) << (levels - 1)) < block:
+        levels += 1
+    for p in prange(nbx * nby):
+        column = np.int64(p)
+        i0 = (column // nby) * block
+        j0 = (column % nby) * block
+        lattice = np.empty((n_cameras, block + 1, block + 1, block + 1, 3))
+        corners = np.empty((8, 3))
+        stack = np.empty((7 * levels + 1, 4), dtype=np.int64)  # (a, b, c, side) relative to the block's origin
+        last = 0
+        for k0 in range(0, nz, block):
+            ex = min(block, nx - i0)
+            ey = min(block, ny - j0)
+            ez = min(block, nz - k0)
+            projected = False
+            stack[0, 0] = 0
+            stack[0, 1] = 0
+            stack[0, 2] = 0
+            stack[0, 3] = block
+            top = 1
+            while top > 0:
+                top -= 1
+                a = stack[top, 0]
+                b = stack[top, 1]
+                c = stack[top, 2]
+                side = stack[top, 3]
+                if a >= ex or b >= ey or c >= ez:
+                    continue
+                a1 = min(a + side, ex)
+                b1 = min(b + side, ey)
+                c1 = min(c + side, ez)
+                if side < block and not projected:
+                    for cam in range(n_cameras):
+                        for da in range(ex + 1):
+                            for db in range(ey + 1):
+                                for dc in range(ez + 1):
+                                    project_point(lo, voxel, i0 + da, j0 + db, k0 + dc, poses[cam], intrinsics[cam],
+                                                  lattice[cam, da, db, dc])
+                    projected = True
+                seen = False
+                for m in range(n_cameras):
+                    cam = (last + m) % n_cameras
+                    for corner in range(8):
+                        da = a1 if corner & 1 else a
+                        db = b1 if corner & 2 else b
+                        dc = c1 if corner & 4 else c
+                        if side < block:
+                            for e in range(3):
+                                corners[corner, e] = lattice[cam, da, db, dc, e]
+                        else:
+                            project_point(lo, voxel, i0 + da, j0 + db, k0 + dc, poses[cam], intrinsics[cam],
+                                          corners[corner])
+                    if camera_sees_box(corners, z_near[cam], sizes[cam, 0], sizes[cam, 1], tables[cam], floor_log2,
+                                       margin, pad):
+                        seen = True
+                        last = cam
+                        break
+                if seen:
+                    for da in range(a, a1):
+                        for db in range(b, b1):
+                            for dc in range(c, c1):
+                                out[i0 + da, j0 + db, k0 + dc] = True
+                elif side > 1:
+                    half = side // 2
+                    for child in range(8):
+                        stack[top, 0] = a + (half if child & 1 else 0)
+                        stack[top, 1] = b + (half if child & 2 else 0)
+                        stack[top, 2] = c + (half if child & 4 else 0)
+                        stack[top, 3] = half
+                        top += 1
 
 
 # ----------------------------------------------------------------------------------------- the distance transform
