@@ -358,3 +358,84 @@ def test_seen_free_fills_edge_dropouts_and_nothing_else():
     around = np.minimum(reference[line.nonzero()[0], 29], reference[line.nonzero()[0], 31])
     assert np.all(filled[line] <= around + 1e-6)  # never farther than the surface around the line
     assert np.all(filled[45:55, 5:25] == 0)
+
+
+# --------------------------------------------------------------------------- the kernels as plain Python
+
+def tiny_fused_answers() -> dict:
+    """Small fused queries through :class:`FusedFrames`, every kernel path once: two 32x24 cameras, the room, a
+    person and an arm self-filtered out of the principal frame (with where its rays leave a link, so that the space
+    between links is reported), holes under every invalid policy, the three aggregates, unseen space occupied and
+    free, a blind secondary camera, remembered free space, a grid shorter than the camera's range, and a second query
+    on the same frames (the cells kept). Returns, per case, the distances, directions, counts, invalid counts, flag
+    bits and blind distances, in plain Python types (floats as they are: JSON keeps them exactly, inf included)."""
+    from depthguard.depthgrid import seen_free
+    from depthguard.freespace import VoxelBox
+
+    r, grid, _, frees, robot_far, robot_near = robot_scene_frames(32, 24)
+    p, s = r.cameras["p"], r.cameras["s"]
+    rng = np.random.default_rng(3)
+    depth = render_depth(p, ROOM + [Capsule((1.4, 0.3, 0.2), (1.4, 0.3, 1.5), 0.2)])
+    depth[rng.random(depth.shape) < 0.08] = 0
+    robot_exit = robot_near.copy()  # every ray of the arm leaves a link at once: the space between links is reported
+    points = np.concatenate([[[0.0, 0.0, 0.35], [0.0, 0.0, 0.6], [-0.1, 0.0, 0.5], [-3.2, 0.0, 0.5],  # arm, wall
+                              [3.0, 0.0, 1.4], [1.2, 0.3, 0.9]],  # behind the principal camera, at the person
+                             rng.uniform([-0.5, -0.6, 0.1], [1.3, 0.6, 1.3], (4, 3))])
+    box = VoxelBox([-0.6, -0.7, 0.0], [1.4, 0.7, 1.4], 0.1)
+    free = np.ones(box.shape, bool)
+    free[:, :, 5:8] = False  # all free but a slab
+    remembered = (free, box)
+    second = dg.depth_image(render_depth(s, ROOM), s)
+    answers = {}
+
+    def record(name, result):
+        answers[name] = dict(distance=result.distance.tolist(), direction=result.direction.tolist(),
+                             count=result.count.tolist(), invalid_count=result.invalid_count.tolist(),
+                             flags=[int(f) for f in result.flags], blind_distance=result.blind_distance.tolist())
+
+    for invalid in ("occupied", "neighbors", "free"):
+        principal = dg.prepare_depth(dg.depth_image(depth, p), p, invalid, robot_near=robot_near, robot_far=robot_far)
+        secondaries = {"s": seen_free(second, dg.prepare_depth(second, s, invalid))}
+        frames = FusedFrames(grid, r, principal, secondaries, robot_far=robot_far, robot_near=robot_near,
+                             robot_exit=robot_exit)
+        for aggregate in ("min", "mean", "hybrid"):
+            for unseen in ("occupied", "free"):
+                record(f"{invalid} {aggregate} {unseen}", frames.distances(points, 0.4, aggregate, unseen))
+        record(f"{invalid} again", frames.distances(points[::-1], 0.3, "min"))  # the cells kept from above
+        record(f"{invalid} remembered", FusedFrames(grid, r, principal, secondaries, robot_far=robot_far,
+                                                    robot_near=robot_near, remembered=remembered).distances(points))
+    record("blind secondary", FusedFrames(grid, r, principal, {"s": None}, robot_far=robot_far).distances(points))
+    short = build_map(r, d_max=2.6)  # beyond its end every cell is occupied, and regions leaving it are flagged
+    record("short grid", FusedFrames(short, r, principal, secondaries, robot_far=robot_far).distances(points))
+    record("free image", fused_distances(grid, r, principal, frees, points, 0.4, "hybrid", robot_far=robot_far))
+    return answers
+
+
+def test_depth_grid_kernels_run_as_python_with_jit_disabled():
+    """NUMBA_DISABLE_JIT=1 in a child process runs the depth grid's kernels' bodies as plain Python (so coverage sees
+    them): :func:`tiny_fused_answers` there gives exactly what the compiled kernels give here (floats to 1e-12)."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    tests = os.path.dirname(os.path.abspath(__file__))
+    script = (f"import json, sys; sys.path.insert(0, {tests!r}); import test_depth_grid; "
+              "print(json.dumps(test_depth_grid.tiny_fused_answers()))")
+    done = subprocess.run([sys.executable, "-c", script], env=dict(os.environ, NUMBA_DISABLE_JIT="1"),
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-3000:]
+    plain = json.loads(done.stdout.splitlines()[-1])
+    compiled = json.loads(json.dumps(tiny_fused_answers()))
+    assert plain.keys() == compiled.keys()
+    checked = dict(finite=0, flagged=0, directions=0)
+    for case, answer in compiled.items():
+        for field in ("count", "invalid_count", "flags"):
+            assert plain[case][field] == answer[field], (case, field)
+        for field in ("distance", "direction", "blind_distance"):
+            np.testing.assert_allclose(plain[case][field], answer[field], rtol=0, atol=1e-12, err_msg=f"{case} {field}")
+        distance = np.array(answer["distance"])
+        checked["finite"] += int(np.sum(np.isfinite(distance) & (distance > 0)))
+        checked["flagged"] += sum(f != 0 for f in answer["flags"])
+        checked["directions"] += int(np.count_nonzero(np.linalg.norm(answer["direction"], axis=1)))
+    assert all(v > 20 for v in checked.values()), checked  # the answers are not all inf or zero
