@@ -144,6 +144,16 @@ def _run_workloads() -> None:
     memory.update(0.0, seen)
     memory.update(0.1, seen, robot=np.zeros(box.shape, dtype=bool))
     squared_distance_transform(seen)
+    # The monitor with the memory (a rig with a workspace, stamped frames), and the test behind its flag.
+    from depthguard.freespace._near import voxels_within
+
+    remembering = dg.DistanceMonitor(dg.Rig(rig.cameras, principal="principal", workspace=[box.lo, box.hi]), rho=0.3,
+                                     memory_voxel=0.1)
+    for k, pts in enumerate((one, several)):
+        stamped = {name: dg.depth_image(frames["uint16"][name], camera, timestamp=0.1 * k)
+                   for name, camera in rig.cameras.items()}
+        remembering.query(stamped, pts, now=0.1 * k)
+    voxels_within(np.ones(box.shape, dtype=bool), box, several, np.full(len(several), 0.2))
     tangents = np.array([[-0.1, 0.1, -0.1, 0.1], [0.0, 0.2, 0.0, 0.2]])
     dg.frustum_distance([0.0, 0.0, 1.0], tangents, [0.5, np.inf])
     dg.paper_frustum_distance([0.0, 0.0, 1.0], tangents, [0.5, np.inf])
