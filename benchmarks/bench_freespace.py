@@ -20,6 +20,7 @@ Medians, because this machine is noisy.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numba
@@ -72,6 +73,8 @@ def main(argv=None) -> None:
     images = free_images(cams)
     threads_available = numba.config.NUMBA_NUM_THREADS
     thread_counts = [n for n in (1, 2) if n <= threads_available]
+    print(f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} before the run (above the number of cores, "
+          "other processes share them and the 2-thread figures mean little)\n")
 
     print(f"seen_free_voxels: 640x480 cameras, a {np.subtract(BOX[1], BOX[0]).tolist()} m box, margin 1 cm, pad 1 "
           f"pixel; median of {args.repeats} ms per frame")
