@@ -51,9 +51,10 @@ class DistanceMonitor:
             ``config.MAX_FUSION_PIXELS``], by which a cell's footprint grows in a secondary camera.
         memory: remember free space over time (SPEC section 8a): space no camera sees now counts free while no person
             moving at ``v_max`` could have reached it since it was last seen free. It needs frame timestamps and the
-            rig's ``workspace`` (the box remembered, in voxels of ``memory_voxel`` metres); without a workspace
-            there is no memory (``self.memory`` is None). Fused answers only; an answer that rests on it is flagged
-            ``remembered``. A body part moving faster than v_max is outside the guarantee.
+            rig's ``workspace`` (the box remembered, in voxels of ``memory_voxel`` metres); without a workspace,
+            or with a rig of one camera, there is no memory (``self.memory`` is None). Fused answers only; an answer
+            that rests on it is flagged ``remembered``. A body part moving faster than v_max is outside the
+            guarantee.
         v_max: metres/second, finite, > 0: the fastest a person may move (default 2.0, ISO 13855's hand speed).
         memory_voxel: metres, > 0: the memory's voxel side.
 
@@ -110,7 +111,7 @@ class DistanceMonitor:
         self.memory = None
         if not isinstance(memory, bool):
             raise InputError(f"memory must be True or False, got {short_repr(memory)}", field="memory")
-        if memory and rig.workspace is not None:
+        if memory and rig.workspace is not None and len(rig.cameras) > 1:  # only fused answers use it
             from depthguard.freespace import FreeSpaceMemory, VoxelBox
 
             self.memory = FreeSpaceMemory(VoxelBox(rig.workspace[0], rig.workspace[1], memory_voxel), v_max)
