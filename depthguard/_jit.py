@@ -28,12 +28,14 @@ from numba.core import caching, event
 
 #: The modules that define numba kernels, each decorated with :func:`kernel`.
 KERNEL_MODULES = (
+    "depthguard._frustum_kernels",
     "depthguard.baselines",
     "depthguard.depth._kernels",
     "depthguard.depthgrid._kernels",
     "depthguard.depthspace._frustum",
     "depthguard.depthspace._kernels",
     "depthguard.freespace._kernels",
+    "depthguard.freespace._near",
     "depthguard.robots._capsule_kernels",
 )
 

@@ -19,7 +19,7 @@ from depthguard import config
 from depthguard._jit import kernel
 from depthguard.depth import DepthImage
 from depthguard.depthspace._distance import check_points
-from depthguard.depthspace._kernels import cube_window
+from depthguard._frustum_kernels import cube_window
 
 
 def valid_metres(depth: DepthImage, camera) -> np.ndarray:

@@ -150,9 +150,12 @@ def test_kernel_caches_are_stamped_with_the_sources_they_inline():
     from depthguard.depthgrid import _kernels as grid_kernels
     from depthguard.depthspace import _kernels as space_kernels
 
-    assert _jit.kernel_dependencies("depthguard.depthgrid._kernels") == ("depthguard.depthgrid._kernels",
-                                                                         "depthguard.depthspace._kernels")
-    assert _jit.kernel_dependencies("depthguard.depth._kernels") == ("depthguard.depth._kernels",)
+    assert _jit.kernel_dependencies("depthguard.depthgrid._kernels") == ("depthguard._frustum_kernels",
+                                                                         "depthguard.depthgrid._kernels")
+    assert _jit.kernel_dependencies("depthguard.depthspace._kernels") == ("depthguard._frustum_kernels",
+                                                                          "depthguard.depthspace._kernels")
+    assert _jit.kernel_dependencies("depthguard.depth._kernels") == ("depthguard._frustum_kernels",
+                                                                     "depthguard.depth._kernels")
     # The locator in use is depthguard's, and its stamp covers the depth grid's and the single camera's sources.
     locator = grid_kernels.fused_query_points._cache._impl.locator
     assert type(locator).__name__.startswith("Depthguard")

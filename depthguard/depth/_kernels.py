@@ -3,6 +3,7 @@
 import numpy as np
 from numba import prange
 
+from depthguard._frustum_kernels import noise_margin
 from depthguard._jit import kernel
 
 
@@ -23,9 +24,7 @@ def start_depths(raw, scale, z_min, z_max, m0, m1, m2, invalid_start, z_start, i
             blind[v, u] = np.inf
             d = np.float64(raw[v, u]) * scale
             if np.isfinite(d) and d > 0.0 and d >= z_min and d <= z_max:
-                margin = m0 + (m1 + m2 * d) * d
-                if margin < 0.0:
-                    margin = 0.0
+                margin = noise_margin(d, m0, m1, m2)
                 z = d - margin
                 if z < 0.0:
                     z = 0.0
@@ -96,7 +95,7 @@ def _filter_robot_pixel(v, u, z_start, invalid, policy_start, robot_near, robot_
             d = np.float64(robot_near[vv, min(max(u + du, 0), w - 1)])
             if d > 0.0:
                 d_near = min(d_near, d)
-    margin = max(m0 + (m1 + m2 * d_near) * d_near, 0.0)
+    margin = noise_margin(d_near, m0, m1, m2)
     front = d_near - tolerance - margin  # nearest depth at which a measurement could still be the robot
     zs = np.float64(z_start[v, u])
     if invalid[v, u] and zs == policy_start:
@@ -112,7 +111,7 @@ def _filter_robot_pixel(v, u, z_start, invalid, policy_start, robot_near, robot_
                 vv = min(max(v + dv, 0), h - 1)
                 for du in range(-1, 2):
                     d_far = max(d_far, np.float64(robot_far[vv, min(max(u + du, 0), w - 1)]))
-            if zs > d_far + tolerance + max(m0 + (m1 + m2 * d_far) * d_far, 0.0):
+            if zs > d_far + tolerance + noise_margin(d_far, m0, m1, m2):
                 return  # seen past the robot
         z_start[v, u] = np.inf
         blind[v, u] = d_r
@@ -184,7 +183,7 @@ def fill_small_holes(raw, scale, invalid, hole_pixels, m0, m1, m2, z_start, z_en
                     z_end[v, u] = np.inf
                     blind[v, u] = min(np.float64(blind[v, u]), near_robot)
             elif near_other < np.inf:
-                margin = max(m0 + (m1 + m2 * near_other) * near_other, 0.0)
+                margin = noise_margin(near_other, m0, m1, m2)
                 start = max(near_other - margin, 0.0)
                 for k in range(n):
                     v = stack[k] // w

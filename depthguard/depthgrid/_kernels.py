@@ -18,8 +18,7 @@ free[j][q] is j's measured depth minus its noise margin (0 where j measured noth
 import numpy as np
 from numba import prange
 
-from depthguard._jit import kernel
-from depthguard.depthspace._kernels import (
+from depthguard._frustum_kernels import (
     AGG_MIN,
     FLAG_ROBOT_BLIND_SPOT,
     _finish_min_at_pixel,
@@ -29,10 +28,12 @@ from depthguard.depthspace._kernels import (
     clamped_index,
     frustum_direction,
     frustum_nearest,
+    noise_margin,
     rho_squared,
     surveillance_region,
     usable_rho,
 )
+from depthguard._jit import kernel
 
 
 @kernel(inline=True)
@@ -41,7 +42,7 @@ def measured_free(raw, scale, z_min, z_max, m0, m1, m2):
     -1 where it measured nothing (or outside [z_min, z_max])."""
     d = np.float64(raw) * scale
     if np.isfinite(d) and d > 0.0 and d >= z_min and d <= z_max:
-        return max(d - max(m0 + (m1 + m2 * d) * d, 0.0), 0.0)
+        return max(d - noise_margin(d, m0, m1, m2), 0.0)
     return -1.0
 
 
@@ -108,7 +109,7 @@ def principal_arrays(z_start, z_end, invalid, invalid_start, blind, robot_near, 
             certain[v, u] = 1 if (invalid[v, u] == 0 or zs != invalid_start) else 0
             z_end_fused[v, u] = z_end[v, u]
             far = np.float64(robot_far[v, u])
-            behind = far + slack + max(m0 + (m1 + m2 * far) * far, 0.0)
+            behind = far + slack + noise_margin(far, m0, m1, m2)
             b = np.float64(blind[v, u])
             if np.isfinite(b):
                 blind_from[v, u] = max(b, behind)
@@ -120,7 +121,7 @@ def principal_arrays(z_start, z_end, invalid, invalid_start, blind, robot_near, 
             unchecked_from[v, u] = np.inf
             exit_ = np.float64(robot_exit[v, u])
             if exit_ > 0.0 and np.isfinite(blind_from[v, u]):
-                start = max(exit_ + slack + max(m0 + (m1 + m2 * exit_) * exit_, 0.0), np.float64(robot_near[v, u]))
+                start = max(exit_ + slack + noise_margin(exit_, m0, m1, m2), np.float64(robot_near[v, u]))
                 if start < blind_from[v, u]:
                     unchecked_from[v, u] = start
 

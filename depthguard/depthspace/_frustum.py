@@ -6,7 +6,7 @@ import numpy as np
 from numba import prange
 
 from depthguard._jit import kernel
-from depthguard.depthspace._kernels import frustum_nearest, frustum_nearest_paper
+from depthguard._frustum_kernels import frustum_nearest, frustum_nearest_paper
 
 
 @kernel(parallel=True)
