@@ -271,9 +271,17 @@ class DistanceMonitor:
             return
         from depthguard.freespace import seen_free_voxels
 
+        from depthguard.freespace._near import surface_voxels
+
         t = min(state.occupancy.timestamp for state in new)
         seen = seen_free_voxels(self.memory.box, [state.camera for state in new], [state.free for state in new],
                                 margin=self.fusion_margin, pad=self.fusion_pixels, check=False)
+        # A surface measured now where the memory remembers free space moved faster than v_max: not cleared there.
+        surfaces = np.zeros(self.memory.box.shape, dtype=bool)
+        for state in new:
+            surface_voxels(self.memory.box, state.camera, state.image, state.occupancy, surfaces)
+        self.memory.forget(surfaces)
+        seen &= ~surfaces
         self.memory.update(t, seen, check=False)
         self._seen_now = seen
         self._remembered = {id(state) for state in usable.values()}

@@ -149,8 +149,8 @@ def _run_workloads() -> None:
 
     remembering = dg.DistanceMonitor(dg.Rig(rig.cameras, principal="principal", workspace=[box.lo, box.hi]), rho=0.3,
                                      memory_voxel=0.1)
-    for k, pts in enumerate((one, several)):
-        stamped = {name: dg.depth_image(frames["uint16"][name], camera, timestamp=0.1 * k)
+    for k, (kind, pts) in enumerate([(kind, pts) for kind in ("uint16", "float32") for pts in (one, several)]):
+        stamped = {name: dg.depth_image(frames[kind][name], camera, timestamp=0.1 * k)
                    for name, camera in rig.cameras.items()}
         remembering.query(stamped, pts, now=0.1 * k)
     voxels_within(np.ones(box.shape, dtype=bool), box, several, np.full(len(several), 0.2))

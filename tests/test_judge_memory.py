@@ -433,19 +433,21 @@ def remembered_place(world: World, mon: dg.DistanceMonitor, q, t: float):
     return best, best_score
 
 
-def test_above_v_max_memory_may_be_optimistic_but_says_so(world):
+def test_above_v_max_a_hand_a_camera_sees_is_not_cleared(world):
     """Above v_max, as documented (SPEC 8a, ``DistanceMonitor``: "a body part moving faster than v_max is outside the
     guarantee"): the hand waits in the room's corner (FAR) while the robot moves, is teleported in one frame (more
     than 2 m in 1/30 s) behind the robot into voxels the memory certifies free at that time (found from the memory's
-    own arrival times, ``remembered_place``), stays there 4 frames and is teleported back. The memory takes no
-    account of what the cameras see there now (a voxel it certifies stays free even while the second camera shows
-    the hand in it), so answers near the hand may exceed truth + tolerance; every one of them must carry
-    ``remembered``, so that an unflagged answer is never optimistic. Without memory, no answer is optimistic.
+    own arrival times, ``remembered_place``), stays there 4 frames and is teleported back. Any optimistic answer must
+    carry ``remembered``, so that an unflagged answer is never optimistic; without memory, no answer is optimistic.
+
+    The memory forgets a voxel in which a camera measures a surface now (the monitor's hardening): the second camera
+    sees the hand there, so the voxels that hold its seen surface are not cleared. Before that hardening, this test
+    measured 23, 18, 15 and 9 optimistic points in the 4 frames the hand stays (all flagged, by up to 93.5 mm); with
+    it, none. A hand that jumps faster than v_max into space that no camera sees is still outside the guarantee.
 
     Measured: the hand jumps 2.99 m (90 m/s) to (0.578, 0.229, 0.381), where the principal camera shows 1-2 of its
     pixels and the second camera 27, in voxels remembered free until 0.165 s (it lands at 0.133 s); optimistic points
-    in the 4 frames it stays: 23, 18, 15, 9 (all flagged remembered; the voxels around the hand expire one by one),
-    largest excess over truth + tolerance 93.5 mm; none before or after.
+    per frame: none.
     """
     monitors = {"memory": monitor(world), "none": monitor(world, memory=False)}
     steps = [Step(k / FPS, joints_at(k / FPS), FAR.copy(), phase="far") for k in range(10)]
@@ -481,7 +483,8 @@ def test_above_v_max_memory_may_be_optimistic_but_says_so(world):
           f"optimistic points per frame {optimistic} (all flagged remembered), largest excess "
           f"{worst * 1e3:.1f} mm; {n_points} points")
     assert jump > 2.0
-    assert sum(optimistic) >= 1, "the documented limit did not show"
+    assert all(p + s > 0 for p, s in hidden), "a camera must see the hand where it lands"
+    assert sum(optimistic) == 0, "a hand a camera sees was cleared by memory"
 
 
 # ------------------------------------------------------------------------------------- 3. the judge can catch it
@@ -493,8 +496,10 @@ def test_the_judge_catches_a_memory_that_remembers_too_long(reaching):
     than a frame here, where D is at most 0.8 m, half the workspace's height, the layer outside the box counting as
     possibly occupied.)
 
-    Measured: the check fails in 11 of the 36 frames: 41 optimistic points in all, by up to 37.9 mm beyond truth +
-    tolerance, in every phase of the sequence; all 41 flagged remembered.
+    Measured: the check fails in 1 of the 36 frames (1 optimistic point, 5.6 mm beyond truth + tolerance, flagged
+    remembered, while the hand is away). Before the monitor forgot the voxels in which a camera measures a surface
+    now, it failed in 11 frames (41 points, up to 37.9 mm): with that hardening, a memory that keeps space far too long
+    still clears a hand only where no camera sees its surface.
     """
     failures, found = [], []
     for f in reaching:
@@ -509,4 +514,4 @@ def test_the_judge_catches_a_memory_that_remembers_too_long(reaching):
     print(f"\nv_max {SLOW_V_MAX} m/s: the check fails in {len(failures)} of {len(reaching)} frames; optimistic points "
           f"{sum(c for _, c, _, _ in found)} in all (flagged remembered: {sum(r for *_, r in found)}); largest excess "
           f"{max(e for _, _, e, _ in found) * 1e3:.1f} mm; phases {sorted({ph for ph, *_ in found})}")
-    assert len(failures) >= 3 and all("optimistic" in failure for failure in failures)
+    assert len(failures) >= 1 and all("optimistic" in failure for failure in failures)

@@ -307,6 +307,13 @@ class FreeSpaceMemory:
                                  config.FREESPACE_ROUNDING, self._arrival)
         self._time = t
 
+    def forget(self, occupied: np.ndarray) -> None:
+        """Take the voxels ``occupied`` ((nx, ny, nz) bool) to hold something now: their arrival times become -inf,
+        so the next :meth:`update` counts them where a person may be (unless a camera sees them entirely free then).
+        The monitor passes the voxels in which a camera measures a surface: an object seen where the memory
+        remembers free space moved faster than v_max, and is at least not cleared where it is seen."""
+        self._arrival[self._check_mask(occupied, "occupied")] = -np.inf
+
     def free_at(self, t: float) -> np.ndarray:
         """(nx, ny, nz) bool: the voxels certified free at time ``t`` (seconds, at least the last update's; no voxel
         before the first update). Valid until the next update: a later update can only certify more."""

@@ -1,4 +1,5 @@
-"""Which control points have marked voxels nearer than a radius: the test behind the ``remembered`` flag."""
+"""Which control points have marked voxels nearer than a radius (the test behind the ``remembered`` flag), and which
+voxels hold a surface a camera measures now."""
 
 from __future__ import annotations
 
@@ -58,3 +59,36 @@ def _within(mask, lo, voxel, points, radii, out):
             if found:
                 break
         out[p] = found
+
+
+def surface_voxels(box, camera, depth, occupancy, out: np.ndarray) -> None:
+    """Mark in ``out`` (box.shape bool) the voxels that hold a surface ``camera`` measures in ``depth`` (a
+    :class:`~depthguard.DepthImage`): each pixel whose prepared frame (``occupancy``) starts at a measured surface
+    (a valid pixel that is not the robot), at its measured depth on the pixel's centre ray."""
+    T = camera.T_world_camera
+    _mark_surfaces(depth.data, float(depth.depth_scale), occupancy.z_start, occupancy.invalid, camera.fx, camera.fy,
+                   camera.cx, camera.cy, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
+                   np.asarray(box.lo, dtype=np.float64), float(box.voxel), out)
+
+
+@kernel()
+def _mark_surfaces(raw, scale, z_start, invalid, fx, fy, cx, cy, R, t, lo, voxel, out):
+    """out[voxel of (u, v)'s measured point] = True for every pixel with a valid measurement whose z_start is finite
+    (a surface, not the robot nor a hole)."""
+    h, w = raw.shape
+    nx, ny, nz = out.shape
+    inv = 1.0 / voxel
+    for v in range(h):
+        for u in range(w):
+            if invalid[v, u] or not np.isfinite(z_start[v, u]):
+                continue
+            d = np.float64(raw[v, u]) * scale
+            if not (d > 0.0 and np.isfinite(d)):
+                continue
+            x = (u - cx) / fx * d
+            y = (v - cy) / fy * d
+            i = np.floor((R[0, 0] * x + R[0, 1] * y + R[0, 2] * d + t[0] - lo[0]) * inv)
+            j = np.floor((R[1, 0] * x + R[1, 1] * y + R[1, 2] * d + t[1] - lo[1]) * inv)
+            k = np.floor((R[2, 0] * x + R[2, 1] * y + R[2, 2] * d + t[2] - lo[2]) * inv)
+            if 0.0 <= i < nx and 0.0 <= j < ny and 0.0 <= k < nz:
+                out[int(i), int(j), int(k)] = True
