@@ -26,21 +26,25 @@ from depthguard._jit import kernel
 
 
 @kernel(parallel=True)
-def row_min_tables(free, levels, table):
-    """table[l, q, r] = the smallest free[r, q : q + 2^l], for l < levels and q + 2^l <= w (the rest is not
-    written): a sparse table of each row, stored column-major so that the rows of one footprint lie side by side.
-    free: (h, w) float32; table: (>= levels, >= w, >= h) float32."""
-    h, w = free.shape
-    for p in prange(w):
-        q = np.int64(p)
-        for r in range(h):
-            table[0, q, r] = free[r, q]
-    for level in range(1, levels):
-        half = np.int64(1) << (level - 1)
-        for p in prange(w - 2 * half + 1):
-            q = np.int64(p)
+def row_min_tables(free, sizes, table):
+    """table[c, l, q, r] = the smallest free[c, r, q : q + 2^l] of camera c's free image (sizes[c] = (width, height)),
+    for 2^l <= width and q + 2^l <= width (the rest is not written): a sparse table of each row, stored column-major
+    so that the rows of one footprint lie side by side. free: (n, >= h, >= w) float32; table: (n, >= levels, >= w,
+    >= h) float32. One task per camera (a single parallel region: on a busy machine each region's barrier costs)."""
+    for p in prange(free.shape[0]):
+        c = np.int64(p)
+        w = sizes[c, 0]
+        h = sizes[c, 1]
+        for q in range(w):
             for r in range(h):
-                table[level, q, r] = min(table[level - 1, q, r], table[level - 1, q + half, r])
+                table[c, 0, q, r] = free[c, r, q]
+        level = 1
+        while (np.int64(1) << level) <= w:
+            half = np.int64(1) << (level - 1)
+            for q in range(w - 2 * half + 1):
+                for r in range(h):
+                    table[c, level, q, r] = min(table[c, level - 1, q, r], table[c, level - 1, q + half, r])
+            level += 1
 
 
 @kernel(inline=True)

@@ -156,6 +156,7 @@ def seen_free_voxels(box: VoxelBox, cameras: Sequence[PinholeCamera], free_image
     z_near = np.empty(n)
     sizes = np.empty((n, 2), dtype=np.int64)
     tables = np.empty((n, levels, width, height), dtype=np.float32)
+    stacked = np.empty((n, height, width), dtype=np.float32)
     for c, (camera, free) in enumerate(views):
         T_camera_world = camera.T_camera_world
         poses[c, :9] = T_camera_world[:3, :3].ravel()
@@ -163,9 +164,10 @@ def seen_free_voxels(box: VoxelBox, cameras: Sequence[PinholeCamera], free_image
         intrinsics[c] = (camera.fx, camera.fy, camera.cx, camera.cy)
         z_near[c] = max(camera.depth_range[0], config.NEAR_PLANE_EPSILON)
         sizes[c] = (camera.width, camera.height)
-        # Contiguous and writable: a read-only array is another type to numba, and would compile once more.
-        _kernels.row_min_tables(np.require(free, np.float32, ["C", "W"]), camera.width.bit_length(), tables[c])
-    floor_log2 = np.array([max(m.bit_length() - 1, 0) for m in range(width + 1)], dtype=np.int64)
+        stacked[c, :camera.height, :camera.width] = free
+    _kernels.row_min_tables(stacked, sizes, tables)
+    floor_log2 = np.zeros(width + 1, dtype=np.int64)  # floor(log2(m)) for m >= 1: frexp's exponent, exactly
+    floor_log2[1:] = np.frexp(np.arange(1.0, width + 1.0))[1] - 1
     _kernels.seen_free_voxels(box.lo, box.voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, float(margin),
                               float(pad), config.FREESPACE_BLOCK, out)
     return out
