@@ -516,6 +516,42 @@ def sustained(all_cameras, robot, pool, names, seconds):
             "ages": np.array(ages)}
 
 
+def sustained_live(all_cameras, robot, pool, names, seconds):
+    """The same timeline through depthguard.LiveMonitor: each new set of frames is submitted (prepared on its worker
+    thread) and every query answers at once from the latest prepared set."""
+    live = dg.LiveMonitor(make_rig(all_cameras, names), rho=RHO, aggregate="hybrid", robot=robot)
+    try:
+        offsets = [[robot.control_point_positions(q + STEP * j) for j in range(64)] for q, _, _ in pool]
+        q, points, raw = pool[0]
+        live.submit(new_frames(raw, all_cameras, 0.0), joints=q, now=0.0)
+        live.wait(600)  # the first set builds the map: not counted
+        period = 1.0 / FPS
+        start = time.perf_counter()
+        clock = lambda: time.perf_counter() - start + 1.0  # noqa: E731
+        first_capture = clock()
+        k, since = -1, 0
+        latency, ages = [], []
+        while clock() - first_capture < seconds:
+            latest = int((clock() - first_capture) / period)
+            if latest != k:
+                k = latest
+                q, _, raw = pool[pool_index(k + 1, len(pool))]
+                live.submit(new_frames(raw, all_cameras, first_capture + k * period), joints=q, now=clock())
+                since = 0
+            points = offsets[pool_index(k + 1, len(pool))][min(since, 63)]
+            t0 = time.perf_counter()
+            live.query(points)
+            latency.append(time.perf_counter() - t0)
+            if live.latest_time is not None and live.latest_time >= first_capture:
+                ages.append(clock() - live.latest_time)
+            since += 1
+        elapsed = clock() - first_capture
+        return {"rate": len(latency) / elapsed, "latency": np.array(latency), "ages": np.array(ages),
+                "prepared": live.prepared - 1, "dropped": live.dropped, "sets": k + 1}
+    finally:
+        live.close()
+
+
 def sustained_report(all_cameras, robot, pools, seconds):
     threads = numba.get_num_threads()
     print(f"\n4. sustained: cameras at {FPS:g} Hz (wall clock), queries of 9 points as fast as they come (the robot "
@@ -537,6 +573,17 @@ def sustained_report(all_cameras, robot, pools, seconds):
                   f"{r['dropped']:7d} {np.median(r['ages']) * 1e3:10.1f} {np.max(r['ages']) * 1e3:9.1f} "
                   f"{spread(r['new']):>29s} {spread(r['later'], digits=2):>21s}")
     print("  (later n/a: every query met a new set of frames, its preparation taking longer than a frame period)")
+    print(f"  the same through LiveMonitor (frames prepared on a worker thread, {threads} numba threads; queries never "
+          "wait for a set):")
+    print(f"  {'cameras':>7s} {'queries/s':>9s} {'goal':>5s} {'sets':>5s} {'prepared':>8s} {'age med ms':>10s} "
+          f"{'age worst':>9s} {'query ms min/med/max':>22s}")
+    for n in SETS:
+        r = out[(n, "live")] = sustained_live(all_cameras, robot, pools[n], SETS[n], seconds)
+        goal = GOAL_RATE.get(n)
+        ages = r["ages"] if len(r["ages"]) else np.array([np.nan])
+        print(f"  {n:7d} {r['rate']:9.0f} {('>=' + str(int(goal))) if goal else '':>5s} {r['sets']:5d} "
+              f"{r['prepared']:8d} {np.median(ages) * 1e3:10.1f} {np.max(ages) * 1e3:9.1f} "
+              f"{spread(r['latency'], digits=2):>22s}")
     for n, goal in GOAL_RATE.items():
         rates = [out[(n, t)]["rate"] for t in (threads, 1)]
         ages = out[(n, threads)]["ages"]
@@ -617,7 +664,10 @@ def main(argv=None) -> None:
     parser.add_argument("--seconds", type=float, default=3.0, help="wall-clock seconds of each sustained run")
     parser.add_argument("--memory-child", help=argparse.SUPPRESS)
     parser.add_argument("--sets", type=int, default=10, help=argparse.SUPPRESS)
+    parser.add_argument("--only", choices=("budget", "memory", "sustained", "shadow"), action="append",
+                        help="run only these sections (repeatable; default: all)")
     args = parser.parse_args(argv)
+    run = set(args.only or ("budget", "memory", "sustained", "shadow"))
     if args.memory_child:
         memory_child(args.memory_child, args.sets)
         return
@@ -647,10 +697,14 @@ def main(argv=None) -> None:
         run_sets(all_cameras, SETS[n], robot, pools[n], 1, False, warmup=1)
     print(f"numba threading layer: {numba.threading_layer()}")
 
-    budget(all_cameras, robot, pools, args.repeats)
-    memory_report(pools[4][:8], 10)
-    sustained_report(all_cameras, robot, pools, args.seconds)
-    shadow_report(all_cameras, robot, shadow, shadow_pools, max(2, args.repeats // 2))
+    if "budget" in run:
+        budget(all_cameras, robot, pools, args.repeats)
+    if "memory" in run:
+        memory_report(pools[4][:8], 10)
+    if "sustained" in run:
+        sustained_report(all_cameras, robot, pools, args.seconds)
+    if "shadow" in run:
+        shadow_report(all_cameras, robot, shadow, shadow_pools, max(2, args.repeats // 2))
     print(f"\n(run took {time.perf_counter() - started:.0f} s)")
 
 

@@ -9,7 +9,8 @@ Typical use::
     result = monitor.query({"right": depth}, points_world)   # (n, 3) metres, world frame
 """
 
-from depthguard._monitor import DistanceMonitor
+from depthguard._live import LiveMonitor
+from depthguard._monitor import DistanceMonitor, PreparedSet
 from depthguard.cameras import NoiseModel, PinholeCamera, Rig, load_camera_info, load_rig, rig_from_dict, save_rig
 from depthguard.depth import DepthImage, OccupancyImage, depth_image, load_depth, prepare_depth, read_depth_file
 from depthguard.depthspace import frustum_distance, paper_frustum_distance, single_camera_distances
@@ -27,9 +28,11 @@ __all__ = [
     "DistanceResult",
     "Flag",
     "InputError",
+    "LiveMonitor",
     "NoiseModel",
     "OccupancyImage",
     "PinholeCamera",
+    "PreparedSet",
     "Recording",
     "Rig",
     "RigError",

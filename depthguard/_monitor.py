@@ -228,6 +228,16 @@ class DistanceMonitor:
         if not isinstance(check, bool):
             raise InputError(f"check must be True or False, got {short_repr(check)}", field="check")
         points = check_points(points_world) if check else points_world
+        return self.prepare_set(frames, joints=joints, camera_joints=camera_joints, now=now).query(points, check=False)
+
+    def prepare_set(self, frames: Mapping[str, object], *, joints=None, camera_joints=None,
+                    now: float | None = None) -> "PreparedSet":
+        """Prepare one set of frames for any number of queries: check and prepare each frame (self-filtering it),
+        take it into the free-space memory, decide the plan (:meth:`plan`), and set up the depth grid's fusion.
+        Arguments as :meth:`query`, which is ``prepare_set(...).query(points)``. Frames prepared before (the same
+        :class:`DepthImage` objects) are not prepared again. The :class:`PreparedSet` does not change when the
+        monitor prepares the next one: one thread may query it while another prepares the next
+        (:class:`depthguard.LiveMonitor`)."""
         if not isinstance(frames, Mapping):
             raise InputError(f"frames must map camera names to depth images, got {type(frames).__name__}",
                              field="frames")
@@ -258,7 +268,12 @@ class DistanceMonitor:
                 usable[name] = state
         if self.memory is not None:
             self._remember(usable)
-        return self._answer(self.plan(usable, stale), usable, points)
+        plan = self.plan(usable, stale)
+        fused = self._fused_frames_of(plan, usable) if plan.kind == "fused" else ()
+        times = [state.occupancy.timestamp for state in usable.values() if state.occupancy.timestamp is not None]
+        return PreparedSet(plan=plan, usable=dict(usable), fused=fused, free_now=self._free_now if fused else None,
+                           rho=self.rho, aggregate=self.aggregate, unseen=self.unseen, method=self.method,
+                           time=max(times) if times else None)
 
     def _remember(self, usable: dict) -> None:
         """Take the usable frames the memory has not seen into it (SPEC section 8a), as of the earliest capture time
@@ -314,16 +329,6 @@ class DistanceMonitor:
         principals = tuple(name for name in self.principals if name in usable) or (names[0],)
         return QueryPlan("fused", principals, absent, dict(stale))
 
-    def _answer(self, plan: "QueryPlan", usable: dict, points: np.ndarray) -> DistanceResult:
-        if plan.kind == "blind":
-            return DistanceResult.blind(len(points), plan.absent, plan.stale)
-        if plan.kind == "single":
-            (name,) = plan.principals
-            result = single_camera_distances(usable[name].occupancy, points, self.rho, self.aggregate, self.unseen,
-                                             self.method, check=False)
-            return _with_flags(result, plan.absent) if plan.absent else result
-        return self._fused(plan, usable, points)
-
     def is_stale(self, timestamp: float | None, now: float | None) -> bool:
         """Whether a frame stamped ``timestamp`` (seconds, or None) counts as blind at ``now`` (see :meth:`query`)."""
         if timestamp is None:
@@ -334,19 +339,18 @@ class DistanceMonitor:
             return True
         return self.max_age is not None and now - timestamp > self.max_age
 
-    def _fused(self, plan: "QueryPlan", usable: dict, points: np.ndarray) -> DistanceResult:
-        """The depth grid of each of the plan's principals; per point, the largest answer among the principals
-        whose view holds its whole surveillance region (each is a lower bound), else the first principal's."""
+    def _fused_frames_of(self, plan: "QueryPlan", usable: dict) -> tuple:
+        """The FusedFrames of each of the plan's principals on these frames (kept while the same frames come back,
+        with the cells they have classified so far)."""
         from depthguard.depthgrid import FusedFrames, build_map
 
         if self.method != "exact":
             raise InputError("fusing several cameras uses the exact method only")
-        results = []
+        out = []
         for name in plan.principals:
             grid = self.maps.get(name)
             if grid is None:
                 grid = self.maps[name] = build_map(self.rig, name)
-            # The same frames as the last query: their fusion, with the cells it has classified so far.
             key = tuple(usable.get(other) for other in (name,) + grid.secondaries)
             cached = self._fused_frames.get(name)
             if cached is None or len(cached[0]) != len(key) or any(a is not b for a, b in zip(cached[0], key)):
@@ -356,29 +360,8 @@ class DistanceMonitor:
                     grid, self.rig, state.occupancy, secondaries, robot_far=state.robot_far,
                     margin=self.fusion_margin, pad=self.fusion_pixels, check=False, robot_near=state.robot_near,
                     robot_exit=state.robot_exit, remembered=self._remembered_free(usable)))
-            results.append(cached[1].distances(points, self.rho, self.aggregate, self.unseen, check=False))
-        timestamps = {name: state.occupancy.timestamp for name, state in usable.items()}
-        invalid_pixels = {n: s.occupancy.invalid_pixels for n, s in usable.items()}
-        if len(results) == 1:
-            chosen = np.zeros(len(points), dtype=np.int64)
-        else:
-            holds = np.array([[Flag.REGION_OUTSIDE_VIEW not in f for f in r.flags] for r in results])
-            candidates = np.where(holds, np.array([r.distance for r in results]), -np.inf)
-            chosen = np.where(holds.any(axis=0), np.argmax(candidates, axis=0), 0)
-        pick = lambda attr: np.array([getattr(results[c], attr)[i] for i, c in enumerate(chosen)])  # noqa: E731
-        # FusedFrames flags a blind secondary camera STALE_CAMERA; the plan knows whether it was stale or missing.
-        flags = [(results[c].flags[i] & ~Flag.STALE_CAMERA) | plan.absent for i, c in enumerate(chosen)]
-        distance = pick("distance")
-        if self._free_now is not None:
-            from depthguard.freespace._near import voxels_within
-
-            # An answer rests on memory when space nearer than it counts free only because it is remembered.
-            rests = voxels_within(self._free_now[2], self._free_now[1], points, np.minimum(distance, self.rho))
-            flags = [f | Flag.REMEMBERED if r else f for f, r in zip(flags, rests)]
-        return DistanceResult(distance=distance, direction=pick("direction").reshape(-1, 3),
-                              count=pick("count"), invalid_count=pick("invalid_count"), flags=flags,
-                              blind_distance=pick("blind_distance"), timestamps=timestamps, cameras=tuple(usable),
-                              invalid_pixels=invalid_pixels, principal=tuple(plan.principals[c] for c in chosen))
+            out.append(cached[1])
+        return tuple(out)
 
     def _remembered_free(self, usable: dict):
         """(free voxels, box) for FusedFrames: what the memory certifies free at the latest capture time of the
@@ -405,6 +388,62 @@ class QueryPlan:
     principals: tuple[str, ...]
     absent: Flag
     stale: dict
+
+
+@dataclass(frozen=True, eq=False)
+class PreparedSet:
+    """One set of frames as :meth:`DistanceMonitor.prepare_set` prepared it, ready for queries: the plan, the usable
+    frames, the depth grid's fusion of each principal (fused plans), the free-space memory's remembered voxels (for
+    the flag), and ``time``, the latest capture time among the usable frames (seconds, or None). Queries change
+    only the fusion's cache of classified cells: query it from one thread at a time."""
+
+    plan: QueryPlan
+    usable: dict
+    fused: tuple
+    free_now: tuple | None
+    rho: float
+    aggregate: str
+    unseen: str
+    method: str
+    time: float | None
+
+    def query(self, points_world, check: bool = True) -> DistanceResult:
+        """Distances of control points ((n, 3) float64, metres, world frame) on these frames, as
+        :meth:`DistanceMonitor.query` gives them."""
+        points = check_points(points_world) if check else points_world
+        plan = self.plan
+        if plan.kind == "blind":
+            return DistanceResult.blind(len(points), plan.absent, plan.stale)
+        if plan.kind == "single":
+            (name,) = plan.principals
+            result = single_camera_distances(self.usable[name].occupancy, points, self.rho, self.aggregate,
+                                             self.unseen, self.method, check=False)
+            return _with_flags(result, plan.absent) if plan.absent else result
+        results = [frames.distances(points, self.rho, self.aggregate, self.unseen, check=False)
+                   for frames in self.fused]
+        timestamps = {name: state.occupancy.timestamp for name, state in self.usable.items()}
+        invalid_pixels = {n: s.occupancy.invalid_pixels for n, s in self.usable.items()}
+        if len(results) == 1:
+            chosen = np.zeros(len(points), dtype=np.int64)
+        else:
+            holds = np.array([[Flag.REGION_OUTSIDE_VIEW not in f for f in r.flags] for r in results])
+            candidates = np.where(holds, np.array([r.distance for r in results]), -np.inf)
+            chosen = np.where(holds.any(axis=0), np.argmax(candidates, axis=0), 0)
+        pick = lambda attr: np.array([getattr(results[c], attr)[i] for i, c in enumerate(chosen)])  # noqa: E731
+        # FusedFrames flags a blind secondary camera STALE_CAMERA; the plan knows whether it was stale or missing.
+        flags = [(results[c].flags[i] & ~Flag.STALE_CAMERA) | plan.absent for i, c in enumerate(chosen)]
+        distance = pick("distance")
+        if self.free_now is not None:
+            from depthguard.freespace._near import voxels_within
+
+            # An answer rests on memory when space nearer than it counts free only because it is remembered.
+            rests = voxels_within(self.free_now[2], self.free_now[1], points, np.minimum(distance, self.rho))
+            flags = [f | Flag.REMEMBERED if r else f for f, r in zip(flags, rests)]
+        return DistanceResult(distance=distance, direction=pick("direction").reshape(-1, 3),
+                              count=pick("count"), invalid_count=pick("invalid_count"), flags=tuple(flags),
+                              blind_distance=pick("blind_distance"), timestamps=timestamps,
+                              cameras=tuple(self.usable), invalid_pixels=invalid_pixels,
+                              principal=tuple(plan.principals[c] for c in chosen))
 
 
 def _with_flags(result: DistanceResult, extra: Flag) -> DistanceResult:
