@@ -6,6 +6,7 @@
     depthguard replay RECORDING --out RESULTS.csv [--robot URDF|iiwa|panda] [--points POINTS] [--rho 0.4] ...
     depthguard demo [--out DIR] [--duration S]
     depthguard fusion-workcell [--out DIR] [--scene SCENE.yaml ...] [--all-frames]
+    depthguard coverage --rig RIG.yaml [--robot URDF|iiwa|panda] [--trajectory joint_states.csv] [--rho 0.4] ...
     depthguard scenario-a [--out DIR]
     depthguard real-room [--out DIR] [--data FOLDER]
     depthguard warmup
@@ -13,7 +14,7 @@
 Bad input ends with exit status 2 and one line on standard error that says what is wrong (exit status 3 means a bug).
 Numeric options are checked where they are parsed (``inf``, ``nan`` and ``1e999`` are refused), in these ranges:
 
-- ``--rho``: metres in [``config.RHO_MIN``, ``config.RHO_MAX``];
+- ``--rho``: metres in [``config.RHO_MIN``, ``config.RHO_MAX``] (``coverage``: in ``coverage.RHO_RANGE``);
 - ``--d-min``, ``--d-max``, ``--delta-d``: metres in (0, ``config.COORDINATE_LIMIT``], with d-max > d-min and at
   most ``config.DEPTH_GRID_MAX_CELLS`` cells;
 - ``--duration``: finite seconds, at least one frame period of the scene (1/30 s for the default scenes); longer
@@ -184,6 +185,22 @@ def _build_parser() -> argparse.ArgumentParser:
     fusion.add_argument("--all-frames", action="store_true", help="simulate the whole episode (default: the two "
                                                                   "cases and 0.5 s around them)")
 
+    coverage = commands.add_parser("coverage", help="camera placement: the space within rho of the robot that no "
+                                                    "camera of a rig can clear, as fractions and a picture")
+    coverage.add_argument("--rig", required=True, help="rig YAML file (SPEC section 2)")
+    coverage.add_argument("--robot", default="iiwa", metavar="URDF",
+                          help="the robot: a URDF file, or 'iiwa' / 'panda' for the models shipped with pybullet_data "
+                               "(default: iiwa)")
+    coverage.add_argument("--trajectory", metavar="joint_states.csv",
+                          help="robot poses: a CSV time,<joint names...> (a recording's joint_states.csv), at most "
+                               "20 rows used, evenly spread (default: scenario B's posture and four poses along its "
+                               "trajectory for the iiwa, else the zero configuration)")
+    from depthguard.experiments.coverage import RHO_RANGE  # the samples fill rho around the robot: bounded
+
+    coverage.add_argument("--rho", type=_real(*RHO_RANGE, "metres"), default=config.DEFAULT_RHO,
+                          help=f"surveillance radius, metres, in [{RHO_RANGE[0]:g}, {RHO_RANGE[1]:g}]")
+    coverage.add_argument("--out", default="out/coverage", help="output folder for coverage.json and coverage.png")
+
     room = commands.add_parser("real-room", help="real data: three calibrated views of a room fused through the "
                                                  "depth grid; the calibration error and the fusion margin it needs")
     room.add_argument("--out", default="out/real-room", help="output folder for plots and summary.json")
@@ -223,6 +240,10 @@ def main(argv=None) -> int:
             from depthguard import _warmup
 
             return _warmup.main()
+        if args.command == "coverage":
+            from depthguard.experiments import coverage
+
+            return coverage.main(args.rig, robot=args.robot, trajectory=args.trajectory, rho=args.rho, out=args.out)
         if args.command == "fusion-workcell":
             from depthguard.experiments import fusion_workcell
 
