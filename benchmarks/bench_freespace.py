@@ -12,9 +12,12 @@ voxels. Per frame:
   a layer of them (the distances alone), against our distance transform alone on the same voxels; the ratio is
   scipy's time over ours.
 
-Medians, because this machine is noisy.
+Medians, because this machine is noisy. With numba's OpenMP threading layer, a worker thread that has gone to sleep
+between two calls takes milliseconds to wake on some virtual machines (8 ms on the development VM, for every parallel
+region); ``OMP_WAIT_POLICY=ACTIVE`` keeps the workers spinning, which shows the kernels' own time with 2 threads:
 
     .venv/bin/python benchmarks/bench_freespace.py [--repeats 5]
+    OMP_WAIT_POLICY=ACTIVE .venv/bin/python benchmarks/bench_freespace.py
 """
 
 from __future__ import annotations
@@ -73,8 +76,10 @@ def main(argv=None) -> None:
     images = free_images(cams)
     threads_available = numba.config.NUMBA_NUM_THREADS
     thread_counts = [n for n in (1, 2) if n <= threads_available]
-    print(f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} before the run (above the number of cores, "
-          "other processes share them and the 2-thread figures mean little)\n")
+    seen_free_voxels(VoxelBox([0, 0, 1], [0.1, 0.1, 1.1], 0.1), cams[:1], images[:1])  # starts numba's threads
+    print(f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} before the run (when it exceeds the number "
+          f"of cores, other processes share them and the 2-thread figures mean little); numba threading layer "
+          f"{numba.threading_layer()}, OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY', 'unset')}\n")
 
     print(f"seen_free_voxels: 640x480 cameras, a {np.subtract(BOX[1], BOX[0]).tolist()} m box, margin 1 cm, pad 1 "
           f"pixel; median of {args.repeats} ms per frame")
