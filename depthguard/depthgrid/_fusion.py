@@ -207,12 +207,14 @@ class FusedFrames:
                       self._unchecked_block_min, config.BLOCK_SIZE, camera.fx, camera.fy, camera.cx, camera.cy, z_min,
                       z_max)
             near_inside = (config.NEAR_PLANE_EPSILON, config.INSIDE_TOLERANCE)
-            cells = (grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets, self._eroded, self._sizes,
-                     self._z_near, self._margin, self._cells, self._memory, self._free_run, config.FUSION_ROW_CHUNKS)
+            state = _kernels.GridState(grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets,
+                                       self._eroded, self._sizes, self._z_near, self._margin, self._cells,
+                                       *self._memory, self._free_run)
             with parallel_chunksize(1):
                 _kernels.fused_query_points(points_camera, float(rho), *common, config.AGGREGATES.index(aggregate),
-                                            unseen == "occupied", *near_inside, config.MIN_DIRECTION_NORM, *cells,
-                                            distance, direction_camera, count, invalid_count, flags, unchecked)
+                                            unseen == "occupied", *near_inside, config.MIN_DIRECTION_NORM, state,
+                                            config.FUSION_ROW_CHUNKS, distance, direction_camera, count,
+                                            invalid_count, flags, unchecked)
         stale = Flag.STALE_CAMERA if self._stale else Flag(0)
         # The region's depths [Z - rho, Z + rho], within the camera's range, that the grid does not span.
         z = points_camera[:, 2]

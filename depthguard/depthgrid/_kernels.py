@@ -15,6 +15,8 @@ pixel q of that footprint saw beyond the cell: free[j][q] >= the cell's largest 
 free[j][q] is j's measured depth minus its noise margin (0 where j measured nothing).
 """
 
+from collections import namedtuple
+
 import numpy as np
 from numba import prange
 
@@ -34,6 +36,17 @@ from depthguard._frustum_kernels import (
     usable_rho,
 )
 from depthguard._jit import kernel
+
+#: What the fused kernels need of the depth grid and its per-frame state, passed as one record (numba compiles a
+#: namedtuple of arrays and scalars like separate arguments). d_min, delta_d (metres), n_cells: the grid's cells
+#: along each principal pixel; corners (n_sec, H+1, W+1, 3), offsets (n_sec, 3): the map (DepthGridMap); eroded
+#: (n_sec, h, w) float32: each secondary's free depths eroded by the footprint pad; sizes (n_sec, 2) int64: their
+#: (width, height); z_near (n_sec,): their nearest valid depth; margin: metres a secondary must see beyond a cell;
+#: cells (H, W, n_cells) uint8: the cells' classes so far; mem_free (free voxels, uint8) and mem_geometry (float64):
+#: the free-space memory (:func:`remembered_cells`; zero-sized for none; two fields, not a nested tuple, which
+#: numba's parallel loops do not take); free_run (H, W) int64: one run of cells known free per pixel.
+GridState = namedtuple("GridState", "d_min delta_d n_cells corners offsets eroded sizes z_near margin cells mem_free "
+                                    "mem_geometry free_run")
 
 
 @kernel(inline=True)
@@ -207,7 +220,7 @@ CLASSIFY_RUN = 8  # cells classified together: neighbours share a face, projecte
 
 
 @kernel()
-def classify_run(u, v, k_a, k_b, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin, cells, memory):
+def classify_run(u, v, k_a, k_b, grid):
     """Classify cells k_a..k_b (at most 64) of principal pixel (u, v) into cells[v, u, k]: 1 when some secondary
     camera saw through the whole cell, else 3 when the free-space memory (``memory``, :func:`remembered_cells`)
     certifies every voxel the cell touches, else 2 (occupied, or hidden from every camera). Each face between two cells
@@ -217,6 +230,8 @@ def classify_run(u, v, k_a, k_b, d_min, delta_d, corners, offsets, eroded, sizes
     faces' corners and its largest depth at one of them (depth is linear along each corner ray), so if the camera
     saw beyond that over that box, it saw through every cell, and the per-cell tests would all agree. Behind the
     robot, where a secondary camera sees the room far beyond, that settles a run with one test."""
+    d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
+        free_run = grid
     n = k_b - k_a + 1
     everything = _ALL if n == 64 else (np.uint64(1) << np.uint64(n)) - np.uint64(1)
     cleared = np.uint64(0)
@@ -244,7 +259,7 @@ def classify_run(u, v, k_a, k_b, d_min, delta_d, corners, offsets, eroded, sizes
             ok0, x_lo0, x_hi0, y_lo0, y_hi0, far0 = ok1, x_lo1, x_hi1, y_lo1, y_hi1, far1
     remembered = np.uint64(0)
     if cleared != everything:
-        remembered = remembered_cells(u, v, k_a, k_b, d_min, delta_d, memory)
+        remembered = remembered_cells(u, v, k_a, k_b, d_min, delta_d, (mem_free, mem_geometry))
     for i in range(k_b - k_a + 1):
         bit = np.uint64(1) << np.uint64(i)
         cells[v, u, k_a + i] = 1 if (cleared & bit) != np.uint64(0) else (
@@ -332,8 +347,7 @@ def _next_not_free(cells, v, u, k, k_end, step):
 
 
 @kernel()
-def occupied_in(u, v, k_lo, k_hi, highest, d_min, delta_d, corners, offsets, eroded, sizes, z_near, margin, cells,
-                memory):
+def occupied_in(u, v, k_lo, k_hi, highest, grid):
     """The highest (or lowest) occupied cell in k_lo..k_hi of principal pixel (u, v), -1 for none.
 
     cells[v, u, k] caches each cell's class for the frame: 0 unknown, 1 free (seen), 2 occupied, 3 free (remembered:
@@ -342,6 +356,8 @@ def occupied_in(u, v, k_lo, k_hi, highest, d_min, delta_d, corners, offsets, ero
     control points may classify the same cell at once; each writes the same byte, a function of this frame's images
     alone, so whichever write lands, the cache holds the right class.
     """
+    d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
+        free_run = grid
     if k_lo > k_hi:
         return -1
     step = -1 if highest else 1
@@ -353,11 +369,9 @@ def occupied_in(u, v, k_lo, k_hi, highest, d_min, delta_d, corners, offsets, ero
             return -1
         if cells[v, u, k] == 0:
             if highest:
-                classify_run(u, v, max(k - CLASSIFY_RUN + 1, k_end), k, d_min, delta_d, corners, offsets, eroded,
-                             sizes, z_near, margin, cells, memory)
+                classify_run(u, v, max(k - CLASSIFY_RUN + 1, k_end), k, grid)
             else:
-                classify_run(u, v, k, min(k + CLASSIFY_RUN - 1, k_end), d_min, delta_d, corners, offsets, eroded,
-                             sizes, z_near, margin, cells, memory)
+                classify_run(u, v, k, min(k + CLASSIFY_RUN - 1, k_end), grid)
         if cells[v, u, k] == 2:
             return k
         k += step
@@ -402,21 +416,19 @@ def cell_index(z, d_min, delta_d, n_cells):
 
 
 @kernel(inline=True)
-def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, d_min, delta_d, corners, offsets, eroded, sizes, z_near,
-              margin, cells, memory, free_run):
+def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, grid):
     """:func:`nearest_confirmed`'s walk down and up from cell k_star (or from the ends of the known free run holding
     it) to the first occupied cell each way within k_lo..k_hi. Returns (k_left, k_right), -1 for none, or (-2, -2)
     when k_star's own cell is occupied. Records the free run found between them."""
+    d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
+        free_run = grid
     # np.bool_, not a literal True or False, for which numba would compile occupied_in twice.
-    if not in_run and occupied_in(u, v, k_star, k_star, np.bool_(False), d_min, delta_d, corners, offsets, eroded,
-                                  sizes, z_near, margin, cells, memory) >= 0:
+    if not in_run and occupied_in(u, v, k_star, k_star, np.bool_(False), grid) >= 0:
         return -2, -2
     down_from = run_lo - 1 if in_run else k_star - 1
     up_from = run_hi + 1 if in_run else k_star + 1
-    k_left = occupied_in(u, v, k_lo, down_from, np.bool_(True), d_min, delta_d, corners, offsets, eroded, sizes, z_near,
-                         margin, cells, memory)
-    k_right = occupied_in(u, v, up_from, k_hi, np.bool_(False), d_min, delta_d, corners, offsets, eroded, sizes,
-                          z_near, margin, cells, memory)
+    k_left = occupied_in(u, v, k_lo, down_from, np.bool_(True), grid)
+    k_right = occupied_in(u, v, up_from, k_hi, np.bool_(False), grid)
     # Everything between the two is free now.
     free_lo = k_left + 1 if k_left >= 0 else (min(k_lo, run_lo) if in_run else k_lo)
     free_hi = k_right - 1 if k_right >= 0 else (max(k_hi, run_hi) if in_run else k_hi)
@@ -425,8 +437,7 @@ def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, d_min, delta_d, 
 
 
 @kernel()
-def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, u, v, d_min, delta_d, n_cells,
-                      corners, offsets, eroded, sizes, z_near, margin, cells, memory, free_run):
+def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, u, v, grid):
     """The nearest occupied part of [lo, hi] along principal pixel (u, v)'s frustum, nearer than ``bound2``: the
     part [lo, certain_to] is occupied as it stands (a measured surface's own cell; certain_to <= lo for none), and so
     are the parts outside the grid [d_min, d_max], which no camera can check; the rest is candidate cells.
@@ -441,6 +452,8 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
     to z* to come nearer than bound2 are looked at. Returns (squared distance, z*), (inf, 0) if nothing occupied
     comes nearer than bound2.
     """
+    d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
+        free_run = grid
     if lo > hi:
         return np.inf, 0.0
     d_max = d_min + n_cells * delta_d
@@ -477,8 +490,7 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
         k_left = -1
         k_right = -1
     else:
-        k_left, k_right = _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, d_min, delta_d, corners,
-                                    offsets, eroded, sizes, z_near, margin, cells, memory, free_run)
+        k_left, k_right = _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, grid)
         if k_left == -2:  # z*'s own cell is occupied
             return d2, z
     # Down: the occupied cell found, else the part occupied as it stands below; up alike.
@@ -502,8 +514,7 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
 
 
 @kernel(inline=True)
-def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_from, bound2, d_min, delta_d, n_cells,
-                   corners, offsets, eroded, sizes, z_near, margin, cells, memory, free_run):
+def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_from, bound2, grid):
     """Squared distance from P to what is occupied along principal pixel (u, v) after fusion, its depth z*, and
     whether that came from a candidate of a pixel without a measurement. (inf, 0, False) if nothing nearer than
     ``bound2``.
@@ -511,6 +522,8 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
     zs, ze: the principal's possibly-occupied segment; ``certain``: it starts at a measured surface; blind_from:
     where the space behind the robot starts (after its body), inf for none.
     """
+    d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
+        free_run = grid
     z_far = Z + rho
     best2 = np.inf
     best_z = 0.0
@@ -524,17 +537,14 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
             else:  # case (iii): the surface's own cell is certain, the gray area behind it is a candidate
                 best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs,
                                                   surface_cell_end(zs, d_min, delta_d),
-                                                  min(ze, z_far), bound2, u, v, d_min, delta_d, n_cells, corners,
-                                                  offsets, eroded, sizes, z_near, margin, cells, memory, free_run)
+                                                  min(ze, z_far), bound2, u, v, grid)
         else:  # no measurement: the whole segment is a candidate
             best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs, zs, min(ze, z_far), bound2, u, v,
-                                              d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin,
-                                              cells, memory, free_run)
+                                              grid)
             from_invalid = best2 < np.inf
     if blind_from <= z_far:  # case (iv): behind the robot
         d2, z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, blind_from, blind_from, z_far, min(best2, bound2), u,
-                                  v, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin,
-                                  cells, memory, free_run)
+                                  v, grid)
         if d2 < best2:
             best2, best_z = d2, z
             from_invalid = False
@@ -551,14 +561,14 @@ N_ACC = 12
 
 @kernel()
 def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, certain, blind_from, fx, fy, cx, cy,
-               prune_min, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, memory,
-               free_run,
-               scratch, acc):
+               prune_min, grid, scratch, acc):
     """One control point P = (X, Y, Z) (metres, principal optical frame) against the rows v_first, v_first + v_step,
     ... <= v_last of its surveillance region (``spans``): what the principal camera says is possibly occupied and
     the secondary cameras do not clear. Writes into acc (N_ACC,) the count of contributing pixels, those from pixels
     without a measurement, whether P is inside, the sums of their distances and unit directions, and the nearest
     one (squared distance, pixel, depth, from a pixel without a measurement?). ``scratch`` (5, width) float64."""
+    d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
+        free_run = grid
     rho2 = rho_squared(rho)
     z_far = Z + rho
     d_max = d_min + n_cells * delta_d
@@ -628,8 +638,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
                 answered = cells[v, u, min(int((z - d_min) / delta_d), n_cells - 1)] == 2
             if not answered:
                 d2, z, from_invalid = pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, np.float64(z_end[v, u]),
-                                                     certain[v, u], bf, bound2, d_min, delta_d, n_cells, corners,
-                                                     offsets, eroded, sizes, z_near, margin, cells, memory, free_run)
+                                                     certain[v, u], bf, bound2, grid)
             if d2 >= rho2:
                 continue
             if d2 < best2 or (d2 == best2 and (v < best_v or (v == best_v and u < best_u))):
@@ -727,9 +736,7 @@ def fused_finish(X, Y, Z, aggregate, region, acc, fx, fy, cx, cy, inside_tol, mi
 @kernel(parallel=True)
 def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, unchecked_from, unchecked_block_min,
                        block, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, near_eps, inside_tol,
-                       min_direction, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells,
-                       memory,
-                       free_run, row_chunks, distance, direction, count, invalid_count, flags, unchecked):
+                       min_direction, grid, row_chunks, distance, direction, count, invalid_count, flags, unchecked):
     """Distances from the (n, 3) control points (metres, principal optical frame) to what the principal camera says
     is possibly occupied and the secondary cameras do not clear, aggregated as ``aggregate``; the fused counterpart
     of :func:`depthguard.depthspace._kernels.query_points`. Writes distance (n,), the unit direction (n, 3) (from
@@ -759,8 +766,7 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
         c = t % row_chunks
         fused_rows(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, int(region[i, 6]) + c,
                    int(region[i, 7]), row_chunks, spans[i], z_start, z_end, certain, blind_from, fx, fy, cx, cy,
-                   aggregate == AGG_MIN, d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin,
-                   cells, memory, free_run, scratch[t], acc[i, c])
+                   aggregate == AGG_MIN, grid, scratch[t], acc[i, c])
     for i in range(n):
         d, k, m, g = fused_finish(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], aggregate, region[i],
                                   acc[i], fx, fy, cx, cy, inside_tol, min_direction, direction[i])
