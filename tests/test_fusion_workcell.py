@@ -238,3 +238,21 @@ def test_main_writes_plots_and_summary(tmp_path, capsys, across):
     assert "tiny:" in capsys.readouterr().out
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["layouts"]["tiny"]["frames"] == 6
+
+
+def test_the_packaged_layouts_differ_only_where_they_say():
+    """scenario_b_four.yaml is scenario_b.yaml with two more cameras; scenario_b_four_tof.yaml is scenario_b_four.yaml
+    with every camera's noise model lower (time-of-flight class), and nothing else."""
+    from depthguard.simulation import default_workcell
+
+    paths = {p.name: p for p in fw.scene_paths(fw.SCENES + ("scenario_b_four_tof.yaml",))}
+    reference, four, tof = (dict(load_workcell(paths[n]).scene) if n != "scenario_b.yaml" else
+                            dict(default_workcell().scene) for n in ("scenario_b.yaml", "scenario_b_four.yaml",
+                                                                     "scenario_b_four_tof.yaml"))
+    ref_cams, four_cams, tof_cams = reference.pop("cameras"), four.pop("cameras"), tof.pop("cameras")
+    assert reference == four == tof
+    assert four_cams[:2] == ref_cams and [c["name"] for c in four_cams] == ["principal", "second", "third", "fourth"]
+    for a, b in zip(four_cams, tof_cams):
+        a, b = dict(a), dict(b)
+        assert b.pop("noise") == {"a": 0.001, "b": 0.0, "c": 0.0005, "k": 3.0} != a.pop("noise")
+        assert a == b
