@@ -8,8 +8,8 @@
 #
 # Setup: system packages (when missing, through apt-get), a virtual environment in .venv with depthguard installed
 # in editable mode with its test dependencies. It is skipped when pyproject.toml has not changed since the last run.
-# Then, every time, `depthguard warmup` compiles the numba kernels not cached yet (about two minutes after a fresh clone or
-# an upgrade of depthguard or numba; a few seconds when everything is cached), so that no query waits for them.
+# Then, every time, `depthguard warmup` compiles the numba kernels not cached yet (about two minutes after a fresh clone
+# or an upgrade of depthguard or numba; a few seconds when everything is cached), so that no query waits for them.
 set -euo pipefail
 cd "$(dirname "$0")"
 
