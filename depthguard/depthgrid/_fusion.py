@@ -203,18 +203,18 @@ class FusedFrames:
         unchecked = np.full(len(points_world), np.inf)
         if len(points_world):
             z_min, z_max = camera.depth_range
-            common = (principal.z_start, self._z_end, self._certain, self._blind_from, self._unchecked_from,
-                      self._unchecked_block_min, config.BLOCK_SIZE, camera.fx, camera.fy, camera.cx, camera.cy, z_min,
-                      z_max)
-            near_inside = (config.NEAR_PLANE_EPSILON, config.INSIDE_TOLERANCE)
+            view = _kernels.PrincipalView(principal.z_start, self._z_end, self._certain, self._blind_from,
+                                          self._unchecked_from, self._unchecked_block_min, config.BLOCK_SIZE,
+                                          camera.fx, camera.fy, camera.cx, camera.cy, z_min, z_max)
+            options = _kernels.QueryOptions(config.AGGREGATES.index(aggregate), unseen == "occupied",
+                                            config.NEAR_PLANE_EPSILON, config.INSIDE_TOLERANCE,
+                                            config.MIN_DIRECTION_NORM, config.FUSION_ROW_CHUNKS)
             state = _kernels.GridState(grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets,
                                        self._eroded, self._sizes, self._z_near, self._margin, self._cells,
                                        *self._memory, self._free_run)
+            out = _kernels.FusedOutput(distance, direction_camera, count, invalid_count, flags, unchecked)
             with parallel_chunksize(1):
-                _kernels.fused_query_points(points_camera, float(rho), *common, config.AGGREGATES.index(aggregate),
-                                            unseen == "occupied", *near_inside, config.MIN_DIRECTION_NORM, state,
-                                            config.FUSION_ROW_CHUNKS, distance, direction_camera, count,
-                                            invalid_count, flags, unchecked)
+                _kernels.fused_query_points(points_camera, float(rho), view, options, state, out)
         stale = Flag.STALE_CAMERA if self._stale else Flag(0)
         # The region's depths [Z - rho, Z + rho], within the camera's range, that the grid does not span.
         z = points_camera[:, 2]

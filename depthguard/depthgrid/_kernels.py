@@ -48,6 +48,22 @@ from depthguard._jit import kernel
 GridState = namedtuple("GridState", "d_min delta_d n_cells corners offsets eroded sizes z_near margin cells mem_free "
                                     "mem_geometry free_run")
 
+#: What the fused kernels need of the principal camera's frame, one record: its per-pixel arrays ((h, w) each, from
+#: :func:`principal_arrays`: z_start float32, z_end float32, certain uint8, blind_from float32, unchecked_from
+#: float32, and unchecked_block_min, their minima over blocks of ``block`` pixels), its intrinsics fx, fy, cx, cy
+#: (pixels) and its valid depth range z_min, z_max (metres).
+PrincipalView = namedtuple("PrincipalView", "z_start z_end certain blind_from unchecked_from unchecked_block_min block "
+                                            "fx fy cx cy z_min z_max")
+
+#: A fused query's options: aggregate (AGG_*), unseen_occupied (bool), near_eps, inside_tol, min_direction (the
+#: kernels' numerical tolerances, config.NEAR_PLANE_EPSILON, INSIDE_TOLERANCE, MIN_DIRECTION_NORM), row_chunks (each
+#: point's rows are split in this many interleaved tasks).
+QueryOptions = namedtuple("QueryOptions", "aggregate unseen_occupied near_eps inside_tol min_direction row_chunks")
+
+#: Where a fused query writes, for n points: distance (n,), direction (n, 3), count (n,), invalid_count (n,), flags
+#: (n,), unchecked (n,).
+FusedOutput = namedtuple("FusedOutput", "distance direction count invalid_count flags unchecked")
+
 
 @kernel(inline=True)
 def measured_free(raw, scale, z_min, z_max, m0, m1, m2):
@@ -560,8 +576,7 @@ N_ACC = 12
 
 
 @kernel()
-def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, certain, blind_from, fx, fy, cx, cy,
-               prune_min, grid, scratch, acc):
+def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, grid, scratch, acc):
     """One control point P = (X, Y, Z) (metres, principal optical frame) against the rows v_first, v_first + v_step,
     ... <= v_last of its surveillance region (``spans``): what the principal camera says is possibly occupied and
     the secondary cameras do not clear. Writes into acc (N_ACC,) the count of contributing pixels, those from pixels
@@ -569,6 +584,8 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
     one (squared distance, pixel, depth, from a pixel without a measurement?). ``scratch`` (5, width) float64."""
     d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
         free_run = grid
+    z_start, z_end, certain, blind_from = view.z_start, view.z_end, view.certain, view.blind_from
+    fx, fy, cx, cy = view.fx, view.fy, view.cx, view.cy
     rho2 = rho_squared(rho)
     z_far = Z + rho
     d_max = d_min + n_cells * delta_d
@@ -675,12 +692,13 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, z_start, z_end, cer
 
 
 @kernel()
-def fused_region(X, Y, Z, rho, unchecked_from, blind_from, certain, unchecked_block_min, block, width, height, fx, fy,
-                 cx, cy, z_min, z_max, unseen_occupied, near_eps, inside_tol, spans, region, out_direction):
+def fused_region(X, Y, Z, rho, view, unseen_occupied, near_eps, inside_tol, spans, region, out_direction):
     """The first step of one control point P's fused query: its surveillance region (``spans``, (height, 2) int64,
     as :func:`surveillance_region` fills it), written into region (8,): flags, P unseen?, unseen_d, nx, ny, nz,
     v_lo, v_hi (v_hi < v_lo: no rows to visit). Clears out_direction (3,). Returns the distance to the space between
     links that fusion takes for the robot and does not check (inf beyond rho)."""
+    height, width = view.z_start.shape
+    fx, fy, cx, cy, z_min, z_max = view.fx, view.fy, view.cx, view.cy, view.z_min, view.z_max
     f, unseen_here, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi = surveillance_region(
         X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_max, unseen_occupied, near_eps, inside_tol, spans,
         out_direction)
@@ -689,8 +707,9 @@ def fused_region(X, Y, Z, rho, unchecked_from, blind_from, certain, unchecked_bl
         # The space between links: the nearest of it, as the single camera finds its blind spot (blocks in rings
         # round P's pixel, skipped by their nearest start depth). (``certain`` stands in for its per-pixel "invalid"
         # array, whose answer is not used here.)
-        u2 = _nearest_in_blocks(X, Y, Z, rho, unchecked_from, blind_from, np.bool_(True), certain,
-                                unchecked_block_min, block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi, near_eps, spans)[0]
+        u2 = _nearest_in_blocks(X, Y, Z, rho, view.unchecked_from, view.blind_from, np.bool_(True), view.certain,
+                                view.unchecked_block_min, view.block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi, near_eps,
+                                spans)[0]
         if u2 < rho_squared(rho):
             unchecked = np.sqrt(u2)
     region[0] = f
@@ -705,10 +724,11 @@ def fused_region(X, Y, Z, rho, unchecked_from, blind_from, certain, unchecked_bl
 
 
 @kernel()
-def fused_finish(X, Y, Z, aggregate, region, acc, fx, fy, cx, cy, inside_tol, min_direction, out_direction):
+def fused_finish(X, Y, Z, aggregate, region, acc, view, inside_tol, min_direction, out_direction):
     """The last step of one control point P's fused query: the sums of its row tasks (acc, (row_chunks, N_ACC)),
     added in a fixed order, so that the answer does not depend on the threads' timing, and aggregated. region (8,):
     from :func:`fused_region`. Returns (distance, count, invalid_count, flags) and writes the direction."""
+    fx, fy, cx, cy = view.fx, view.fy, view.cx, view.cy
     f = int(region[0])
     if region[1] != 0.0:
         return 0.0, 1, 0, f
@@ -734,15 +754,14 @@ def fused_finish(X, Y, Z, aggregate, region, acc, fx, fy, cx, cy, inside_tol, mi
 
 
 @kernel(parallel=True)
-def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, unchecked_from, unchecked_block_min,
-                       block, fx, fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, near_eps, inside_tol,
-                       min_direction, grid, row_chunks, distance, direction, count, invalid_count, flags, unchecked):
+def fused_query_points(points_camera, rho, view, options, grid, out):
     """Distances from the (n, 3) control points (metres, principal optical frame) to what the principal camera says
     is possibly occupied and the secondary cameras do not clear, aggregated as ``aggregate``; the fused counterpart
-    of :func:`depthguard.depthspace._kernels.query_points`. Writes distance (n,), the unit direction (n, 3) (from
-    the obstacle towards P, principal optical frame), count, invalid_count and flags, and into unchecked (n,) the
-    distance to the space between links fusion did not check (inf beyond rho); ROBOT_BLIND_SPOT flags it when it
-    comes nearer than the distance.
+    of :func:`depthguard.depthspace._kernels.query_points`. ``view``: :class:`PrincipalView`; ``options``:
+    :class:`QueryOptions`; ``grid``: :class:`GridState`. Writes into ``out`` (:class:`FusedOutput`) distance (n,),
+    the unit direction (n, 3) (from the obstacle towards P, principal optical frame), count, invalid_count and flags,
+    and into unchecked (n,) the distance to the space between links fusion did not check (inf beyond rho);
+    ROBOT_BLIND_SPOT flags it when it comes nearer than the distance.
 
     Each point's region is split into ``row_chunks`` interleaved sets of rows, and the n * row_chunks tasks run in
     parallel: a point near much clutter does not leave the other threads idle. Their sums are then added in a fixed
@@ -750,26 +769,25 @@ def fused_query_points(points_camera, rho, z_start, z_end, certain, blind_from, 
     parallel loop's body twice.
     """
     n = points_camera.shape[0]
-    height, width = z_start.shape
+    height, width = view.z_start.shape
+    aggregate, unseen_occupied, near_eps, inside_tol, min_direction, row_chunks = options
+    distance, direction, count, invalid_count, flags, unchecked = out
     rho = usable_rho(rho)
     spans = np.empty((n, height, 2), dtype=np.int64)
     region = np.empty((n, 8))
     for i in prange(n):
-        unchecked[i] = fused_region(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, unchecked_from,
-                                    blind_from, certain, unchecked_block_min, block, width, height, fx, fy, cx, cy,
-                                    z_min, z_max, unseen_occupied, near_eps, inside_tol, spans[i], region[i],
-                                    direction[i])
+        unchecked[i] = fused_region(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, view,
+                                    unseen_occupied, near_eps, inside_tol, spans[i], region[i], direction[i])
     acc = np.empty((n, row_chunks, N_ACC))
     scratch = np.empty((n * row_chunks, 5, width))
     for t in prange(n * row_chunks):
         i = t // row_chunks
         c = t % row_chunks
         fused_rows(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, int(region[i, 6]) + c,
-                   int(region[i, 7]), row_chunks, spans[i], z_start, z_end, certain, blind_from, fx, fy, cx, cy,
-                   aggregate == AGG_MIN, grid, scratch[t], acc[i, c])
+                   int(region[i, 7]), row_chunks, spans[i], view, aggregate == AGG_MIN, grid, scratch[t], acc[i, c])
     for i in range(n):
         d, k, m, g = fused_finish(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], aggregate, region[i],
-                                  acc[i], fx, fy, cx, cy, inside_tol, min_direction, direction[i])
+                                  acc[i], view, inside_tol, min_direction, direction[i])
         distance[i] = d
         count[i] = k
         invalid_count[i] = m
