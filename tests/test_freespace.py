@@ -449,3 +449,40 @@ def test_kernels_run_as_python_with_jit_disabled():
     seen = eval(runs[0])[0]
     assert any(v for plane in seen for row in plane for v in row) and not all(
         v for plane in seen for row in plane for v in row)
+
+
+def test_surface_voxels_hold_the_measured_points_and_forget_makes_them_possibly_occupied():
+    """The monitor's hardening: the voxels that hold a surface a camera measures now (``surface_voxels``, each valid
+    pixel's measured point on its centre ray, the robot's pixels and holes left out) are forgotten (arrival -inf),
+    so the next update counts them where a person may be even when the memory remembered them free."""
+    from depthguard.freespace._near import surface_voxels
+
+    camera = dg.PinholeCamera("c", 32, 24, 26.0, 26.0, 15.5, 11.5, look_at([0.0, -0.4, 2.0], [0.0, 0.0, 0.0]),
+                              depth_range=(0.1, 5.0), noise=dg.NoiseModel.none())
+    box = VoxelBox([-1.0, -1.0, -0.2], [1.0, 1.0, 1.8], 0.1)
+    scene = [Box.from_bounds([-0.3, -0.3, 0.4], [0.3, 0.3, 0.6])]  # a slab whose top, z = 0.6, the camera sees
+    depth = dg.depth_image(render_depth(camera, scene), camera)
+    occupancy = dg.prepare_depth(depth, camera)
+    marked = np.zeros(box.shape, dtype=bool)
+    surface_voxels(box, camera, depth, occupancy, marked)
+    # The judge: every valid pixel's measured point, voxel by voxel.
+    expected = np.zeros(box.shape, dtype=bool)
+    for v in range(camera.height):
+        for u in range(camera.width):
+            d = float(depth.data[v, u])
+            if d > 0:
+                p = camera.T_world_camera @ np.array([(u - camera.cx) / camera.fx * d, (v - camera.cy) / camera.fy * d,
+                                                     d, 1.0])
+                i, j, k = np.floor((p[:3] - box.lo) / box.voxel).astype(int)
+                if 0 <= i < box.shape[0] and 0 <= j < box.shape[1] and 0 <= k < box.shape[2]:
+                    expected[i, j, k] = True
+    assert marked.any() and np.array_equal(marked, expected)
+    assert set(np.unique(np.nonzero(marked)[2])) <= {6, 7, 8}  # the slab, z 0.4-0.6 m: voxel layers 6-8
+    # Remembered free everywhere, then forgotten where a surface is seen now.
+    memory = FreeSpaceMemory(box, v_max=2.0)
+    memory.update(0.0, np.ones(box.shape, dtype=bool))
+    assert memory.free_at(0.0)[marked].all()
+    memory.forget(marked)
+    assert not memory.free_at(0.0)[marked].any() and memory.free_at(0.0)[~marked].any()
+    memory.update(0.01, np.zeros(box.shape, dtype=bool))
+    assert not memory.free_at(0.01)[marked].any()
