@@ -71,14 +71,15 @@ def surface_voxels(box, camera, depth, occupancy, out: np.ndarray) -> None:
                    np.asarray(box.lo, dtype=np.float64), float(box.voxel), out)
 
 
-@kernel()
+@kernel(parallel=True)
 def _mark_surfaces(raw, scale, z_start, invalid, fx, fy, cx, cy, R, t, lo, voxel, out):
     """out[voxel of (u, v)'s measured point] = True for every pixel with a valid measurement whose z_start is finite
-    (a surface, not the robot nor a hole)."""
+    (a surface, not the robot nor a hole). Rows in parallel: threads may mark the same voxel, and every write is the
+    same True."""
     h, w = raw.shape
     nx, ny, nz = out.shape
     inv = 1.0 / voxel
-    for v in range(h):
+    for v in prange(h):
         for u in range(w):
             if invalid[v, u] or not np.isfinite(z_start[v, u]):
                 continue
