@@ -111,6 +111,10 @@ class DistanceMonitor:
         self.memory = None
         if not isinstance(memory, bool):
             raise InputError(f"memory must be True or False, got {short_repr(memory)}", field="memory")
+        v_max = check_real(v_max, "v_max", minimum=0.0, above_minimum=True, maximum=config.COORDINATE_LIMIT,
+                           unit="metres/second", field="v_max")
+        memory_voxel = check_real(memory_voxel, "memory_voxel", minimum=0.0, above_minimum=True,
+                                  maximum=config.COORDINATE_LIMIT, unit="metres", field="memory_voxel")
         if memory and rig.workspace is not None and len(rig.cameras) > 1:  # only fused answers use it
             from depthguard.freespace import FreeSpaceMemory, VoxelBox
 

@@ -140,3 +140,11 @@ def test_the_plan_is_one_rule(stale_names, given, kind):
     if len(given) < 2:
         expected |= Flag.MISSING_CAMERA
     assert plan.absent == expected
+
+
+@pytest.mark.parametrize("option", [dict(v_max=float("nan")), dict(v_max=0.0), dict(v_max=-2.0), dict(v_max="2"),
+                                    dict(memory_voxel=float("inf")), dict(memory_voxel=0.0), dict(memory="yes")])
+def test_memory_options_are_checked_whether_or_not_the_rig_has_a_workspace(option):
+    for r in (rig("p", "s"), dg.Rig(rig("p", "s").cameras, principal="p", workspace=[[-1, -1, 0], [1, 1, 1.5]])):
+        with pytest.raises(dg.InputError, match=next(iter(option))):
+            dg.DistanceMonitor(r, **option)
