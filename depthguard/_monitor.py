@@ -369,8 +369,8 @@ class DistanceMonitor:
 
     def _remembered_free(self, usable: dict):
         """(free voxels, box) for FusedFrames: what the memory certifies free at the latest capture time of the
-        usable frames (None without memory). Keeps, for the flag, the part of it that no frame of the last update
-        saw free: ``self._free_now`` = (free, remembered only)."""
+        usable frames, or the memory's last update if that is later (None without memory). Keeps, for the flag,
+        ``self._free_now`` = (free, box, the part of free that no frame of the last update saw free)."""
         self._free_now = None
         if self.memory is None or self.memory.time is None:
             return None
