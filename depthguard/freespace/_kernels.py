@@ -307,19 +307,22 @@ def _envelope_slab(slab, lines, f, v, fv, zn, zd, out):
             slab[q, k] = lines[k, q]
 
 
+@kernel(inline=True)
+def _slab_scratch(n, nz):
+    """The work arrays of one slab's envelopes along an axis of n voxels (int64): its nz lines (nz, n), one line f
+    (n,), the envelope's v, fv, zn, zd (n + 2,) and the result out (n,), in :func:`_envelope_slab`'s order."""
+    return (np.empty((nz, n), dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n + 2, dtype=np.int64),
+            np.empty(n + 2, dtype=np.int64), np.empty(n + 2, dtype=np.int64), np.empty(n + 2, dtype=np.int64),
+            np.empty(n, dtype=np.int64))
+
+
 @kernel(parallel=True)
 def middle_axis(d2):
     """Pass 2: the lower envelope along the second axis, in place, one (ny, nz) slab per task. d2: int32."""
     nx, ny, nz = d2.shape
     for p in prange(nx):
         i = np.int64(p)
-        lines = np.empty((nz, ny), dtype=np.int64)
-        f = np.empty(ny, dtype=np.int64)
-        out = np.empty(ny, dtype=np.int64)
-        v = np.empty(ny + 2, dtype=np.int64)
-        fv = np.empty(ny + 2, dtype=np.int64)
-        zn = np.empty(ny + 2, dtype=np.int64)
-        zd = np.empty(ny + 2, dtype=np.int64)
+        lines, f, v, fv, zn, zd, out = _slab_scratch(ny, nz)
         _envelope_slab(d2[i], lines, f, v, fv, zn, zd, out)
 
 
@@ -329,13 +332,7 @@ def first_axis(d2):
     nx, ny, nz = d2.shape
     for p in prange(ny):
         j = np.int64(p)
-        lines = np.empty((nz, nx), dtype=np.int64)
-        f = np.empty(nx, dtype=np.int64)
-        out = np.empty(nx, dtype=np.int64)
-        v = np.empty(nx + 2, dtype=np.int64)
-        fv = np.empty(nx + 2, dtype=np.int64)
-        zn = np.empty(nx + 2, dtype=np.int64)
-        zd = np.empty(nx + 2, dtype=np.int64)
+        lines, f, v, fv, zn, zd, out = _slab_scratch(nx, nz)
         _envelope_slab(d2[:, j, :], lines, f, v, fv, zn, zd, out)
 
 
