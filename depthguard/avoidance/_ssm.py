@@ -1,0 +1,336 @@
+"""Speed and separation monitoring (SPEC section 9; ISO/TS 15066 with ISO 13855's human speeds and intrusion).
+
+The protective separation distance, metres, between a control point of the robot and an obstacle (a person) is
+
+    S_p = v_h (T_r + T_s) + v_r T_r + S_s + C + Z_d + Z_r
+
+- v_h: the human's approach speed, m/s (ISO 13855: 2.0 m/s when the separation is within 0.5 m, else 1.6 m/s);
+- T_r: the system's reaction time, seconds: the age of the depth data when the command is sent, plus computation,
+  plus one control cycle. The caller knows the data's age, so it is an argument of every call;
+- v_r: the robot's speed towards the obstacle, m/s (motion away counts as 0);
+- T_s, S_s: the robot's stopping time (seconds) and distance (metres). The robot is taken to decelerate uniformly
+  from v_r to rest in T_s, so S_s = v_r T_s / 2, plus a fixed ``stopping_distance_extra``;
+- C: the intrusion distance, metres, from the sensors' detection capability d (:func:`intrusion_distance`);
+- Z_d, Z_r: the sensing and the robot-position uncertainties, metres.
+
+:class:`SpeedSeparationMonitor` scales the commanded joint velocities by one factor k in [0, 1] so that each control
+point's speed towards its obstacle is at most what its reported distance allows (:func:`allowed_approach_speed`).
+Scaling the whole joint velocity keeps the commanded path and only slows the robot along it; a point moving away
+from its obstacle imposes nothing, so motion away is never slowed, and a robot whose motion approaches no obstacle
+is not slowed at all.
+
+Frames and units: world frame, metres, seconds, radians. Directions point from the obstacle towards the point (the
+way to move away), as in :class:`~depthguard.DistanceResult`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from depthguard.errors import InputError, check_real
+from depthguard.results import DistanceResult
+
+# ----------------------------------------------------------------------------------------------------------------
+# SSM defaults (ISO/TS 15066, ISO 13855). They belong in depthguard.config and will move there.
+
+#: The human's approach speed, m/s: ISO 13855's K = 1600 mm/s, and K = 2000 mm/s when the separation is at most
+#: 500 mm (a hand or arm within reach moves faster than walking).
+SSM_HUMAN_SPEED = 1.6
+SSM_HUMAN_SPEED_NEAR = 2.0
+SSM_NEAR_SEPARATION = 0.5
+#: The robot's stopping time, seconds (from its data sheet; 0.25 s is a typical category 1 stop of a light arm at
+#: moderate speed), and a fixed extra stopping distance, metres, on top of the uniform deceleration's v_r T_s / 2.
+SSM_STOPPING_TIME = 0.25
+SSM_STOPPING_DISTANCE_EXTRA = 0.0
+#: The sensors' detection capability d, metres: the smallest object they are sure to see (0.04 m: a hand).
+SSM_DETECTION_CAPABILITY = 0.04
+#: ISO 13855's intrusion distance: C = 8 (d - 14 mm) for 14 mm < d <= 40 mm, 0 for d <= 14 mm (a finger cannot
+#: reach in unseen), and 850 mm (an arm's reach) for coarser sensing.
+SSM_INTRUSION_SLOPE = 8.0
+SSM_INTRUSION_FINGER = 0.014
+SSM_INTRUSION_HAND = 0.040
+SSM_INTRUSION_REACH = 0.85
+#: The sensing uncertainty Z_d and the robot's position uncertainty Z_r, metres.
+SSM_SENSING_UNCERTAINTY = 0.05
+SSM_ROBOT_UNCERTAINTY = 0.01
+#: Before solving for the allowed speed, the distance is lowered by this fraction of max(1 m, distance), so that float
+#: rounding never makes the protective distance at the allowed (or scaled) speed exceed the distance (rounding is a
+#: few 1e-16 of it).
+SSM_ROUNDING = 1e-12
+#: A direction whose norm differs from 1 by more than this is refused (only the exact zero vector means unknown).
+SSM_UNIT_TOLERANCE = 1e-6
+#: Largest accepted value of each SSMParams field (a typo such as 16 for 1.6 is refused, not obeyed).
+SSM_MAXIMA = {"human_speed": 10.0, "human_speed_near": 10.0, "near_separation": 10.0, "stopping_time": 60.0,
+              "stopping_distance_extra": 10.0, "detection_capability": 1.0, "sensing_uncertainty": 10.0,
+              "robot_uncertainty": 10.0}
+_UNITS = {"human_speed": "m/s", "human_speed_near": "m/s", "stopping_time": "seconds"}
+
+
+def intrusion_distance(detection_capability: float) -> float:
+    """ISO 13855's intrusion distance C, metres, for sensors of detection capability d (metres, the smallest object
+    they are sure to detect): 0 for d <= 14 mm; 8 (d - 14 mm) for 14 mm < d <= 40 mm (0.208 m at 40 mm); 0.85 m (an
+    arm's reach) for d > 40 mm."""
+    d = check_real(detection_capability, "detection_capability", minimum=0.0,
+                   maximum=SSM_MAXIMA["detection_capability"], unit="metres", field="detection_capability")
+    if d <= SSM_INTRUSION_FINGER:
+        return 0.0
+    if d <= SSM_INTRUSION_HAND:
+        return SSM_INTRUSION_SLOPE * (d - SSM_INTRUSION_FINGER)
+    return SSM_INTRUSION_REACH
+
+
+@dataclass(frozen=True)
+class SSMParams:
+    """The parameters of speed and separation monitoring (see the module's docstring for the formula).
+
+    Attributes:
+        human_speed: v_h, m/s, when the separation is above ``near_separation``.
+        human_speed_near: v_h, m/s, when the separation is at most ``near_separation``; at least ``human_speed``.
+        near_separation: metres.
+        stopping_time: T_s, seconds, > 0.
+        stopping_distance_extra: metres, added to the stopping distance v_r T_s / 2.
+        detection_capability: d, metres (gives the intrusion distance C, :attr:`intrusion`).
+        sensing_uncertainty: Z_d, metres.
+        robot_uncertainty: Z_r, metres.
+
+    Every field is a finite number >= 0 and at most ``SSM_MAXIMA[field]``; :class:`~depthguard.errors.InputError`
+    naming the field otherwise.
+    """
+
+    human_speed: float = SSM_HUMAN_SPEED
+    human_speed_near: float = SSM_HUMAN_SPEED_NEAR
+    near_separation: float = SSM_NEAR_SEPARATION
+    stopping_time: float = SSM_STOPPING_TIME
+    stopping_distance_extra: float = SSM_STOPPING_DISTANCE_EXTRA
+    detection_capability: float = SSM_DETECTION_CAPABILITY
+    sensing_uncertainty: float = SSM_SENSING_UNCERTAINTY
+    robot_uncertainty: float = SSM_ROBOT_UNCERTAINTY
+
+    def __post_init__(self):
+        for f in fields(self):
+            value = check_real(getattr(self, f.name), f.name, minimum=0.0, maximum=SSM_MAXIMA[f.name],
+                               above_minimum=f.name == "stopping_time", unit=_UNITS.get(f.name, "metres"),
+                               field=f.name)
+            object.__setattr__(self, f.name, value)
+        if self.human_speed_near < self.human_speed:
+            raise InputError(f"human_speed_near ({self.human_speed_near:g} m/s) must be at least human_speed "
+                             f"({self.human_speed:g} m/s)", field="human_speed_near")
+
+    @property
+    def intrusion(self) -> float:
+        """C, metres: :func:`intrusion_distance` of ``detection_capability``."""
+        return intrusion_distance(self.detection_capability)
+
+
+# ------------------------------------------------------------------------------------------------- the formula
+
+
+def _fixed_part(params: SSMParams, reaction_time: float, separation) -> np.ndarray:
+    """S_p at v_r = 0: v_h (T_r + T_s) + extra + C + Z_d + Z_r, with v_h chosen by ``separation`` (None: near)."""
+    if separation is None:
+        v_h = params.human_speed_near
+    else:
+        v_h = np.where(separation <= params.near_separation, params.human_speed_near, params.human_speed)
+    return (v_h * (reaction_time + params.stopping_time) + params.stopping_distance_extra + params.intrusion
+            + params.sensing_uncertainty + params.robot_uncertainty)
+
+
+def _speed_slope(params: SSMParams, reaction_time: float) -> float:
+    """dS_p / dv_r, seconds: T_r (travel while reacting) + T_s / 2 (uniform deceleration)."""
+    return reaction_time + 0.5 * params.stopping_time
+
+
+def _protective(params, approach_speed, reaction_time, separation) -> np.ndarray:
+    return _fixed_part(params, reaction_time, separation) + \
+        np.maximum(approach_speed, 0.0) * _speed_slope(params, reaction_time)
+
+
+def _allowed(params, distance, reaction_time) -> np.ndarray:
+    finite = np.isfinite(distance)
+    d = np.where(finite, distance, 0.0)
+    room = d - _fixed_part(params, reaction_time, distance) - SSM_ROUNDING * np.maximum(d, 1.0)
+    return np.where(finite, np.maximum(room, 0.0) / _speed_slope(params, reaction_time), np.inf)
+
+
+# ------------------------------------------------------------------------------------------------- validation
+
+
+def _params(params) -> SSMParams:
+    if not isinstance(params, SSMParams):
+        raise InputError(f"params must be SSMParams, got {type(params).__name__}", field="params")
+    return params
+
+
+def _reaction_time(reaction_time) -> float:
+    return check_real(reaction_time, "reaction_time", minimum=0.0, unit="seconds", field="reaction_time")
+
+
+def _array(value, name: str, *, shape=None, allow_inf: bool = False, nonnegative: bool = False) -> np.ndarray:
+    """``value`` as a float64 array after checking its shape (a tuple, None for any dimension) and values."""
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be an array of real numbers", field=name) from None
+    if shape is not None and (array.ndim != len(shape) or
+                              any(want is not None and got != want for got, want in zip(array.shape, shape))):
+        wanted = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
+        raise InputError(f"{name} must have shape {wanted}, got {array.shape}", field=name)
+    bad = np.isnan(array) | (np.isinf(array) if not allow_inf else np.isneginf(array))
+    if bad.any():
+        raise InputError(f"{name} must be {'NaN-free and not -inf' if allow_inf else 'finite'}", field=name)
+    if nonnegative and (array < 0).any():
+        raise InputError(f"{name} must be >= 0 (metres)", field=name)
+    return array
+
+
+def _result(value):
+    return float(value) if np.ndim(value) == 0 else value
+
+
+# ------------------------------------------------------------------------------------------------- public API
+
+
+def protective_separation_distance(params: SSMParams, approach_speed, reaction_time: float, separation=None):
+    """S_p, metres (see the module's docstring).
+
+    Args:
+        params: :class:`SSMParams`.
+        approach_speed: v_r, m/s, the robot's speed towards the obstacle; a number or an array. Negative (moving
+            away) counts as 0.
+        reaction_time: T_r, seconds, >= 0.
+        separation: the current separation, metres (>= 0, inf allowed), a number or an array broadcast against
+            ``approach_speed``: it picks v_h (``human_speed_near`` when at most ``near_separation``, else
+            ``human_speed``). None: ``human_speed_near`` (conservative).
+
+    Returns:
+        a float when every argument is a number, else an array of the broadcast shape, metres.
+    """
+    params = _params(params)
+    reaction_time = _reaction_time(reaction_time)
+    speed = _array(approach_speed, "approach_speed")
+    if separation is not None:
+        separation = _array(separation, "separation", allow_inf=True, nonnegative=True)
+        try:
+            np.broadcast_shapes(speed.shape, separation.shape)
+        except ValueError:
+            raise InputError(f"separation's shape {separation.shape} does not broadcast against approach_speed's "
+                             f"{speed.shape}", field="separation") from None
+    return _result(_protective(params, speed, reaction_time, separation))
+
+
+def allowed_approach_speed(params: SSMParams, distance, reaction_time: float):
+    """The largest approach speed v_r >= 0, m/s, with S_p(v_r) <= distance, v_h chosen with separation = distance:
+
+        v_r = (distance - v_h (T_r + T_s) - extra - C - Z_d - Z_r) / (T_r + T_s / 2)
+
+    0 when even v_r = 0 does not fit; inf where the distance is inf (nothing within rho). The distance is lowered by
+    ``SSM_ROUNDING`` max(1 m, distance) first, so that S_p at the answer never exceeds the distance after rounding.
+
+    Args:
+        params: :class:`SSMParams`.
+        distance: metres, >= 0 (inf allowed): a number or an (m,) array (any shape works).
+        reaction_time: T_r, seconds, >= 0.
+
+    Returns:
+        m/s, a float for a number, else an array of ``distance``'s shape.
+    """
+    params = _params(params)
+    reaction_time = _reaction_time(reaction_time)
+    distance = _array(distance, "distance", allow_inf=True, nonnegative=True)
+    return _result(_allowed(params, distance, reaction_time))
+
+
+@dataclass(frozen=True, eq=False)
+class SSMVerdict:
+    """One control step's speed and separation verdict for m control points. The command to send is ``factor * dq``.
+
+    Attributes:
+        factor: k in [0, 1], the fraction of the commanded joint velocities allowed.
+        approach_speed: (m,) float64, m/s, each point's speed towards its obstacle under the unscaled command
+            (negative: moving away; the whole speed where the direction is unknown).
+        allowed_speed: (m,) float64, m/s, :func:`allowed_approach_speed` of each point's distance (inf: nothing
+            within rho).
+        protective_distance: (m,) float64, metres, S_p at each point's scaled approach speed ``factor *
+            approach_speed`` (separation = its distance). At most the distance wherever that speed is > 0.
+        limiting: index of the point that set ``factor``, or -1 when the factor is 1.
+    """
+
+    factor: float
+    approach_speed: np.ndarray
+    allowed_speed: np.ndarray
+    protective_distance: np.ndarray
+    limiting: int
+
+
+class SpeedSeparationMonitor:
+    """Speed and separation monitoring of a robot's control points (see the module's docstring).
+
+    Args:
+        params: :class:`SSMParams` (default: ``SSMParams()``).
+    """
+
+    def __init__(self, params: SSMParams | None = None):
+        self.params = _params(SSMParams() if params is None else params)
+
+    def speed_factor(self, result_or_distances, directions, jacobians, dq, reaction_time: float, *,
+                     check: bool = True) -> SSMVerdict:
+        """The factor k in [0, 1] for the commanded joint velocities ``dq``: the largest k with
+        k v_i <= allowed_approach_speed(D_i) for every control point i, where v_i = -direction_i . (J_i dq) is the
+        point's speed towards its obstacle.
+
+        - A point moving away (v_i <= 0) imposes nothing: motion away is never slowed.
+        - A point with distance inf (nothing within rho) imposes nothing.
+        - A point with a finite distance and the zero direction (inside an obstacle, unseen space, or directions that
+          cancel out) has an unknown way to its obstacle: its whole speed |J_i dq| counts as approaching.
+
+        Args:
+            result_or_distances: a :class:`~depthguard.DistanceResult` of the m control points (its ``distance``
+                and ``direction`` are used; pass ``directions=None``), or (m,) float64 distances, metres, >= 0,
+                inf when nothing is within rho.
+            directions: (m, 3) float64, world frame, unit vectors from the obstacle towards the point, or the zero
+                vector (unknown); None with a DistanceResult.
+            jacobians: (m, 3, n) float64, the control points' positional Jacobians, world frame, metres per rad
+                (per metre for prismatic joints).
+            dq: (n,) float64, the commanded joint velocities, rad/s (m/s for prismatic joints).
+            reaction_time: T_r, seconds, >= 0: the data's age when the command is sent + computation + one control
+                cycle.
+            check: False skips the validation (the caller guarantees float64 arrays of those shapes and values).
+
+        Returns:
+            :class:`SSMVerdict`; send ``verdict.factor * dq``.
+        """
+        params = self.params
+        if isinstance(result_or_distances, DistanceResult):
+            if directions is not None:
+                raise InputError("directions must be None when a DistanceResult is given (its direction is used)",
+                                 field="directions")
+            distances, directions = result_or_distances.distance, result_or_distances.direction
+        else:
+            distances = result_or_distances
+        if check:
+            reaction_time = _reaction_time(reaction_time)
+            distances = _array(distances, "distances", shape=(None,), allow_inf=True, nonnegative=True)
+            m = len(distances)
+            directions = _array(directions, "directions", shape=(m, 3))
+            norms = np.linalg.norm(directions, axis=1)
+            if np.any((norms != 0.0) & (np.abs(norms - 1.0) > SSM_UNIT_TOLERANCE)):
+                raise InputError("directions must be unit vectors or the zero vector (unknown)", field="directions")
+            jacobians = _array(jacobians, "jacobians", shape=(m, 3, None))
+            dq = _array(dq, "dq", shape=(jacobians.shape[2],))
+        velocity = np.einsum("mkn,n->mk", jacobians, dq)  # (m, 3) m/s, world frame
+        approach = -np.einsum("mk,mk->m", directions, velocity)
+        finite = np.isfinite(distances)
+        unknown = finite & ~directions.any(axis=1)
+        approach = np.where(unknown, np.linalg.norm(velocity, axis=1), approach)
+
+        allowed = _allowed(params, distances, reaction_time)
+        approaching = finite & (approach > 0.0)
+        with np.errstate(divide="ignore", over="ignore"):
+            ratio = np.where(approaching, allowed / np.where(approaching, approach, 1.0), np.inf)
+        limiting = int(np.argmin(ratio)) if len(ratio) and ratio.min() < 1.0 else -1
+        factor = float(ratio[limiting]) if limiting >= 0 else 1.0
+        protective = _protective(params, factor * approach, reaction_time, distances)
+        return SSMVerdict(factor=factor, approach_speed=approach, allowed_speed=allowed,
+                          protective_distance=protective, limiting=limiting)
