@@ -332,3 +332,16 @@ FREESPACE_ROUNDING = 1e-12
 #: seen_free_voxels tests blocks of this many voxels a side whole first, then their halves, down to single voxels
 #: (a power of 2): where a camera sees a whole block free, its voxels cost nothing more.
 FREESPACE_BLOCK = 8
+
+# ------------------------------------------------------------------------------------------ avoidance (SPEC 9)
+#: The papers' avoidance parameters (2015 paper section 5.3): rho 0.4 m, the end-effector's largest repulsive speed
+#: V_max 1.5 m/s and the shape factor alpha 5 of the repulsive speed and of the risk function.
+AVOID_V_MAX = 1.5
+AVOID_ALPHA = 5.0
+#: Joint accelerations (rad/s^2, or m/s^2 for prismatic joints) when the caller gives none: URDF has no acceleration
+#: limits. 10 rad/s^2 is below what the KUKA iiwa and the Franka Panda (15 rad/s^2) allow.
+JOINT_ACCELERATION = 10.0
+#: Damped least squares (Nakamura and Hanafusa; Chiaverini): damping lambda^2 = DLS_LAMBDA_MAX^2 (1 - (s/eps)^2)
+#: when the smallest singular value s of the task Jacobian is below eps = DLS_EPSILON, else none.
+DLS_EPSILON = 0.04
+DLS_LAMBDA_MAX = 0.04

@@ -164,6 +164,29 @@ def cosine_from_intensity(intensity: np.ndarray, label: np.ndarray, albedo: np.n
     return np.where(label >= 0, np.clip(cosine, 0.0, 1.0), np.float32(0.0)).astype(np.float32)
 
 
+def sense(workcell: Workcell, scene: SceneRenderer, truth: TruthComputer, part_names: dict, q: np.ndarray, t: float,
+          index: int, seed: int) -> SimFrame:
+    """What every camera of ``workcell`` captures at time ``t`` (seconds) with the robot at ``q`` ((n,) rad) and the
+    people and objects where their scripts put them: frame ``index``, the sensor noise drawn from
+    ``numpy.random.default_rng([seed, index])``. ``scene``: the workcell's :class:`SceneRenderer`; ``truth``: its
+    :class:`TruthComputer`; ``part_names``: obstacle name -> its parts' names (``workcell.part_names``)."""
+    robot = workcell.robot
+    obstacles = workcell.obstacles_at(t)
+    instances = scene.instances(robot.link_poses(q, check=False), obstacles)
+    rng = np.random.default_rng([int(seed), int(index)])
+    depth, exact, intensity, labels = {}, {}, {}, {}
+    for camera in workcell.all_cameras():
+        result = scene.render(camera, instances)
+        labels[camera.name] = result.label
+        if camera.name in workcell.rig.cameras:
+            exact[camera.name] = result.depth
+            data = simulate_depth(result.depth, scene.cosine(result), camera, workcell.sensors[camera.name], rng)
+            depth[camera.name] = depth_image(data, camera, timestamp=t)
+        intensity[camera.name] = simulate_intensity(result.intensity, workcell.intensity_noise[camera.name], rng)
+    return SimFrame(index=index, time=t, joints=q, depth=depth, depth_exact=exact, intensity=intensity,
+                    label=labels, truth=truth(q, obstacles, part_names))
+
+
 def simulate(workcell: Workcell, seed: int | None = None, frames: Iterable[int] | None = None,
              renderer: Renderer | None = None) -> Iterator[SimFrame]:
     """Simulate the episode frame by frame: a generator of :class:`SimFrame`.
@@ -183,30 +206,13 @@ def simulate(workcell: Workcell, seed: int | None = None, frames: Iterable[int] 
     for i in indices:
         if not 0 <= i < workcell.n_frames:
             raise InputError(f"frame {i} is outside the episode (0 .. {workcell.n_frames - 1})", field="frames")
-    robot = workcell.robot
-    truth = TruthComputer(robot)
+    truth = TruthComputer(workcell.robot)
     part_names = {name: workcell.part_names(name) for name in workcell.obstacle_names}
     scene = SceneRenderer(workcell, renderer)
     try:
         for i in indices:
             t = i / workcell.rate
-            q = workcell.joints_at(t)
-            obstacles = workcell.obstacles_at(t)
-            instances = scene.instances(robot.link_poses(q, check=False), obstacles)
-            rng = np.random.default_rng([int(seed), i])
-            depth, exact, intensity, labels = {}, {}, {}, {}
-            for camera in workcell.all_cameras():
-                result = scene.render(camera, instances)
-                labels[camera.name] = result.label
-                if camera.name in workcell.rig.cameras:
-                    exact[camera.name] = result.depth
-                    data = simulate_depth(result.depth, scene.cosine(result), camera, workcell.sensors[camera.name],
-                                          rng)
-                    depth[camera.name] = depth_image(data, camera, timestamp=t)
-                intensity[camera.name] = simulate_intensity(result.intensity, workcell.intensity_noise[camera.name],
-                                                            rng)
-            yield SimFrame(index=i, time=t, joints=q, depth=depth, depth_exact=exact, intensity=intensity,
-                           label=labels, truth=truth(q, obstacles, part_names))
+            yield sense(workcell, scene, truth, part_names, workcell.joints_at(t), t, i, seed)
     finally:
         scene.release()
 

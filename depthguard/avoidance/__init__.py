@@ -1,0 +1,25 @@
+"""Collision avoidance from the monitor's distances (SPEC section 9): the papers' repulsive velocity and joint
+velocity bounds with saturation in the null space, and speed and separation monitoring (ISO/TS 15066)."""
+
+from depthguard.avoidance._controller import (
+    AvoidanceCommand,
+    AvoidanceController,
+    AvoidanceParams,
+    damped_pinv,
+    repulsive_speed,
+    risk,
+    sns,
+)
+from depthguard.avoidance._limits import JointLimits, reachable
+
+__all__ = [
+    "AvoidanceCommand",
+    "AvoidanceController",
+    "AvoidanceParams",
+    "JointLimits",
+    "damped_pinv",
+    "reachable",
+    "repulsive_speed",
+    "risk",
+    "sns",
+]
