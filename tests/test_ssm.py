@@ -143,7 +143,7 @@ def test_allowed_speed_inf_and_scalar():
 
 
 def test_moving_away_is_never_slowed():
-    monitor = SpeedSeparationMonitor()
+    monitor = SpeedSeparationMonitor(rho=np.inf)
     directions, J, dq = one_point([1.0, 0.0, 0.0], [2.0, 0.0, 0.0])  # away from the obstacle at 2 m/s
     for D in (0.0, 0.01, 0.3, 2.0):
         verdict = monitor.speed_factor(np.array([D]), directions, J, dq, 0.1)
@@ -152,7 +152,7 @@ def test_moving_away_is_never_slowed():
 
 
 def test_tangential_motion_is_not_slowed():
-    monitor = SpeedSeparationMonitor()
+    monitor = SpeedSeparationMonitor(rho=np.inf)
     directions, J, dq = one_point([1.0, 0.0, 0.0], [0.0, 1.0, 0.5])
     verdict = monitor.speed_factor(np.array([0.01]), directions, J, dq, 0.1)
     assert verdict.factor == 1.0 and verdict.approach_speed[0] == 0.0
@@ -160,7 +160,7 @@ def test_tangential_motion_is_not_slowed():
 
 def test_approaching_inside_the_protective_distance_stops():
     p = SSMParams()
-    monitor = SpeedSeparationMonitor(p)
+    monitor = SpeedSeparationMonitor(p, rho=np.inf)
     directions, J, dq = one_point([1.0, 0.0, 0.0], [-0.05, 0.0, 0.0])
     D = sp_by_hand(p, 0.0, 0.1, 0.9) - 1e-6
     verdict = monitor.speed_factor(np.array([D]), directions, J, dq, 0.1)
@@ -170,7 +170,7 @@ def test_approaching_inside_the_protective_distance_stops():
 
 def test_factor_one_half():
     p = SSMParams()
-    monitor = SpeedSeparationMonitor(p)
+    monitor = SpeedSeparationMonitor(p, rho=np.inf)
     v, T_r = 1.0, 0.1
     D = distance_for_speed(p, v / 2, T_r)  # 0.9405 m
     directions, J, dq = one_point([1.0, 0.0, 0.0], [-v, 0.0, 0.0])
@@ -184,7 +184,7 @@ def test_factor_one_half():
 
 def test_two_points_take_the_minimum():
     p = SSMParams()
-    monitor = SpeedSeparationMonitor(p)
+    monitor = SpeedSeparationMonitor(p, rho=np.inf)
     T_r = 0.05
     D = np.array([distance_for_speed(p, 0.5, T_r), distance_for_speed(p, 0.25, T_r)])  # each allows factor 0.5, 0.25
     directions = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0]])
@@ -200,7 +200,7 @@ def test_two_points_take_the_minimum():
 
 
 def test_inf_distance_imposes_nothing():
-    monitor = SpeedSeparationMonitor()
+    monitor = SpeedSeparationMonitor(rho=np.inf)
     directions, J, dq = one_point([1.0, 0.0, 0.0], [-3.0, 0.0, 0.0])
     verdict = monitor.speed_factor(np.array([np.inf]), directions, J, dq, 0.1)
     assert verdict.factor == 1.0 and verdict.limiting == -1 and verdict.allowed_speed[0] == np.inf
@@ -210,7 +210,7 @@ def test_inf_distance_imposes_nothing():
 
 def test_unknown_direction_counts_the_whole_speed():
     p = SSMParams()
-    monitor = SpeedSeparationMonitor(p)
+    monitor = SpeedSeparationMonitor(p, rho=np.inf)
     T_r = 0.1
     D = distance_for_speed(p, 0.5, T_r)
     _, J, dq = one_point([0.0, 0.0, 0.0], [0.0, 0.6, 0.8])  # |velocity| = 1 m/s
@@ -227,7 +227,7 @@ def test_unknown_direction_counts_the_whole_speed():
 
 def test_distance_result_is_accepted():
     p = SSMParams()
-    monitor = SpeedSeparationMonitor(p)
+    monitor = SpeedSeparationMonitor(p, rho=np.inf)
     D = np.array([distance_for_speed(p, 0.5, 0.1), 0.2, np.inf])
     directions = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     rng = np.random.default_rng(1)
@@ -245,7 +245,7 @@ def test_distance_result_is_accepted():
 
 
 def test_no_points():
-    verdict = SpeedSeparationMonitor().speed_factor(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 7)),
+    verdict = SpeedSeparationMonitor(rho=np.inf).speed_factor(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 7)),
                                                     np.ones(7), 0.1)
     assert verdict.factor == 1.0 and verdict.limiting == -1 and verdict.approach_speed.shape == (0,)
 
@@ -297,7 +297,7 @@ def test_random_cases_keep_the_separation():
     stats = {"stopped": 0, "slowed": 0, "free": 0}
     for _ in range(1000):
         p, T_r, J, dq, directions, truth, reported = random_case(rng)
-        monitor = SpeedSeparationMonitor(p)
+        monitor = SpeedSeparationMonitor(p, rho=np.inf)
         verdict = monitor.speed_factor(reported, directions, J, dq, T_r)
         k = verdict.factor
         v = approach_by_hand(J, dq, directions, reported)
@@ -355,7 +355,7 @@ def test_bad_reaction_time(reaction_time):
     p = SSMParams()
     args = good_args()
     args[4] = reaction_time
-    calls = [lambda: SpeedSeparationMonitor(p).speed_factor(*args),
+    calls = [lambda: SpeedSeparationMonitor(p, rho=np.inf).speed_factor(*args),
              lambda: protective_separation_distance(p, 0.1, reaction_time),
              lambda: allowed_approach_speed(p, 1.0, reaction_time)]
     for call in calls:
@@ -382,7 +382,7 @@ def test_bad_params_relations():
         SSMParams(human_speed=2.5)  # faster far than near
     assert info.value.field == "human_speed_near"
     with pytest.raises(InputError) as info:
-        SpeedSeparationMonitor({"human_speed": 1.6})
+        SpeedSeparationMonitor({"human_speed": 1.6}, rho=0.4)
     assert info.value.field == "params"
     with pytest.raises(InputError) as info:
         protective_separation_distance(None, 0.1, 0.1)
@@ -418,7 +418,7 @@ def test_bad_speed_factor_arrays(index, value, field):
     args = good_args()
     args[index] = value
     with pytest.raises(InputError) as info:
-        SpeedSeparationMonitor().speed_factor(*args)
+        SpeedSeparationMonitor(rho=np.inf).speed_factor(*args)
     assert info.value.field == field
 
 
@@ -433,3 +433,22 @@ def test_bad_formula_arrays():
         with pytest.raises(InputError) as info:
             call()
         assert info.value.field == field
+
+
+def test_nothing_within_rho_counts_as_rho_from_anywhere():
+    """The monitor says only that nothing is within rho: SSM must take the obstacle at rho, direction unknown."""
+    p = SSMParams()
+    rho = 0.9
+    J = np.zeros((1, 3, 2))
+    J[0, 0, 0] = 1.0  # joint 0 moves the point along +x at 1 m/s per rad/s
+    dq = np.array([1.0, 0.0])
+    allowed = allowed_approach_speed(p, rho, 0.05)
+    for direction in ([1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]):  # ignored: unknown beyond rho
+        verdict = SpeedSeparationMonitor(p, rho=rho).speed_factor(np.array([np.inf]), np.array([direction]), J, dq,
+                                                                  0.05)
+        assert verdict.factor == pytest.approx(min(1.0, allowed / 1.0))
+    # below the protective distance at standstill, a rho that small stops every motion
+    assert SpeedSeparationMonitor(p, rho=0.4).speed_factor(np.array([np.inf]), np.zeros((1, 3)), J, dq,
+                                                           0.05).factor == 0.0
+    with pytest.raises(InputError):
+        SpeedSeparationMonitor(p, rho=0.0)

@@ -11,13 +11,27 @@ from depthguard.avoidance._controller import (
     sns,
 )
 from depthguard.avoidance._limits import JointLimits, reachable
+from depthguard.avoidance._ssm import (
+    SpeedSeparationMonitor,
+    SSMParams,
+    SSMVerdict,
+    allowed_approach_speed,
+    intrusion_distance,
+    protective_separation_distance,
+)
 
 __all__ = [
     "AvoidanceCommand",
     "AvoidanceController",
     "AvoidanceParams",
     "JointLimits",
+    "SSMParams",
+    "SSMVerdict",
+    "SpeedSeparationMonitor",
+    "allowed_approach_speed",
     "damped_pinv",
+    "intrusion_distance",
+    "protective_separation_distance",
     "reachable",
     "repulsive_speed",
     "risk",

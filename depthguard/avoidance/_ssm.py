@@ -25,6 +25,8 @@ way to move away), as in :class:`~depthguard.DistanceResult`.
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -269,10 +271,16 @@ class SpeedSeparationMonitor:
 
     Args:
         params: :class:`SSMParams` (default: ``SSMParams()``).
+        rho: metres, the rho of the distances' monitor (required): a distance of inf says only that nothing is
+            within rho, so it counts as rho, with an unknown direction. Choose rho above the protective separation
+            distance at the robot's speed, or the robot is slowed whenever it moves. ``inf`` only for distances
+            known at any range (such as exact ones).
     """
 
-    def __init__(self, params: SSMParams | None = None):
+    def __init__(self, params: SSMParams | None = None, *, rho: float):
         self.params = _params(SSMParams() if params is None else params)
+        self.rho = check_real(rho, "rho", minimum=0.0, above_minimum=True, unit="metres", field="rho") \
+            if not (isinstance(rho, (int, float)) and rho == math.inf) else math.inf
 
     def speed_factor(self, result_or_distances, directions, jacobians, dq, reaction_time: float, *,
                      check: bool = True) -> SSMVerdict:
@@ -281,7 +289,8 @@ class SpeedSeparationMonitor:
         point's speed towards its obstacle.
 
         - A point moving away (v_i <= 0) imposes nothing: motion away is never slowed.
-        - A point with distance inf (nothing within rho) imposes nothing.
+        - A point with distance inf (nothing within rho) counts as at rho with an unknown direction (its whole
+          speed approaching); with ``rho = inf`` it imposes nothing.
         - A point with a finite distance and the zero direction (inside an obstacle, unseen space, or directions that
           cancel out) has an unknown way to its obstacle: its whole speed |J_i dq| counts as approaching.
 
@@ -319,6 +328,10 @@ class SpeedSeparationMonitor:
                 raise InputError("directions must be unit vectors or the zero vector (unknown)", field="directions")
             jacobians = _array(jacobians, "jacobians", shape=(m, 3, None))
             dq = _array(dq, "dq", shape=(jacobians.shape[2],))
+        beyond = ~np.isfinite(distances)
+        if beyond.any() and math.isfinite(self.rho):  # nothing within rho: at least rho, from anywhere
+            distances = np.where(beyond, self.rho, distances)
+            directions = np.where(beyond[:, None], 0.0, directions)
         velocity = np.einsum("mkn,n->mk", jacobians, dq)  # (m, 3) m/s, world frame
         approach = -np.einsum("mk,mk->m", directions, velocity)
         finite = np.isfinite(distances)

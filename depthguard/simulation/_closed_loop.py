@@ -1,0 +1,246 @@
+"""The avoidance loop in simulated time (issue 9; SPEC section 9): cameras at the workcell's rate, control at 500 Hz.
+
+Per control step k (t = k dt):
+
+1. when a camera period has passed, every camera captures the workcell with the robot where it **is** (its joints
+   under the loop's own command, not the scripted trajectory) and the people where their scripts put them; the set
+   goes to the :class:`~depthguard.DistanceMonitor`, self-filtered with the joints at its capture time, and becomes
+   usable ``latency`` seconds later (the time a real pipeline takes to prepare it);
+2. the control points' distances at the current joints, from the latest usable set (its age is the data's age);
+3. the command, by ``mode``:
+
+   - ``"none"``: the task alone (the joints' limits still hold);
+   - ``"avoid"``: the papers' avoidance (:class:`~depthguard.avoidance.AvoidanceController`);
+   - ``"ssm"``: the task, slowed by speed and separation monitoring
+     (:class:`~depthguard.avoidance.SpeedSeparationMonitor`), with the reaction time = the data's age + one control
+     step;
+
+4. the joints move by the command (Euler, within their limits).
+
+The task: the end-effector follows the workcell's scripted trajectory (its end-effector position over time, x_ref):
+desired velocity dx_ref/dt + ``gain`` (x_ref - x); the arm's redundancy pulls towards the scripted joints
+(``AvoidanceParams.posture_gain``), so the posture comes back after an avoidance.
+
+Exact ground truth (:class:`~depthguard.simulation.TruthComputer`: coal between the robot's collision meshes and the
+obstacles) every ``truth_every`` control steps and at every camera frame.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from depthguard import config
+from depthguard.avoidance import AvoidanceController, AvoidanceParams, JointLimits, reachable
+from depthguard.errors import InputError, check_real
+from depthguard.results import DistanceResult, Flag
+
+MODES = ("none", "avoid", "ssm")
+
+
+@dataclass(frozen=True)
+class LoopSettings:
+    """How the loop runs.
+
+    Attributes:
+        control_rate: Hz, control steps per second (the papers: 500).
+        latency: seconds from a set's capture to when its distances can be used.
+        gain: 1/s, the task's position feedback.
+        posture_gain: 1/s, the redundancy's pull towards the scripted joints.
+        truth_every: ground truth every this many control steps (and at every camera frame).
+        avoidance: the papers' parameters (its rho is the monitor's).
+        acceleration: rad/s^2, the joints' acceleration limits (URDF has none).
+        ssm: :class:`~depthguard.avoidance.SSMParams` of mode "ssm" (default: its defaults).
+        ssm_rho: metres, the monitor's rho in mode "ssm": above the protective separation distance (0.84 m at
+            standstill with the defaults), or nothing could be seen far enough away to move at all.
+        monitor: keyword arguments of :class:`~depthguard.DistanceMonitor` besides rig and robot.
+    """
+
+    control_rate: float = 500.0
+    latency: float = 1.0 / 30.0
+    gain: float = 5.0
+    posture_gain: float = 2.0
+    truth_every: int = 5
+    avoidance: AvoidanceParams = field(default_factory=AvoidanceParams)
+    acceleration: float = config.JOINT_ACCELERATION
+    ssm: object = None
+    ssm_rho: float = 1.0
+    monitor: dict = field(default_factory=lambda: dict(aggregate="hybrid", invalid="neighbors"))
+
+    def __post_init__(self):
+        check_real(self.control_rate, "control_rate", minimum=1.0, maximum=1e5, unit="Hz", field="control_rate")
+        check_real(self.latency, "latency", minimum=0.0, maximum=10.0, unit="seconds", field="latency")
+        check_real(self.gain, "gain", minimum=0.0, maximum=1e3, unit="1/s", field="gain")
+        check_real(self.posture_gain, "posture_gain", minimum=0.0, maximum=1e3, unit="1/s", field="posture_gain")
+        if isinstance(self.truth_every, bool) or not isinstance(self.truth_every, int) or self.truth_every < 1:
+            raise InputError("truth_every must be a whole number >= 1", field="truth_every")
+
+
+@dataclass(frozen=True, eq=False)
+class LoopLog:
+    """What happened, per control step (T steps, n joints, m control points; world frame, metres, seconds).
+
+    Attributes:
+        mode: "none", "avoid" or "ssm".
+        times: (T,) seconds.
+        q, dq: (T, n) joints and the command applied from that step.
+        ee, ee_ref: (T, 3) the end-effector control point and where the task wants it.
+        reported: (T, m) the monitor's distances (inf: nothing within rho).
+        flags: (T, m) int flag bits.
+        repulsive: (T, 3) m/s, the end-effector's repulsive velocity ("avoid").
+        scale: (T,) the fraction of the task's velocity commanded (avoidance's task scale, or SSM's speed factor).
+        data_age: (T,) seconds, the age of the frames the distances came from (inf before the first).
+        step_seconds: (T,) wall-clock seconds of each step's distances and command.
+        truth_steps: (K,) indices into the steps where the ground truth was computed.
+        truth: (K, m) metres, each control point to the nearest obstacle.
+        clearance: (K,) metres, robot collision meshes to the nearest obstacle (<= 0: a collision).
+        frames: how many camera sets were captured. wall_seconds: the whole run, wall clock.
+    """
+
+    mode: str
+    times: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray
+    ee: np.ndarray
+    ee_ref: np.ndarray
+    reported: np.ndarray
+    flags: np.ndarray
+    repulsive: np.ndarray
+    scale: np.ndarray
+    data_age: np.ndarray
+    step_seconds: np.ndarray
+    truth_steps: np.ndarray
+    truth: np.ndarray
+    clearance: np.ndarray
+    frames: int
+    wall_seconds: float
+
+    @property
+    def task_error(self) -> np.ndarray:
+        """(T,) metres between the end-effector and where the task wants it."""
+        return np.linalg.norm(self.ee - self.ee_ref, axis=1)
+
+
+def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None, start: float = 0.0,
+                    settings: LoopSettings | None = None, seed: int | None = None, progress: bool = False,
+                    renderer=None) -> LoopLog:
+    """Run ``workcell`` (:class:`~depthguard.simulation.Workcell`) in closed loop from ``start`` for ``duration``
+    seconds (default: to the episode's end) with ``mode`` ("none", "avoid", "ssm"). See the module's docstring."""
+    import depthguard as dg
+    from depthguard.simulation._episode import SceneRenderer, sense
+    from depthguard.simulation._truth import TruthComputer
+
+    if mode not in MODES:
+        raise InputError(f"mode must be one of {', '.join(MODES)}, got {mode!r}", field="mode")
+    settings = LoopSettings() if settings is None else settings
+    seed = workcell.seed if seed is None else seed
+    end = workcell.duration if duration is None else start + check_real(duration, "duration", minimum=0.0,
+                                                                        above_minimum=True, unit="seconds",
+                                                                        field="duration")
+    robot = workcell.robot
+    dt = 1.0 / settings.control_rate
+    steps = int(round((end - start) / dt))
+    camera_period = 1.0 / workcell.rate
+    params = replace(settings.avoidance, posture_gain=settings.posture_gain)
+    limits = JointLimits.from_robot(robot, acceleration=settings.acceleration)
+    controller = AvoidanceController(robot, params, limits)
+    ssm = None
+    if mode == "ssm":
+        from depthguard.avoidance import SpeedSeparationMonitor
+
+        ssm = SpeedSeparationMonitor(settings.ssm, rho=settings.ssm_rho)
+    monitor = dg.DistanceMonitor(workcell.rig, rho=settings.ssm_rho if mode == "ssm" else params.rho, robot=robot,
+                                 **settings.monitor)
+    truth = TruthComputer(robot)
+    part_names = {name: workcell.part_names(name) for name in workcell.obstacle_names}
+    m, n = len(robot.control_points), robot.n_joints
+    ee = robot.end_effector_index
+    nothing = _empty_result(m)
+
+    def reference(t):
+        q_ref = workcell.joints_at(min(max(t, 0.0), workcell.duration))
+        return robot.control_point_positions(q_ref, check=False)[ee], q_ref
+
+    q = workcell.joints_at(start).copy()
+    dq = np.zeros(n)
+    log = {key: [] for key in ("times", "q", "dq", "ee", "ee_ref", "reported", "flags", "repulsive", "scale",
+                               "data_age", "step_seconds")}
+    truth_steps, truth_rows, clearance = [], [], []
+    pending = []  # (usable from, PreparedSet, capture time)
+    current = None  # (PreparedSet, capture time)
+    next_frame = start
+    frames = 0
+    scene = SceneRenderer(workcell, renderer)
+    wall = time.perf_counter()
+    try:
+        iterator = range(steps)
+        if progress:
+            from tqdm import tqdm
+
+            iterator = tqdm(iterator, desc=f"closed loop, {mode}", unit="step", mininterval=1.0)
+        for k in iterator:
+            t = start + k * dt
+            captured = t >= next_frame - 1e-9
+            if captured:
+                frame = sense(workcell, scene, truth, part_names, q.copy(), t, int(round(t * workcell.rate)), seed)
+                prepared = monitor.prepare_set(frame.depth, joints=q.copy(), now=t)
+                pending.append((t + settings.latency, prepared, t))
+                next_frame += camera_period
+                frames += 1
+            while pending and pending[0][0] <= t + 1e-9:
+                _, prepared, captured_at = pending.pop(0)
+                current = (prepared, captured_at)
+            tick = time.perf_counter()
+            points, jacobians = robot.control_point_kinematics(q, check=False)
+            if current is None:
+                result = DistanceResult.blind(m, Flag.MISSING_CAMERA, {})  # nothing seen yet: distance 0
+                age = math.inf
+            else:
+                result = current[0].query(points, check=False)
+                age = t - current[1]
+            x_ref, q_ref = reference(t)
+            x_next, _ = reference(t + dt)
+            task = (x_next - x_ref) / dt + settings.gain * (x_ref - points[ee])
+            if mode == "avoid":
+                command = controller.command(result, q, task, dq, dt, jacobians=jacobians, posture=q_ref,
+                                             check=False)
+                dq_new, scale, repulsive = command.dq, command.scale, command.repulsive
+            else:
+                command = controller.command(nothing, q, task, dq, dt, jacobians=jacobians, posture=q_ref,
+                                             check=False)
+                dq_new, scale, repulsive = command.dq, command.scale, np.zeros(3)
+                if mode == "ssm":
+                    # Nothing seen yet: no reaction time can be stated, and the robot stays.
+                    scale = 0.0 if current is None else ssm.speed_factor(result, None, jacobians, dq_new,
+                                                                         age + dt).factor
+                    # The robot brakes as hard as its joints allow: the stopping time T_s of SSM covers it.
+                    low, high = reachable(np.minimum(dq_new * scale, 0.0), np.maximum(dq_new * scale, 0.0), dq,
+                                          limits.acceleration * dt)
+                    dq_new = np.clip(dq_new * scale, low, high)
+            log["step_seconds"].append(time.perf_counter() - tick)
+            if captured or k % settings.truth_every == 0:
+                g = frame.truth if captured else truth(q, workcell.obstacles_at(t), part_names)
+                truth_steps.append(k)
+                truth_rows.append(g.distance)
+                clearance.append(g.clearance)
+            for key, value in (("times", t), ("q", q.copy()), ("dq", dq_new), ("ee", points[ee]), ("ee_ref", x_ref),
+                               ("reported", result.distance), ("flags", [int(f) for f in result.flags]),
+                               ("repulsive", repulsive), ("scale", scale), ("data_age", age)):
+                log[key].append(value)
+            dq = dq_new
+            q = np.clip(q + dq * dt, limits.lower, limits.upper)
+    finally:
+        scene.release()
+    arrays = {key: np.array(value) for key, value in log.items()}
+    return LoopLog(mode=mode, truth_steps=np.array(truth_steps, dtype=np.int64), truth=np.array(truth_rows),
+                   clearance=np.array(clearance), frames=frames, wall_seconds=time.perf_counter() - wall, **arrays)
+
+
+def _empty_result(m: int) -> DistanceResult:
+    """A result with nothing within rho for m points: the task alone."""
+    return DistanceResult(distance=np.full(m, np.inf), direction=np.zeros((m, 3)), count=np.zeros(m, dtype=np.int64),
+                          invalid_count=np.zeros(m, dtype=np.int64), flags=tuple(Flag(0) for _ in range(m)),
+                          timestamps={}, cameras=(), invalid_pixels={}, blind_distance=np.full(m, np.inf))
