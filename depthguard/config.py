@@ -345,3 +345,36 @@ JOINT_ACCELERATION = 10.0
 #: when the smallest singular value s of the task Jacobian is below eps = DLS_EPSILON, else none.
 DLS_EPSILON = 0.04
 DLS_LAMBDA_MAX = 0.04
+
+# ------------------------------------------------------------------- speed and separation monitoring (SPEC 9)
+
+#: The human's approach speed, m/s: ISO 13855's K = 1600 mm/s, and K = 2000 mm/s when the separation is at most
+#: 500 mm (a hand or arm within reach moves faster than walking).
+SSM_HUMAN_SPEED = 1.6
+SSM_HUMAN_SPEED_NEAR = 2.0
+SSM_NEAR_SEPARATION = 0.5
+#: The robot's stopping time, seconds (from its data sheet; 0.25 s is a typical category 1 stop of a light arm at
+#: moderate speed), and a fixed extra stopping distance, metres, on top of the uniform deceleration's v_r T_s / 2.
+SSM_STOPPING_TIME = 0.25
+SSM_STOPPING_DISTANCE_EXTRA = 0.0
+#: The sensors' detection capability d, metres: the smallest object they are sure to see (0.04 m: a hand).
+SSM_DETECTION_CAPABILITY = 0.04
+#: ISO 13855's intrusion distance: C = 8 (d - 14 mm) for 14 mm < d <= 40 mm, 0 for d <= 14 mm (a finger cannot
+#: reach in unseen), and 850 mm (an arm's reach) for coarser sensing.
+SSM_INTRUSION_SLOPE = 8.0
+SSM_INTRUSION_FINGER = 0.014
+SSM_INTRUSION_HAND = 0.040
+SSM_INTRUSION_REACH = 0.85
+#: The sensing uncertainty Z_d and the robot's position uncertainty Z_r, metres.
+SSM_SENSING_UNCERTAINTY = 0.05
+SSM_ROBOT_UNCERTAINTY = 0.01
+#: Before solving for the allowed speed, the distance is lowered by this fraction of max(1 m, distance), so that float
+#: rounding never makes the protective distance at the allowed (or scaled) speed exceed the distance (rounding is a
+#: few 1e-16 of it).
+SSM_ROUNDING = 1e-12
+#: A direction whose norm differs from 1 by more than this is refused (only the exact zero vector means unknown).
+SSM_UNIT_TOLERANCE = 1e-6
+#: Largest accepted value of each SSMParams field (a typo such as 16 for 1.6 is refused, not obeyed).
+SSM_MAXIMA = {"human_speed": 10.0, "human_speed_near": 10.0, "near_separation": 10.0, "stopping_time": 60.0,
+              "stopping_distance_extra": 10.0, "detection_capability": 1.0, "sensing_uncertainty": 10.0,
+              "robot_uncertainty": 10.0}

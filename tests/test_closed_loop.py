@@ -2,13 +2,13 @@
 truth (coal between the robot's collision meshes and the person)."""
 
 from importlib import resources
+from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from depthguard.avoidance import JointLimits
-from depthguard.simulation import workcell_from_dict
+from depthguard.simulation import load_workcell
 from depthguard.simulation._closed_loop import LoopSettings, run_closed_loop
 
 #: The person reaches into the end-effector (no standoff): without avoidance the hand meets the robot at about 3.0 s.
@@ -18,13 +18,7 @@ CLEARANCE = 0.05  # metres the avoidance must keep between the robot's meshes an
 
 @pytest.fixture(scope="module")
 def reach_workcell():
-    data = yaml.safe_load(resources.files("depthguard.simulation").joinpath("scenario_b.yaml").read_text())
-    data["duration"] = 4.0
-    data["people"][0]["actions"] = [
-        {"walk": {"to": [1.1, 0.1], "speed": 1.4}},
-        {"reach": {"hand": "right", "target": "end_effector", "standoff": 0.0, "duration": 2.0, "ramp": 0.6}},
-    ]
-    return workcell_from_dict(data, base_dir=".")
+    return load_workcell(Path(str(resources.files("depthguard.simulation").joinpath("scenario_b_reach.yaml"))))
 
 
 @pytest.fixture(scope="module")
