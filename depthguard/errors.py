@@ -109,6 +109,33 @@ def check_real(value, name: str, *, minimum: float | None = None, maximum: float
     return number
 
 
+def real_vector(values, n: int, field_name: str, unit: str = ""):
+    """``values`` as a (new) float64 numpy array, refusing before conversion what is not real numbers (strings,
+    complex, bools, objects, masked arrays; numpy would turn "0.1" or 1+2j into a float silently): otherwise
+    :class:`InputError` naming ``field_name``. ``n`` is the expected count, for the message; the caller checks the
+    shape and finiteness. ``unit`` (e.g. "radians or metres") goes into the message."""
+    import numbers
+
+    import numpy as np
+
+    unit = f" ({unit})" if unit else ""
+    if isinstance(values, (str, bytes)) or isinstance(values, np.ma.MaskedArray):
+        raise InputError(f"expected {n} numbers, got {short_repr(values)}", field=field_name)
+    if isinstance(values, (list, tuple)):  # numpy would read [0.1, True] as floats: look at each value
+        for value in values:
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+                raise InputError(f"expected {n} real numbers{unit}, got {short_repr(value)} among them",
+                                 field=field_name)
+    try:
+        array = np.asarray(values)
+    except (TypeError, ValueError):
+        raise InputError(f"expected {n} numbers, got {short_repr(values)}", field=field_name) from None
+    if array.dtype.kind not in "fiu":
+        raise InputError(f"expected {n} real numbers{unit}, got {short_repr(values)} (dtype {array.dtype})",
+                         field=field_name)
+    return np.array(array, dtype=np.float64)
+
+
 def check_path(path, what: str, error: type[DepthguardError] | None = None, **context):
     """``path`` as a :class:`pathlib.Path` after checking that it is a file name: a ``str`` or ``os.PathLike``
     without NUL characters (``None``, a number or bytes are refused with ``error``, default :class:`InputError`)."""

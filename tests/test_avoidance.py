@@ -111,7 +111,8 @@ def test_joint_limits_come_from_the_urdf_and_are_checked(iiwa):
     np.testing.assert_array_equal(limits.lower, iiwa.lower)
     np.testing.assert_array_equal(limits.velocity, iiwa.velocity_limits)
     np.testing.assert_array_equal(limits.acceleration, 7.0)
-    for bad in (dict(acceleration=0.0), dict(acceleration=np.nan), dict(velocity=-1.0)):
+    for bad in (dict(acceleration=0.0), dict(acceleration=np.nan), dict(velocity=-1.0), dict(velocity="fast"),
+                dict(acceleration=[1.0, 2.0]), dict(velocity=np.inf), dict(acceleration=[[1.0] * 7])):
         with pytest.raises(dg.InputError):
             JointLimits.from_robot(iiwa, **bad)
 
@@ -184,6 +185,10 @@ def test_the_end_effector_moves_away_from_a_near_obstacle_with_no_task(iiwa):
     ("dt", dict(dt=0.0)),
     ("dt", dict(dt=np.nan)),
     ("dq_previous", dict(dq_previous=np.full(7, np.inf))),
+    ("q", dict(q=["0.1"] * 7)),
+    ("q", dict(q=[object()] * 7)),
+    ("q", dict(q=np.full(7, 1 + 2j))),
+    ("posture", dict(posture=np.full(7, 1e400))),
 ])
 def test_bad_inputs_name_the_field(iiwa, field, kwargs):
     controller = AvoidanceController(iiwa)

@@ -59,3 +59,21 @@ def test_the_loop_runs_cameras_at_their_rate_and_answers_from_frames_no_younger_
     assert np.all(log.data_age[seen] >= settings.latency - 1e-9)
     assert np.all(log.data_age[seen] <= settings.latency + 1.0 / reach_workcell.rate + 1e-9)
     assert np.all(log.reported[~seen] == 0.0)  # and meanwhile every distance is 0
+
+
+@pytest.mark.parametrize("field, kwargs", [
+    ("mode", dict(mode="fast")),
+    ("start", dict(start=float("nan"))),
+    ("start", dict(start=-1.0)),
+    ("duration", dict(duration=float("inf"))),
+    ("duration", dict(duration=1e300)),  # beyond the episode: refused, not run for ever
+    ("duration", dict(duration="1")),
+    ("seed", dict(seed=-1)),
+    ("seed", dict(seed="0")),
+])
+def test_bad_loop_arguments_are_refused_before_any_work(reach_workcell, field, kwargs):
+    from depthguard.errors import InputError
+
+    with pytest.raises(InputError) as error:
+        run_closed_loop(reach_workcell, **{"mode": "avoid", **kwargs})
+    assert error.value.field == field

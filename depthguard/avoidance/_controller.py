@@ -30,7 +30,7 @@ import numpy as np
 
 from depthguard import config
 from depthguard.avoidance._limits import JointLimits, reachable
-from depthguard.errors import InputError, check_real
+from depthguard.errors import InputError, check_real, real_vector, short_repr
 
 
 def repulsive_speed(distance, rho: float, v_max: float, alpha: float) -> np.ndarray:
@@ -267,8 +267,8 @@ def _task_scale(a, b, low, high, free) -> tuple[float, int]:
 
 
 def _vector(value, n: int, name: str) -> np.ndarray:
-    array = np.asarray(value, dtype=np.float64) if not isinstance(value, (str, bytes)) else None
-    if array is None or array.shape != (n,) or not np.all(np.isfinite(array)):
-        raise InputError(f"{name} must be {n} finite numbers, got {getattr(array, 'shape', type(value).__name__)}",
-                         field=name)
+    """(n,) finite real numbers as float64, else InputError naming ``name``."""
+    array = real_vector(value, n, name)
+    if array.shape != (n,) or not np.all(np.isfinite(array)):
+        raise InputError(f"{name} must be {n} finite numbers, got {short_repr(value)}", field=name)
     return array

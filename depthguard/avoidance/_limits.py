@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from depthguard import config
-from depthguard.errors import InputError
+from depthguard.errors import InputError, real_vector
 
 
 @dataclass(frozen=True, eq=False)
@@ -26,10 +26,10 @@ class JointLimits:
     acceleration: np.ndarray
 
     def __post_init__(self):
-        arrays = [np.array(getattr(self, name), dtype=np.float64) for name in ("lower", "upper", "velocity",
-                                                                               "acceleration")]
+        names = ("lower", "upper", "velocity", "acceleration")
+        arrays = [real_vector(getattr(self, name), np.size(self.lower), name) for name in names]
         n = arrays[0].shape
-        for name, array in zip(("lower", "upper", "velocity", "acceleration"), arrays):
+        for name, array in zip(names, arrays):
             if array.ndim != 1 or array.shape != n:
                 raise InputError(f"joint limits: {name} must be a vector of {n[0] if n else '?'} values, got shape "
                                  f"{array.shape}", field=name)
@@ -50,10 +50,10 @@ class JointLimits:
         ``velocity`` ((n,) or a number) instead; ``acceleration`` ((n,) or a number, default
         ``config.JOINT_ACCELERATION``)."""
         n = robot.n_joints
-        velocity = robot.velocity_limits if velocity is None else np.broadcast_to(np.asarray(velocity, float), (n,))
-        acceleration = config.JOINT_ACCELERATION if acceleration is None else acceleration
-        return cls(lower=robot.lower, upper=robot.upper, velocity=velocity,
-                   acceleration=np.broadcast_to(np.asarray(acceleration, dtype=np.float64), (n,)))
+        velocity = robot.velocity_limits if velocity is None else _per_joint(velocity, n, "velocity")
+        acceleration = _per_joint(config.JOINT_ACCELERATION if acceleration is None else acceleration, n,
+                                  "acceleration")
+        return cls(lower=robot.lower, upper=robot.upper, velocity=velocity, acceleration=acceleration)
 
     @property
     def n(self) -> int:
@@ -75,12 +75,11 @@ class JointLimits:
         low = -np.minimum.reduce([self.velocity, np.sqrt(2.0 * a * room_down), room_down / dt])
         return low, high
 
-    def velocity_box(self, q, dq_previous, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`position_velocity_box` cut to the velocities the acceleration limits reach in ``dt`` from
-        ``dq_previous`` ((n,)) (:func:`reachable`): where they do not meet, the joint decelerates as hard as it
-        can."""
-        low, high = self.position_velocity_box(q, dt)
-        return reachable(low, high, np.asarray(dq_previous, dtype=np.float64), self.acceleration * dt)
+
+def _per_joint(value, n: int, name: str) -> np.ndarray:
+    """A number (the same for every joint) or n numbers, as (n,) float64 (the shape is checked by JointLimits)."""
+    array = real_vector(value, n, name)
+    return np.full(n, float(array)) if array.ndim == 0 else array
 
 
 def reachable(low, high, dq_previous, step) -> tuple[np.ndarray, np.ndarray]:

@@ -15,7 +15,7 @@ import pinocchio as pin
 import trimesh
 
 from depthguard import config
-from depthguard.errors import InputError, RigError, RobotError, short_repr
+from depthguard.errors import InputError, RigError, RobotError, real_vector, short_repr
 from depthguard.robots._capsules import LinkCapsule, fit_capsule
 from depthguard.robots._urdf import UrdfDescription, collision_mesh, parse_urdf
 from depthguard.scenes import Capsule
@@ -391,7 +391,7 @@ class RobotModel:
                              field="joints")
         else:
             values = joints
-        q = _real_vector(values, self.n_joints, "joints")
+        q = real_vector(values, self.n_joints, "joints", "radians or metres")
         if q.shape != (self.n_joints,):
             raise InputError(f"expected {self.n_joints} values (one per joint: {', '.join(self.joint_names)}), got "
                              f"shape {q.shape}", field="joints")
@@ -417,7 +417,7 @@ class RobotModel:
     def _q(self, q, check: bool) -> np.ndarray:
         if not check:
             return np.ascontiguousarray(q, dtype=np.float64)
-        q = _real_vector(q, self.n_joints, "q")
+        q = real_vector(q, self.n_joints, "q", "radians or metres")
         if q.shape != (self.n_joints,):
             raise InputError(f"expected shape ({self.n_joints},) in the order of joint_names, got {q.shape}; build "
                              "it by name with joint_vector()", field="q")
@@ -487,26 +487,6 @@ class RobotModel:
     def __repr__(self) -> str:
         return (f"RobotModel(name={self.name!r}, joints={len(self.joint_names)}, links with geometry="
                 f"{len(self.link_names)}, control points={len(self.control_points)}, padding={self.padding:g})")
-
-
-def _real_vector(values, n: int, field_name: str) -> np.ndarray:
-    """``values`` as a float64 array, refusing before conversion what is not real numbers (strings, complex, bools,
-    objects, masked arrays): numpy would turn "0.1" or 1+2j into a float silently."""
-    if isinstance(values, (str, bytes)) or isinstance(values, np.ma.MaskedArray):
-        raise InputError(f"expected {n} numbers, got {short_repr(values)}", field=field_name)
-    if isinstance(values, (list, tuple)):  # numpy would read [0.1, True] as floats: look at each value
-        for value in values:
-            if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-                raise InputError(f"expected {n} real numbers (radians or metres), got {short_repr(value)} among them",
-                                 field=field_name)
-    try:
-        array = np.asarray(values)
-    except (TypeError, ValueError):
-        raise InputError(f"expected {n} numbers, got {short_repr(values)}", field=field_name) from None
-    if array.dtype.kind not in "fiu":
-        raise InputError(f"expected {n} real numbers (radians or metres), got {short_repr(values)} "
-                         f"(dtype {array.dtype})", field=field_name)
-    return np.array(array, dtype=np.float64)
 
 
 def _control_point(item) -> ControlPoint:

@@ -130,16 +130,17 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
     """Run ``workcell`` (:class:`~depthguard.simulation.Workcell`) in closed loop from ``start`` for ``duration``
     seconds (default: to the episode's end) with ``mode`` ("none", "avoid", "ssm"). See the module's docstring."""
     import depthguard as dg
-    from depthguard.simulation._episode import SceneRenderer, sense
+    from depthguard.simulation._episode import SceneRenderer, check_seed, sense
     from depthguard.simulation._truth import TruthComputer
 
     if mode not in MODES:
         raise InputError(f"mode must be one of {', '.join(MODES)}, got {mode!r}", field="mode")
     settings = LoopSettings() if settings is None else settings
-    seed = workcell.seed if seed is None else seed
-    end = workcell.duration if duration is None else start + check_real(duration, "duration", minimum=0.0,
-                                                                        above_minimum=True, unit="seconds",
-                                                                        field="duration")
+    seed = check_seed(workcell.seed if seed is None else seed)
+    start = check_real(start, "start", minimum=0.0, maximum=workcell.duration, unit="seconds", field="start")
+    end = workcell.duration if duration is None else start + check_real(
+        duration, "duration", minimum=0.0, maximum=workcell.duration - start, above_minimum=True, unit="seconds",
+        field="duration")
     robot = workcell.robot
     dt = 1.0 / settings.control_rate
     steps = int(round((end - start) / dt))
@@ -172,6 +173,7 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
     pending = []  # (usable from, PreparedSet, capture time)
     current = None  # (PreparedSet, capture time)
     next_frame = start
+    upcoming = reference(start)  # (end-effector, joints) the task wants at the step about to run
     frames = 0
     scene = SceneRenderer(workcell, renderer)
     wall = time.perf_counter()
@@ -201,8 +203,8 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
             else:
                 result = current[0].query(points, check=False)
                 age = t - current[1]
-            x_ref, q_ref = reference(t)
-            x_next, _ = reference(t + dt)
+            (x_ref, q_ref), upcoming = upcoming, reference(t + dt)  # each reference computed once
+            x_next = upcoming[0]
             task = (x_next - x_ref) / dt + settings.gain * (x_ref - points[ee])
             if mode == "avoid":
                 command = controller.command(result, q, task, dq, dt, jacobians=jacobians, posture=q_ref,

@@ -164,6 +164,13 @@ def cosine_from_intensity(intensity: np.ndarray, label: np.ndarray, albedo: np.n
     return np.where(label >= 0, np.clip(cosine, 0.0, 1.0), np.float32(0.0)).astype(np.float32)
 
 
+def check_seed(seed) -> int:
+    """The sensor noise's seed: a non-negative integer, else InputError (field "seed")."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"seed must be a non-negative integer, got {seed!r}", field="seed")
+    return int(seed)
+
+
 def sense(workcell: Workcell, scene: SceneRenderer, truth: TruthComputer, part_names: dict, q: np.ndarray, t: float,
           index: int, seed: int) -> SimFrame:
     """What every camera of ``workcell`` captures at time ``t`` (seconds) with the robot at ``q`` ((n,) rad) and the
@@ -199,9 +206,7 @@ def simulate(workcell: Workcell, seed: int | None = None, frames: Iterable[int] 
         renderer: a :class:`~depthguard.rendering.Renderer` to upload the meshes to (default: a new one, released
             when the generator finishes).
     """
-    seed = workcell.seed if seed is None else seed
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise InputError(f"seed must be a non-negative integer, got {seed!r}", field="seed")
+    seed = check_seed(workcell.seed if seed is None else seed)
     indices = range(workcell.n_frames) if frames is None else [int(i) for i in frames]
     for i in indices:
         if not 0 <= i < workcell.n_frames:
