@@ -12,6 +12,7 @@ import pytest
 from PIL import Image
 
 import depthguard as dg
+from cli_support import assert_refused, run_cli
 from depthguard import config
 from depthguard._points_io import load_points
 from depthguard.cli import main
@@ -61,18 +62,10 @@ def work(tmp_path_factory):
                 json=folder / "points.json", camera=camera, scene=scene)
 
 
-def run(argv, capsys):
-    """(exit status, stdout, stderr) of ``depthguard`` run in this process."""
-    try:
-        status = main([str(a) for a in argv])
-    except SystemExit as exc:  # argparse
-        status = exc.code
-    out, err = capsys.readouterr()
-    return status, out, err
 
 
 def distance_json(work, capsys, *extra, depth=None, points=None):
-    status, out, err = run(["distance", "--rig", work["rig"], "--depth", f"front={depth or work['png']}",
+    status, out, err = run_cli(["distance", "--rig", work["rig"], "--depth", f"front={depth or work['png']}",
                             "--points", points or work["csv"], "--json", *extra], capsys)
     assert status == 0, err
     assert err == ""
@@ -203,7 +196,7 @@ def test_empty_points_give_an_empty_array(work, capsys, tmp_path, content, name)
 
 
 def test_table_output(work, capsys):
-    status, out, err = run(["distance", "--rig", work["rig"], "--depth", f"front={work['png']}",
+    status, out, err = run_cli(["distance", "--rig", work["rig"], "--depth", f"front={work['png']}",
                             "--points", work["csv"], "--invalid", "free"], capsys)
     assert status == 0 and err == ""
     lines = out.splitlines()
@@ -304,7 +297,7 @@ BAD_CASE_NAMES = [
 @pytest.mark.parametrize("case", BAD_CASE_NAMES)
 def test_bad_input_gives_one_line_and_nonzero_exit(work, capsys, tmp_path, case):
     argv, needle = _bad_cases(work, tmp_path)[case]
-    status, out, err = run(argv, capsys)
+    status, out, err = run_cli(argv, capsys)
     assert status != 0
     assert out == ""
     assert "Traceback" not in err
@@ -338,7 +331,7 @@ def test_installed_command_runs_in_a_subprocess(work, capsys):
 
 
 def test_help_exits_zero(capsys):
-    status, out, _ = run(["distance", "--help"], capsys)
+    status, out, _ = run_cli(["distance", "--help"], capsys)
     assert status == 0
     assert "--rig" in out and "--points" in out
 
@@ -421,11 +414,7 @@ OPTION_CASES = ["rho inf", "rho 1e999", "rho -inf", "rho zero", "rho too large",
 @pytest.mark.parametrize("case", OPTION_CASES)
 def test_numeric_option_out_of_range_exits_2_naming_it(work, capsys, tmp_path, case):
     argv, option = _option_cases(work, tmp_path)[case]
-    status, out, err = run(argv, capsys)
-    assert status == 2, err
-    assert out == "" and "Traceback" not in err
-    assert err.startswith("depthguard: error: ") and err.count("\n") == 1
-    assert option in err
+    assert_refused(argv, capsys, option)
     assert not (tmp_path / "sim").exists() and not (tmp_path / "demo").exists() and not (tmp_path / "map.npz").exists()
 
 
@@ -453,5 +442,5 @@ def test_build_map_out_that_is_not_a_regular_file_is_refused(work, capsys, tmp_p
     fifo = tmp_path / "map.npz"
     os.mkfifo(fifo)
     for out in (fifo, tmp_path):
-        status, out_text, err = run(["build-map", "--rig", work["rig2"], "--out", out], capsys)
+        status, out_text, err = run_cli(["build-map", "--rig", work["rig2"], "--out", out], capsys)
         assert status == 2 and out_text == "" and "--out" in err and err.count("\n") == 1

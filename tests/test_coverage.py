@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import depthguard as dg
-from depthguard.cli import main
+from cli_support import assert_refused, run_cli
 from depthguard.experiments import coverage as cov
 from depthguard.robots import RobotModel, segment_distances
 from depthguard.scenes import Box, render_depth
@@ -228,18 +228,11 @@ def files(tmp_path_factory, robot):
     return folder
 
 
-def run(argv, capsys):
-    try:
-        status = main([str(a) for a in argv])
-    except SystemExit as exc:  # argparse
-        status = exc.code
-    out, err = capsys.readouterr()
-    return status, out, err
 
 
 def test_command_writes_the_picture_and_the_numbers(files, capsys, tmp_path, robot):
     out = tmp_path / "cov"
-    status, text, err = run(["coverage", "--rig", files / "rig.yaml", "--trajectory", files / "joint_states.csv",
+    status, text, err = run_cli(["coverage", "--rig", files / "rig.yaml", "--trajectory", files / "joint_states.csv",
                              "--out", out], capsys)
     assert status == 0, err
     assert (out / "coverage.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -281,11 +274,7 @@ BAD = ["rho too small", "rho too large", "rho nan", "no rig", "missing rig file"
 @pytest.mark.parametrize("case", BAD)
 def test_bad_arguments_exit_2_with_one_line(files, capsys, tmp_path, case):
     argv, needle = _bad_cases(files, tmp_path)[case]
-    status, out, err = run(argv, capsys)
-    assert status == 2, err
-    assert out == "" and "Traceback" not in err
-    assert err.startswith("depthguard: error: ") and err.count("\n") == 1
-    assert needle in err
+    assert_refused(argv, capsys, needle)
     assert not (tmp_path / "o").exists()
 
 

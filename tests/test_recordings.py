@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 
 import depthguard as dg
+from cli_support import assert_refused, run_cli
 from depthguard.cli import main
 from depthguard.depth import write_depth_png
 from depthguard.errors import DepthImageError, InputError, RigError
@@ -35,14 +36,6 @@ HEADER = ["time", "frame", "control_point", "x", "y", "z", "distance", "blind_di
 FRAMES = 3  # frames of the simulated episode (0.1 s at 30 Hz)
 
 
-def run(argv, capsys):
-    """(exit status, stdout, stderr) of ``depthguard`` run in this process."""
-    try:
-        status = main([str(a) for a in argv])
-    except SystemExit as exc:  # argparse
-        status = exc.code
-    out, err = capsys.readouterr()
-    return status, out, err
 
 
 def read_csv(path) -> list[list[str]]:
@@ -170,14 +163,14 @@ def test_bag_reads_back_equal_to_the_folder(episode, tmp_path):
 
 
 def test_simulate_bag_from_the_command_line(tmp_path, capsys):
-    status, out, err = run(["simulate", "--out", tmp_path / "sim", "--duration", str(2 / 30), "--bag"], capsys)
+    status, out, err = run_cli(["simulate", "--out", tmp_path / "sim", "--duration", str(2 / 30), "--bag"], capsys)
     assert status == 0, err
     assert "sim/bag" in out
     folder = open_recording(tmp_path / "sim")
     assert len(folder) == 2 and folder.rig.cameras["principal"].shape == (480, 640)
     assert_same_recording(folder, open_recording(tmp_path / "sim" / "bag"))
     # the bag folder exists now: a second run is refused before it simulates
-    status, out, err = run(["simulate", "--out", tmp_path / "sim", "--duration", str(1 / 30), "--bag"], capsys)
+    status, out, err = run_cli(["simulate", "--out", tmp_path / "sim", "--duration", str(1 / 30), "--bag"], capsys)
     assert status == 2 and err.count("\n") == 1 and "exists already" in err and out == ""
 
 
@@ -228,7 +221,7 @@ def test_replay_with_fixed_points(episode, workcell, tmp_path, capsys):
     points = tmp_path / "points.csv"
     points.write_text("x,y,z\n0.6,0.0,0.5\n0.3,-0.4,0.9\n5.0,5.0,5.0\n")
     out = tmp_path / "fixed.csv"
-    status, _, err = run(["replay", episode, "--out", out, "--points", points], capsys)
+    status, _, err = run_cli(["replay", episode, "--out", out, "--points", points], capsys)
     assert status == 0, err
     rows = read_csv(out)
     assert rows[1:] == expected_rows(episode, workcell, points)
@@ -238,7 +231,7 @@ def test_replay_with_fixed_points(episode, workcell, tmp_path, capsys):
 def test_replay_of_the_bag_equals_the_folder(episode, replayed, tmp_path, capsys):
     for source in (episode / "bag", episode / "bag" / "bag.mcap"):
         out = tmp_path / "bag.csv"
-        status, _, err = run(["replay", source, "--out", out], capsys)
+        status, _, err = run_cli(["replay", source, "--out", out], capsys)
         assert status == 0, err
         assert out.read_text() == replayed.read_text()
     # frames.csv rows in any order: sorted by time
@@ -249,7 +242,7 @@ def test_replay_of_the_bag_equals_the_folder(episode, replayed, tmp_path, capsys
     np.random.default_rng(3).shuffle(body)
     assert body != lines[1:]
     (shuffled / "frames.csv").write_text("\n".join([lines[0], *body]) + "\n")
-    status, _, err = run(["replay", shuffled, "--out", tmp_path / "shuffled.csv"], capsys)
+    status, _, err = run_cli(["replay", shuffled, "--out", tmp_path / "shuffled.csv"], capsys)
     assert status == 0, err
     assert (tmp_path / "shuffled.csv").read_text() == replayed.read_text()
 
@@ -263,7 +256,7 @@ def test_replay_gives_each_camera_its_own_joints(episode, tmp_path, capsys):
     times.update({("second", 0): 0.01, ("second", 1): 0.043333, ("second", 2): float(f"{2 / 30:.6f}")})
     rows = "".join(f"{camera},{i},{t!r}\n" for (camera, i), t in times.items())
     (folder / "frames.csv").write_text("camera,frame,time\n" + rows)
-    status, _, err = run(["replay", folder, "--out", tmp_path / "r.csv"], capsys)
+    status, _, err = run_cli(["replay", folder, "--out", tmp_path / "r.csv"], capsys)
     assert status == 0, err
     rows = read_csv(tmp_path / "r.csv")[1:]
     recording = open_recording(folder)  # its joints_at is checked against exact values above and below
@@ -290,7 +283,7 @@ def test_replay_gives_each_camera_its_own_joints(episode, tmp_path, capsys):
 
 
 def test_replay_json_summary(episode, replayed, tmp_path, capsys):
-    status, out, err = run(["replay", episode, "--out", tmp_path / "r.csv", "--json"], capsys)
+    status, out, err = run_cli(["replay", episode, "--out", tmp_path / "r.csv", "--json"], capsys)
     assert status == 0, err
     assert "replaying" in err  # the progress bar
     summary = json.loads(out)
@@ -314,12 +307,7 @@ def test_replay_errors_are_one_line(episode, tmp_path, capsys):
          ["x.yaml"]),
     ]
     for argv, words in cases:
-        status, out, err = run(argv, capsys)
-        assert status == 2, (argv, err)
-        assert out == "" and "Traceback" not in err
-        assert err.startswith("depthguard: error: ") and err.count("\n") == 1, err
-        for word in words:
-            assert word in err, (word, err)
+        assert_refused(argv, capsys, *words)
         assert not (tmp_path / "r.csv").exists() and not (tmp_path / "r.csv.partial").exists()
 
 
