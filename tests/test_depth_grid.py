@@ -222,11 +222,13 @@ def test_fused_kernel_equals_twin_behind_a_robot():
     assert fused.distance[3] <= truth[3] + 0.02
 
 
-def robot_scene_frames(width=80, height=60):
+def robot_scene_frames(width=80, height=60, torso=False, second=(0.0, 2.5, 1.4)):
     """A capsule arm filtered out of the principal frame (case iv), a hand behind it, a few holes: the rig, map,
-    principal frame, the second camera's free image and the principal's robot_far."""
+    principal frame, the second camera's free image and the principal's robot_far. ``torso``: a box between the
+    principal camera and the arm hides the arm's middle (a person in front of the robot). ``second``: where the second
+    camera stands (it looks at the arm)."""
     arm = [Capsule((0.0, 0.0, 0.0), (0.0, 0.0, 0.7), 0.08), Capsule((0.0, 0.0, 0.7), (0.3, 0.3, 0.9), 0.06)]
-    r = rig(width, height)
+    r = rig(width, height, second=second)
     p, s = r.cameras["p"], r.cameras["s"]
     padded = [Capsule(c.p0, c.p1, c.radius + 0.02) for c in arm]
     with Renderer() as renderer:
@@ -234,6 +236,8 @@ def robot_scene_frames(width=80, height=60):
         robot_near = renderer.render_depth(p, instances)
         robot_far = renderer.render_depth_max(p, instances)
     scene = ROOM + arm + [Sphere((-0.25, 0.05, 0.6), 0.05), Capsule((1.4, 0.3, 0.2), (1.4, 0.3, 1.5), 0.2)]
+    if torso:
+        scene = scene + [Box.from_bounds([1.1, -0.25, 0.3], [1.25, 0.1, 0.75])]
     depth = render_depth(p, scene)
     depth[np.random.default_rng(5).random(depth.shape) < 0.03] = 0
     principal = dg.prepare_depth(dg.depth_image(depth, p), p, robot_near=robot_near, robot_far=robot_far)
@@ -264,6 +268,103 @@ def test_cells_kept_for_the_frame_change_no_answer(aggregate):
     together = kept.distances(points, 0.4, aggregate)
     assert np.allclose(together.distance, fresh(points).distance, rtol=1e-12, atol=0)
     assert (kept._cells > 0).sum() > 100  # the cache was used
+
+
+BESIDE, BEHIND = (0.0, 2.5, 1.4), (-2.5, 0.6, 1.6)  # second cameras: beside the principal, behind the arm
+
+
+@pytest.mark.parametrize("aggregate, torso, second, size", [
+    ("hybrid", False, BESIDE, 80), ("hybrid", True, BESIDE, 80), ("hybrid", True, BESIDE, 160),
+    ("hybrid", True, BEHIND, 160), ("min", True, BEHIND, 160)])
+def test_later_queries_of_moving_points_equal_a_fresh_query(aggregate, torso, second, size):
+    """Later queries answer from the runs of cells earlier ones found free (``nearest_by_run``, ``nothing_known_near``:
+    the nearest occupied cell is the one just past a run's end, or nothing is in reach), without walking the cells.
+    Points that move a little between queries, as a robot's do between frames, in the shadow of a person in front of
+    the principal camera and behind the arm, get exactly a fresh FusedFrames' answer at every step; with the second
+    camera beside the principal (it clears the space between the torso and the arm), or behind the arm, where at
+    160x120 it clears the space right behind it (so that every cell in reach behind the arm is known free for some
+    pixels)."""
+    r, grid, principal, frees, robot_far, robot_near = robot_scene_frames(size, size * 3 // 4, torso=torso,
+                                                                          second=second)
+    if torso:  # the arm's middle is hidden: its gray area ends where the robot starts, its back is checked too
+        hidden = (robot_near > 0) & (principal.z_start < robot_near - 0.1)
+        assert hidden.sum() > 50
+    start = np.array([[0.0, 0.0, 0.35], [0.0, 0.0, 0.6], [0.15, 0.15, 0.8],  # on the arm
+                      [0.7, 0.2, 0.8], [0.9, 0.4, 0.5], [-0.4, 0.1, 0.6],  # between the person and the arm, behind it
+                      [0.3, -0.1, 0.45], [0.35, 0.05, 0.5], [0.25, -0.05, 0.55],  # just in front of the arm
+                      [0.95, -0.05, 0.5], [0.85, -0.1, 0.6], [1.0, 0.0, 0.4]])  # just behind the torso
+    kept = FusedFrames(grid, r, principal, frees, robot_far=robot_far, robot_near=robot_near)
+    for step in range(8):
+        points = start + step * np.array([0.004, -0.003, 0.002])
+        again = kept.distances(points, 0.4, aggregate)
+        alone = FusedFrames(grid, r, principal, frees, robot_far=robot_far, robot_near=robot_near).distances(
+            points, 0.4, aggregate)
+        assert np.array_equal(again.count, alone.count), step
+        np.testing.assert_allclose(again.distance, alone.distance, rtol=1e-12, atol=0, err_msg=str(step))
+        np.testing.assert_allclose(again.direction, alone.direction, rtol=0, atol=1e-12, err_msg=str(step))
+        assert again.flags == alone.flags
+    assert np.isfinite(alone.distance).sum() >= 3 and (alone.count > 1).sum() >= 3 or aggregate == "min"
+
+
+def test_nearest_by_run_equals_the_walk_on_random_pixels():
+    """``nearest_by_run`` (the answer from a pixel's known free run, one evaluation of g per end) against
+    ``nearest_confirmed`` (the walk over the cells, frustum_nearest on the occupied ones) on one pixel of a real
+    FusedFrames whose cell classes, free run, certain part and segment are drawn at random: wherever the run decides
+    the answer, both give the same squared distance and depth. Every branch is drawn: the cells just past the run's
+    ends, the certain part (a surface's own cell, and the grid's near end), and the grid's far end."""
+    from depthguard.depthgrid import _kernels as K
+
+    r, grid, principal, frees, robot_far, robot_near = robot_scene_frames(40, 30)
+    frames = FusedFrames(grid, r, principal, frees, robot_far=robot_far, robot_near=robot_near)
+    camera = r.cameras["p"]
+    rng = np.random.default_rng(11)
+    d_min, delta_d, n = grid.d_min, grid.delta_d, grid.n_cells
+    decided = dict(left_cell=0, right_cell=0, certain=0, grid_end=0, nothing=0)
+    for trial in range(3000):
+        u, v = int(rng.integers(0, 40)), int(rng.integers(0, 30))
+        cells = np.where(rng.random(n) < 0.3, 2, 1).astype(np.uint8)
+        run_lo = int(rng.integers(0, n))
+        run_hi = min(n - 1, run_lo + int(rng.integers(0, 40)))
+        cells[run_lo:run_hi + 1] = 1
+        frames._cells[v, u] = cells
+        runs = np.full(camera.shape, K.NO_FREE_RUN, dtype=np.int64)
+        runs[v, u] = (run_lo << 32) | run_hi
+        state = K.GridState(d_min, delta_d, n, frames._corners, frames._offsets, frames._eroded, frames._sizes,
+                            frames._z_near, frames._margin, frames._cells, *frames._memory, runs, runs.copy())
+        a0, a1 = (u - 0.5 - camera.cx) / camera.fx, (u + 0.5 - camera.cx) / camera.fx
+        b0, b1 = (v - 0.5 - camera.cy) / camera.fy, (v + 0.5 - camera.cy) / camera.fy
+        z_run = d_min + delta_d * rng.uniform(run_lo, run_hi + 1)
+        tx, ty = rng.uniform(a0 - 0.02, a1 + 0.02), rng.uniform(b0 - 0.02, b1 + 0.02)
+        Z = z_run + rng.normal(0, 0.02)
+        X, Y = tx * Z, ty * Z
+        lo = z_run - rng.uniform(0.0, 0.5) if rng.random() < 0.8 else d_min - rng.uniform(0, 0.1)
+        certain_to = lo + (rng.uniform(0, z_run - lo) if rng.random() < 0.5 else 0.0)
+        hi = z_run + rng.uniform(0.0, 0.5) if rng.random() < 0.9 else d_min + n * delta_d + rng.uniform(0, 0.2)
+        rho = 0.4
+        bound2 = rho * rho if rng.random() < 0.7 else rng.uniform(0.0001, 0.04)
+        d2, z = K.frustum_nearest(X, Y, Z, a0, a1, b0, b1, lo, hi)
+        if not d2 < bound2:
+            continue
+        got2, got_z, ok = K.nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, lo, certain_to, hi, bound2, u, v, d_min,
+                                           delta_d, n, frames._cells, runs)
+        if not ok:
+            continue
+        want2, want_z = K.nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, u, v, state, runs)
+        assert got2 == pytest.approx(want2, rel=1e-9, abs=1e-15), trial
+        if np.isfinite(want2):
+            assert got_z == pytest.approx(want_z, rel=0, abs=1e-9), trial
+            k = min(int((got_z - d_min) / delta_d), n - 1) if got_z >= d_min else -1
+            if got_z <= max(certain_to, min(d_min, hi) if lo < d_min else certain_to) and got_z < z:
+                decided["certain"] += 1
+            elif got_z >= d_min + n * delta_d:
+                decided["grid_end"] += 1
+            elif got_z < z:
+                decided["left_cell"] += 1
+            else:
+                decided["right_cell"] += 1
+        else:
+            decided["nothing"] += 1
+    assert all(count >= 10 for count in decided.values()), decided
 
 
 def test_threads_and_row_chunks_change_no_answer(monkeypatch):

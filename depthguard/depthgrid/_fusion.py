@@ -177,8 +177,10 @@ class FusedFrames:
         # The cells' classes so far, a byte each: 0 unknown, 1 free, 2 occupied. The zeroed pages come from the
         # operating system as they are first touched, so memory grows with the cells looked at, not with the grid.
         self._cells = np.zeros(camera.shape + (grid.n_cells,), dtype=np.uint8)
-        # Per pixel, one run of cells known free, to skip without reading them: (first << 32) | last.
+        # Per pixel, one run of cells known free in its gray area and one behind the robot, to skip without reading
+        # them: (first << 32) | last.
         self._free_run = np.full(camera.shape, _kernels.NO_FREE_RUN, dtype=np.int64)
+        self._behind_run = np.full(camera.shape, _kernels.NO_FREE_RUN, dtype=np.int64)
         self._memory = _NO_MEMORY if remembered is None else _memory_tuple(remembered, camera)
 
     def distances(self, points_world, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
@@ -211,7 +213,7 @@ class FusedFrames:
                                             config.MIN_DIRECTION_NORM, config.FUSION_ROW_CHUNKS)
             state = _kernels.GridState(grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets,
                                        self._eroded, self._sizes, self._z_near, self._margin, self._cells,
-                                       *self._memory, self._free_run)
+                                       *self._memory, self._free_run, self._behind_run)
             out = _kernels.FusedOutput(distance, direction_camera, count, invalid_count, flags, unchecked)
             with parallel_chunksize(1):
                 _kernels.fused_query_points(points_camera, float(rho), view, options, state, out)

@@ -44,9 +44,11 @@ from depthguard._jit import kernel
 #: (width, height); z_near (n_sec,): their nearest valid depth; margin: metres a secondary must see beyond a cell;
 #: cells (H, W, n_cells) uint8: the cells' classes so far; mem_free (free voxels, uint8) and mem_geometry (float64):
 #: the free-space memory (:func:`remembered_cells`; zero-sized for none; two fields, not a nested tuple, which
-#: numba's parallel loops do not take); free_run (H, W) int64: one run of cells known free per pixel.
+#: numba's parallel loops do not take); free_run, behind_run (H, W) int64: per pixel, one run of cells known free in
+#: its gray area (or, without a measurement, its frustum) and one in the space behind the robot (two, so that the
+#: two runs of a pixel that shows the robot behind a surface do not replace each other).
 GridState = namedtuple("GridState", "d_min delta_d n_cells corners offsets eroded sizes z_near margin cells mem_free "
-                                    "mem_geometry free_run")
+                                    "mem_geometry free_run behind_run")
 
 #: What the fused kernels need of the principal camera's frame, one record: its per-pixel arrays ((h, w) each, from
 #: :func:`principal_arrays`: z_start float32, z_end float32, certain uint8, blind_from float32, unchecked_from
@@ -247,7 +249,7 @@ def classify_run(u, v, k_a, k_b, grid):
     saw beyond that over that box, it saw through every cell, and the per-cell tests would all agree. Behind the
     robot, where a secondary camera sees the room far beyond, that settles a run with one test."""
     d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run = grid
+        free_run, behind_run = grid
     n = k_b - k_a + 1
     everything = _ALL if n == 64 else (np.uint64(1) << np.uint64(n)) - np.uint64(1)
     cleared = np.uint64(0)
@@ -373,7 +375,7 @@ def occupied_in(u, v, k_lo, k_hi, highest, grid):
     alone, so whichever write lands, the cache holds the right class.
     """
     d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run = grid
+        free_run, behind_run = grid
     if k_lo > k_hi:
         return -1
     step = -1 if highest else 1
@@ -432,12 +434,12 @@ def cell_index(z, d_min, delta_d, n_cells):
 
 
 @kernel(inline=True)
-def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, grid):
+def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, grid, runs):
     """:func:`nearest_confirmed`'s walk down and up from cell k_star (or from the ends of the known free run holding
     it) to the first occupied cell each way within k_lo..k_hi. Returns (k_left, k_right), -1 for none, or (-2, -2)
-    when k_star's own cell is occupied. Records the free run found between them."""
+    when k_star's own cell is occupied. Records the free run found between them in ``runs``."""
     d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run = grid
+        free_run, behind_run = grid
     # np.bool_, not a literal True or False, for which numba would compile occupied_in twice.
     if not in_run and occupied_in(u, v, k_star, k_star, np.bool_(False), grid) >= 0:
         return -2, -2
@@ -448,12 +450,12 @@ def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, grid):
     # Everything between the two is free now.
     free_lo = k_left + 1 if k_left >= 0 else (min(k_lo, run_lo) if in_run else k_lo)
     free_hi = k_right - 1 if k_right >= 0 else (max(k_hi, run_hi) if in_run else k_hi)
-    remember_free_run(free_run, v, u, free_lo, free_hi)
+    remember_free_run(runs, v, u, free_lo, free_hi)
     return k_left, k_right
 
 
 @kernel()
-def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, u, v, grid):
+def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, u, v, grid, runs):
     """The nearest occupied part of [lo, hi] along principal pixel (u, v)'s frustum, nearer than ``bound2``: the
     part [lo, certain_to] is occupied as it stands (a measured surface's own cell; certain_to <= lo for none), and so
     are the parts outside the grid [d_min, d_max], which no camera can check; the rest is candidate cells.
@@ -463,13 +465,13 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
     down from z*, or the first walking up.
 
     A range of candidate cells alone (no certain part) is walked whole, and the run of cells found free is kept in
-    free_run, so that the next control point whose range that run covers skips the pixel at once: the space behind
+    ``runs`` (the grid's free_run for a gray area, behind_run for the space behind the robot), so that the next control point whose range that run covers skips the pixel at once: the space behind
     the robot, which every point on the robot looks at, is mostly such a range. Elsewhere only cells close enough
     to z* to come nearer than bound2 are looked at. Returns (squared distance, z*), (inf, 0) if nothing occupied
     comes nearer than bound2.
     """
     d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run = grid
+        free_run, behind_run = grid
     if lo > hi:
         return np.inf, 0.0
     d_max = d_min + n_cells * delta_d
@@ -478,11 +480,11 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
     above = max(d_max, below)
     candidates_only = below <= lo and hi <= above
     if candidates_only:
-        if known_free(lo, hi, u, v, d_min, delta_d, n_cells, free_run):
+        if known_free(lo, hi, u, v, d_min, delta_d, n_cells, runs):
             return np.inf, 0.0
         k_lo = cell_index(lo, d_min, delta_d, n_cells)
         k_hi = min(cell_index(hi, d_min, delta_d, n_cells), n_cells - 1)
-    run = free_run[v, u]
+    run = runs[v, u]
     run_lo = run >> 32
     run_hi = run & 0xFFFFFFFF
     d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, lo, hi)
@@ -506,7 +508,7 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
         k_left = -1
         k_right = -1
     else:
-        k_left, k_right = _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, grid)
+        k_left, k_right = _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, grid, runs)
         if k_left == -2:  # z*'s own cell is occupied
             return d2, z
     # Down: the occupied cell found, else the part occupied as it stands below; up alike.
@@ -530,6 +532,110 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
 
 
 @kernel(inline=True)
+def gray_known_free(d2, z, lo, certain_to, hi, bound2, u, v, d_min, delta_d, n_cells, runs):
+    """Whether :func:`nearest_confirmed` on [lo, hi] (certain part [lo, certain_to]) would find nothing nearer than
+    bound2 without reading a cell, given (d2, z), the squared distance and depth of the segment's nearest point
+    (d2 < bound2): every cell it would walk lies in the pixel's known free run, and the parts occupied as they stand
+    (the certain part, and the grid's outside) lie beyond reach. The same bounds as nearest_confirmed's: g(z') >=
+    d2 + (z' - z)^2 on the segment."""
+    d_max = d_min + n_cells * delta_d
+    below = max(certain_to, min(d_min, hi)) if lo < d_min else certain_to
+    above = max(d_max, below)
+    if (below > lo and (z <= below or d2 + (z - below) ** 2 < bound2)) or \
+            (hi > above and (z >= above or d2 + (above - z) ** 2 < bound2)):
+        return False
+    reach = np.sqrt(bound2 - d2)
+    k_lo = max(cell_index(max(below, lo), d_min, delta_d, n_cells),
+               cell_index(max(z - reach, d_min), d_min, delta_d, n_cells), 0)
+    k_hi = min(cell_index(min(hi, d_max, z + reach), d_min, delta_d, n_cells), n_cells - 1)
+    run = runs[v, u]
+    return k_lo > k_hi or ((run >> 32) <= k_lo and k_hi <= (run & 0xFFFFFFFF))
+
+
+@kernel(inline=True)
+def _slice_distance2(X, Y, Z, a0, a1, b0, b1, z):
+    """g(z): the squared distance from P to the slice of pixel frustum [a0, a1] x [b0, b1] at depth z."""
+    dx = max(a0 * z - X, 0.0, X - a1 * z)
+    dy = max(b0 * z - Y, 0.0, Y - b1 * z)
+    return dx * dx + dy * dy + (Z - z) * (Z - z)
+
+
+@kernel(inline=True)
+def nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, lo, certain_to, hi, bound2, u, v, d_min, delta_d, n_cells, cells,
+                   runs):
+    """:func:`nearest_confirmed` on [lo, hi] (certain part [lo, certain_to]) when the pixel's known free run in
+    ``runs`` holds the cell of the segment's nearest point z (d2 = g(z) < bound2): the first occupied part each way
+    is then the cell just past each end of the run, or the part occupied as it stands past the cells in reach. g is
+    convex with its minimum at z, so each such part's nearest point is its end towards z: one evaluation of g each.
+    Returns (squared distance, depth, True), (inf, 0, True) for nothing nearer than bound2, or (.., False) when the
+    run does not decide it (a cell past its end not yet classified, or z outside it): the caller asks the grid."""
+    d_max = d_min + n_cells * delta_d
+    below = max(certain_to, min(d_min, hi)) if lo < d_min else certain_to
+    above = max(d_max, below)
+    if (below > lo and z <= below) or (hi > above and z >= above):
+        return d2, z, True
+    reach = np.sqrt(bound2 - d2)
+    k_lo = max(cell_index(max(below, lo), d_min, delta_d, n_cells),
+               cell_index(max(z - reach, d_min), d_min, delta_d, n_cells), 0)
+    k_hi = min(cell_index(min(hi, d_max, z + reach), d_min, delta_d, n_cells), n_cells - 1)
+    if k_lo > k_hi:
+        return d2, z, False
+    k_star = min(max(cell_index(z, d_min, delta_d, n_cells), k_lo), k_hi)
+    run = runs[v, u]
+    run_lo = run >> 32
+    run_hi = run & 0xFFFFFFFF
+    if not (run_lo <= k_star <= run_hi):
+        return d2, z, False
+    best2, best_z = np.inf, 0.0
+    if run_lo - 1 >= k_lo:
+        if cells[v, u, run_lo - 1] != 2:
+            return d2, z, False
+        best_z = min(hi, d_min + run_lo * delta_d)
+        best2 = _slice_distance2(X, Y, Z, a0, a1, b0, b1, best_z)
+    elif below > lo:
+        best_z = below
+        best2 = _slice_distance2(X, Y, Z, a0, a1, b0, b1, below)
+    if run_hi + 1 <= k_hi:
+        if cells[v, u, run_hi + 1] != 2:
+            return d2, z, False
+        z_up = max(below, lo, d_min + (run_hi + 1) * delta_d)
+        d2_up = _slice_distance2(X, Y, Z, a0, a1, b0, b1, z_up)
+        if d2_up < best2:
+            best2, best_z = d2_up, z_up
+    elif hi > above:
+        d2_up = _slice_distance2(X, Y, Z, a0, a1, b0, b1, above)
+        if d2_up < best2:
+            best2, best_z = d2_up, above
+    if best2 >= bound2:
+        return np.inf, 0.0, True
+    return best2, best_z, True
+
+
+@kernel(inline=True)
+def nothing_known_near(X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, ze, certain, bf, z_far, bound2, u, v, d_min,
+                       delta_d, n_cells, free_run, behind_run):
+    """Whether :func:`pixel_distance` would find nothing nearer than bound2 along principal pixel (u, v), decided
+    from the pixel's known free runs alone (no cell read, no walk): its gray area's (or its frustum's, without a
+    measurement) and the space behind the robot's. (d2, z): the nearest point of the span fused_rows gathered, which
+    is the gray area itself for a ``one_piece`` pixel. False when it cannot tell (the caller then asks the grid)."""
+    if bf <= z_far and not known_free(bf, z_far, u, v, d_min, delta_d, n_cells, behind_run):
+        return False
+    if zs > z_far:
+        return True
+    hi = min(ze, z_far)
+    if not certain:
+        return known_free(zs, hi, u, v, d_min, delta_d, n_cells, free_run)
+    if zs >= Z:  # case (ii): the frustum from the surface on is occupied as it stands
+        return False
+    if zs > hi:
+        return True
+    if not one_piece:
+        d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, zs, hi)
+    return d2 >= bound2 or gray_known_free(d2, z, zs, surface_cell_end(zs, d_min, delta_d), hi, bound2, u, v, d_min,
+                                           delta_d, n_cells, free_run)
+
+
+@kernel(inline=True)
 def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_from, bound2, grid):
     """Squared distance from P to what is occupied along principal pixel (u, v) after fusion, its depth z*, and
     whether that came from a candidate of a pixel without a measurement. (inf, 0, False) if nothing nearer than
@@ -539,7 +645,7 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
     where the space behind the robot starts (after its body), inf for none.
     """
     d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run = grid
+        free_run, behind_run = grid
     z_far = Z + rho
     best2 = np.inf
     best_z = 0.0
@@ -553,14 +659,14 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
             else:  # case (iii): the surface's own cell is certain, the gray area behind it is a candidate
                 best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs,
                                                   surface_cell_end(zs, d_min, delta_d),
-                                                  min(ze, z_far), bound2, u, v, grid)
+                                                  min(ze, z_far), bound2, u, v, grid, free_run)
         else:  # no measurement: the whole segment is a candidate
             best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs, zs, min(ze, z_far), bound2, u, v,
-                                              grid)
+                                              grid, free_run)
             from_invalid = best2 < np.inf
     if blind_from <= z_far:  # case (iv): behind the robot
         d2, z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, blind_from, blind_from, z_far, min(best2, bound2), u,
-                                  v, grid)
+                                  v, grid, behind_run)
         if d2 < best2:
             best2, best_z = d2, z
             from_invalid = False
@@ -583,7 +689,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
     without a measurement, whether P is inside, the sums of their distances and unit directions, and the nearest
     one (squared distance, pixel, depth, from a pixel without a measurement?). ``scratch`` (5, width) float64."""
     d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run = grid
+        free_run, behind_run = grid
     z_start, z_end, certain, blind_from = view.z_start, view.z_end, view.certain, view.blind_from
     fx, fy, cx, cy = view.fx, view.fy, view.cx, view.cy
     rho2 = rho_squared(rho)
@@ -617,7 +723,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
             bf = np.float64(blind_from[v, u])
             if min(zs, bf) > z_far:
                 continue
-            if zs > z_far and known_free(bf, z_far, u, v, d_min, delta_d, n_cells, free_run):
+            if zs > z_far and known_free(bf, z_far, u, v, d_min, delta_d, n_cells, behind_run):
                 continue  # the space behind the robot, every cell in reach known free
             z_in[m] = min(zs, bf)
             z_hi_in[m] = min(np.float64(z_end[v, u]), z_far) if (certain[v, u] and bf > z_far) else z_far
@@ -653,6 +759,20 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
                 answered = z <= (ze if zs >= Z else min(surface_cell_end(zs, d_min, delta_d), ze))
             if not answered and (one_piece or zs > z_far) and d_min <= z < d_max:
                 answered = cells[v, u, min(int((z - d_min) / delta_d), n_cells - 1)] == 2
+            # The pixel's known free run holds the nearest point's cell and ends at occupied cells (or at parts
+            # occupied as they stand): the answer is at one of its ends, without a walk.
+            if not answered and zs < Z and one_piece:
+                d2, z, answered = nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, zs, surface_cell_end(zs, d_min, delta_d),
+                                                 min(np.float64(z_end[v, u]), z_far), bound2, u, v, d_min, delta_d,
+                                                 n_cells, cells, free_run)
+            elif not answered and zs > z_far:
+                d2, z, answered = nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, bf, bf, z_far, bound2, u, v, d_min,
+                                                 delta_d, n_cells, cells, behind_run)
+            # Earlier queries found every cell in reach free: nothing occupied here, without reading a cell.
+            if not answered and nothing_known_near(X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs,
+                                                   np.float64(z_end[v, u]), certain[v, u], bf, z_far, bound2, u, v,
+                                                   d_min, delta_d, n_cells, free_run, behind_run):
+                continue
             if not answered:
                 d2, z, from_invalid = pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, np.float64(z_end[v, u]),
                                                      certain[v, u], bf, bound2, grid)
