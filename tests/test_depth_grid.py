@@ -277,7 +277,7 @@ BESIDE, BEHIND = (0.0, 2.5, 1.4), (-2.5, 0.6, 1.6)  # second cameras: beside the
     ("hybrid", False, BESIDE, 80), ("hybrid", True, BESIDE, 80), ("hybrid", True, BESIDE, 160),
     ("hybrid", True, BEHIND, 160), ("min", True, BEHIND, 160)])
 def test_later_queries_of_moving_points_equal_a_fresh_query(aggregate, torso, second, size):
-    """Later queries answer from the runs of cells earlier ones found free (``nearest_by_run``, ``nothing_known_near``:
+    """Later queries answer from the runs of cells earlier ones found free (``distance_by_runs``, ``nearest_by_run``:
     the nearest occupied cell is the one just past a run's end, or nothing is in reach), without walking the cells.
     Points that move a little between queries, as a robot's do between frames, in the shadow of a person in front of
     the principal camera and behind the arm, get exactly a fresh FusedFrames' answer at every step; with the second
@@ -311,7 +311,8 @@ def test_nearest_by_run_equals_the_walk_on_random_pixels():
     ``nearest_confirmed`` (the walk over the cells, frustum_nearest on the occupied ones) on one pixel of a real
     FusedFrames whose cell classes, free run, certain part and segment are drawn at random: wherever the run decides
     the answer, both give the same squared distance and depth. Every branch is drawn: the cells just past the run's
-    ends, the certain part (a surface's own cell, and the grid's near end), and the grid's far end."""
+    ends, the certain part (a surface's own cell, and the grid's near end), the grid's far end, and a nearest point
+    outside the run in a cell known occupied (the answer itself)."""
     from depthguard.depthgrid import _kernels as K
 
     r, grid, principal, frees, robot_far, robot_near = robot_scene_frames(40, 30)
@@ -319,10 +320,11 @@ def test_nearest_by_run_equals_the_walk_on_random_pixels():
     camera = r.cameras["p"]
     rng = np.random.default_rng(11)
     d_min, delta_d, n = grid.d_min, grid.delta_d, grid.n_cells
-    decided = dict(left_cell=0, right_cell=0, certain=0, grid_end=0, nothing=0)
-    for trial in range(3000):
+    decided = dict(left_cell=0, right_cell=0, certain=0, grid_end=0, nothing=0, own=0)
+    for trial in range(4000):
         u, v = int(rng.integers(0, 40)), int(rng.integers(0, 30))
-        cells = np.where(rng.random(n) < 0.3, 2, 1).astype(np.uint8)
+        draw = rng.random(n)  # 0: not classified yet (nearest_confirmed classifies it), 1: free, 2: occupied
+        cells = np.where(draw < 0.1, 0, np.where(draw < 0.4, 2, 1)).astype(np.uint8)
         run_lo = int(rng.integers(0, n))
         run_hi = min(n - 1, run_lo + int(rng.integers(0, 40)))
         cells[run_lo:run_hi + 1] = 1
@@ -333,13 +335,13 @@ def test_nearest_by_run_equals_the_walk_on_random_pixels():
                             frames._z_near, frames._margin, frames._cells, *frames._memory, runs, runs.copy())
         a0, a1 = (u - 0.5 - camera.cx) / camera.fx, (u + 0.5 - camera.cx) / camera.fx
         b0, b1 = (v - 0.5 - camera.cy) / camera.fy, (v + 0.5 - camera.cy) / camera.fy
-        z_run = d_min + delta_d * rng.uniform(run_lo, run_hi + 1)
+        z_run = d_min + delta_d * (rng.uniform(run_lo, run_hi + 1) if rng.random() < 0.7 else rng.uniform(0, n))
         tx, ty = rng.uniform(a0 - 0.02, a1 + 0.02), rng.uniform(b0 - 0.02, b1 + 0.02)
         Z = z_run + rng.normal(0, 0.02)
         X, Y = tx * Z, ty * Z
         lo = z_run - rng.uniform(0.0, 0.5) if rng.random() < 0.8 else d_min - rng.uniform(0, 0.1)
         certain_to = lo + (rng.uniform(0, z_run - lo) if rng.random() < 0.5 else 0.0)
-        hi = z_run + rng.uniform(0.0, 0.5) if rng.random() < 0.9 else d_min + n * delta_d + rng.uniform(0, 0.2)
+        hi = z_run + rng.uniform(0.0, 0.5) if rng.random() < 0.8 else d_min + n * delta_d + rng.uniform(0, 0.2)
         rho = 0.4
         bound2 = rho * rho if rng.random() < 0.7 else rng.uniform(0.0001, 0.04)
         d2, z = K.frustum_nearest(X, Y, Z, a0, a1, b0, b1, lo, hi)
@@ -353,6 +355,9 @@ def test_nearest_by_run_equals_the_walk_on_random_pixels():
         assert got2 == pytest.approx(want2, rel=1e-9, abs=1e-15), trial
         if np.isfinite(want2):
             assert got_z == pytest.approx(want_z, rel=0, abs=1e-9), trial
+            if got2 == d2 and got_z == z:
+                decided["own"] += 1
+                continue
             k = min(int((got_z - d_min) / delta_d), n - 1) if got_z >= d_min else -1
             if got_z <= max(certain_to, min(d_min, hi) if lo < d_min else certain_to) and got_z < z:
                 decided["certain"] += 1

@@ -532,27 +532,6 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
 
 
 @kernel(inline=True)
-def gray_known_free(d2, z, lo, certain_to, hi, bound2, u, v, d_min, delta_d, n_cells, runs):
-    """Whether :func:`nearest_confirmed` on [lo, hi] (certain part [lo, certain_to]) would find nothing nearer than
-    bound2 without reading a cell, given (d2, z), the squared distance and depth of the segment's nearest point
-    (d2 < bound2): every cell it would walk lies in the pixel's known free run, and the parts occupied as they stand
-    (the certain part, and the grid's outside) lie beyond reach. The same bounds as nearest_confirmed's: g(z') >=
-    d2 + (z' - z)^2 on the segment."""
-    d_max = d_min + n_cells * delta_d
-    below = max(certain_to, min(d_min, hi)) if lo < d_min else certain_to
-    above = max(d_max, below)
-    if (below > lo and (z <= below or d2 + (z - below) ** 2 < bound2)) or \
-            (hi > above and (z >= above or d2 + (above - z) ** 2 < bound2)):
-        return False
-    reach = np.sqrt(bound2 - d2)
-    k_lo = max(cell_index(max(below, lo), d_min, delta_d, n_cells),
-               cell_index(max(z - reach, d_min), d_min, delta_d, n_cells), 0)
-    k_hi = min(cell_index(min(hi, d_max, z + reach), d_min, delta_d, n_cells), n_cells - 1)
-    run = runs[v, u]
-    return k_lo > k_hi or ((run >> 32) <= k_lo and k_hi <= (run & 0xFFFFFFFF))
-
-
-@kernel(inline=True)
 def _slice_distance2(X, Y, Z, a0, a1, b0, b1, z):
     """g(z): the squared distance from P to the slice of pixel frustum [a0, a1] x [b0, b1] at depth z."""
     dx = max(a0 * z - X, 0.0, X - a1 * z)
@@ -567,8 +546,9 @@ def nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, lo, certain_to, hi, bound2, u
     ``runs`` holds the cell of the segment's nearest point z (d2 = g(z) < bound2): the first occupied part each way
     is then the cell just past each end of the run, or the part occupied as it stands past the cells in reach. g is
     convex with its minimum at z, so each such part's nearest point is its end towards z: one evaluation of g each.
-    Returns (squared distance, depth, True), (inf, 0, True) for nothing nearer than bound2, or (.., False) when the
-    run does not decide it (a cell past its end not yet classified, or z outside it): the caller asks the grid."""
+    A z outside the run whose own cell is known occupied is the answer itself. Returns (squared distance, depth,
+    True), (inf, 0, True) for nothing nearer than bound2, or (.., False) when the run does not decide it (a cell past
+    its end not yet classified, or z outside it in a cell not known occupied): the caller asks the grid."""
     d_max = d_min + n_cells * delta_d
     below = max(certain_to, min(d_min, hi)) if lo < d_min else certain_to
     above = max(d_max, below)
@@ -585,7 +565,7 @@ def nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, lo, certain_to, hi, bound2, u
     run_lo = run >> 32
     run_hi = run & 0xFFFFFFFF
     if not (run_lo <= k_star <= run_hi):
-        return d2, z, False
+        return d2, z, cells[v, u, k_star] == 2  # z's own cell occupied: the answer, as nearest_confirmed finds it
     best2, best_z = np.inf, 0.0
     if run_lo - 1 >= k_lo:
         if cells[v, u, run_lo - 1] != 2:
@@ -612,27 +592,43 @@ def nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, lo, certain_to, hi, bound2, u
 
 
 @kernel(inline=True)
-def nothing_known_near(X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, ze, certain, bf, z_far, bound2, u, v, d_min,
-                       delta_d, n_cells, free_run, behind_run):
-    """Whether :func:`pixel_distance` would find nothing nearer than bound2 along principal pixel (u, v), decided
-    from the pixel's known free runs alone (no cell read, no walk): its gray area's (or its frustum's, without a
-    measurement) and the space behind the robot's. (d2, z): the nearest point of the span fused_rows gathered, which
-    is the gray area itself for a ``one_piece`` pixel. False when it cannot tell (the caller then asks the grid)."""
-    if bf <= z_far and not known_free(bf, z_far, u, v, d_min, delta_d, n_cells, behind_run):
-        return False
-    if zs > z_far:
-        return True
-    hi = min(ze, z_far)
-    if not certain:
-        return known_free(zs, hi, u, v, d_min, delta_d, n_cells, free_run)
-    if zs >= Z:  # case (ii): the frustum from the surface on is occupied as it stands
-        return False
-    if zs > hi:
-        return True
-    if not one_piece:
-        d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, zs, hi)
-    return d2 >= bound2 or gray_known_free(d2, z, zs, surface_cell_end(zs, d_min, delta_d), hi, bound2, u, v, d_min,
-                                           delta_d, n_cells, free_run)
+def distance_by_runs(X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, ze, certain, bf, z_far, bound2, u, v, d_min,
+                     delta_d, n_cells, cells, free_run, behind_run):
+    """:func:`pixel_distance` from the pixel's known free runs alone (:func:`nearest_by_run` on each of its
+    candidate segments: the surface's gray area, or the frustum of a pixel without a measurement, with free_run; the
+    space behind the robot with behind_run), when they decide it. (d2, z): the nearest point of the span fused_rows
+    gathered, which is the segment itself for a ``one_piece`` pixel (a surface and its gray area) and for one whose
+    only segment is behind the robot. Returns (squared distance, depth, from a pixel without a measurement?,
+    decided?); (inf, 0, False, True) for nothing nearer than bound2. A surface at or behind P (case ii) is left to
+    pixel_distance."""
+    best2, best_z, from_invalid = np.inf, 0.0, False
+    if zs <= z_far:
+        if certain and zs >= Z:
+            return d2, z, False, False
+        hi = min(ze, z_far)
+        if zs <= hi:
+            if not one_piece:
+                d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, zs, hi)
+            if d2 < bound2:
+                certain_to = surface_cell_end(zs, d_min, delta_d) if certain else zs
+                best2, best_z, decided = nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, zs, certain_to, hi, bound2, u,
+                                                        v, d_min, delta_d, n_cells, cells, free_run)
+                if not decided:
+                    return best2, best_z, False, False
+                from_invalid = not certain and best2 < np.inf
+    if bf <= z_far:
+        if zs <= z_far:
+            d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, bf, z_far)
+        if d2 < bound2:
+            d2, z, decided = nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, bf, bf, z_far, bound2, u, v, d_min,
+                                            delta_d, n_cells, cells, behind_run)
+            if not decided:
+                return d2, z, False, False
+            if d2 < best2:
+                best2, best_z, from_invalid = d2, z, False
+    if best2 >= bound2:
+        return np.inf, 0.0, False, True
+    return best2, best_z, from_invalid, True
 
 
 @kernel(inline=True)
@@ -759,20 +755,12 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
                 answered = z <= (ze if zs >= Z else min(surface_cell_end(zs, d_min, delta_d), ze))
             if not answered and (one_piece or zs > z_far) and d_min <= z < d_max:
                 answered = cells[v, u, min(int((z - d_min) / delta_d), n_cells - 1)] == 2
-            # The pixel's known free run holds the nearest point's cell and ends at occupied cells (or at parts
-            # occupied as they stand): the answer is at one of its ends, without a walk.
-            if not answered and zs < Z and one_piece:
-                d2, z, answered = nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, zs, surface_cell_end(zs, d_min, delta_d),
-                                                 min(np.float64(z_end[v, u]), z_far), bound2, u, v, d_min, delta_d,
-                                                 n_cells, cells, free_run)
-            elif not answered and zs > z_far:
-                d2, z, answered = nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, bf, bf, z_far, bound2, u, v, d_min,
-                                                 delta_d, n_cells, cells, behind_run)
-            # Earlier queries found every cell in reach free: nothing occupied here, without reading a cell.
-            if not answered and nothing_known_near(X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs,
-                                                   np.float64(z_end[v, u]), certain[v, u], bf, z_far, bound2, u, v,
-                                                   d_min, delta_d, n_cells, free_run, behind_run):
-                continue
+            # Earlier queries' runs of free cells decide it, without a walk: the nearest occupied cell is the one
+            # just past a run's end, or nothing is in reach.
+            if not answered:
+                d2, z, from_invalid, answered = distance_by_runs(
+                    X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, np.float64(z_end[v, u]), certain[v, u], bf, z_far,
+                    bound2, u, v, d_min, delta_d, n_cells, cells, free_run, behind_run)
             if not answered:
                 d2, z, from_invalid = pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, np.float64(z_end[v, u]),
                                                      certain[v, u], bf, bound2, grid)
