@@ -619,8 +619,9 @@ def distance_by_runs(X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, ze, certain,
     if bf <= z_far:
         if zs <= z_far:
             d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, bf, z_far)
-        if d2 < bound2:
-            d2, z, decided = nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, bf, bf, z_far, bound2, u, v, d_min,
+        bound_behind = min(best2, bound2)  # as pixel_distance asks it: only to beat the gray area's answer
+        if d2 < bound_behind:
+            d2, z, decided = nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, bf, bf, z_far, bound_behind, u, v, d_min,
                                             delta_d, n_cells, cells, behind_run)
             if not decided:
                 return d2, z, False, False
