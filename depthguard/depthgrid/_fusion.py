@@ -152,8 +152,7 @@ class FusedFrames:
         self._stale = len(used) < len(grid.secondaries)
         self._sizes = np.array([[c.width, c.height] for c in cams], dtype=np.int64).reshape(-1, 2)
         self._z_near = np.array([max(c.depth_range[0], 1e-6) for c in cams], dtype=np.float64)
-        self._corners = np.ascontiguousarray(grid.corners[used])
-        self._offsets = np.ascontiguousarray(grid.offsets[used])
+        self._corners, self._offsets = grid.kernel_arrays(tuple(used))
         self._margin = float(margin)
         # Each pixel's smallest free depth within pad pixels: a cell's grown footprint is then its own pixels.
         self._eroded = np.empty_like(free)

@@ -123,6 +123,18 @@ class DepthGridMap:
         object.__setattr__(self, "offsets", offsets)
         object.__setattr__(self, "_rig_checked", None)
 
+    def kernel_arrays(self, used: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """(corners, offsets) of the secondary cameras ``used`` (indices into ``secondaries``), as the fused kernels
+        take them: C-contiguous and writable (numba compiles read-only arrays as another type). Never written. The
+        copy for the cameras of the latest call is kept, so that a new set of frames from the same cameras does not
+        copy several MB a camera again."""
+        kept = self.__dict__.get("_kernel_arrays")
+        if kept is None or kept[0] != used:
+            index = list(used)
+            kept = (used, np.ascontiguousarray(self.corners[index]), np.ascontiguousarray(self.offsets[index]))
+            object.__setattr__(self, "_kernel_arrays", kept)
+        return kept[1], kept[2]
+
     @property
     def d_max(self) -> float:
         return self.d_min + self.n_cells * self.delta_d
