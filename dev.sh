@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # depthguard's one entry point for a fresh machine: it sets up everything it needs, then runs a job.
 #
-#   ./dev.sh demo    set up, then run the main job on the built-in default scene (plots + tables in out/demo)
+#   ./dev.sh demo    set up, then run the main job: the built-in workcell in closed loop (plots + tables in out/demo)
 #   ./dev.sh test    set up, then run the test suite (what CI runs)
 #   ./dev.sh bench   set up, then run the benchmarks
 #   ./dev.sh setup   only set up

@@ -4,7 +4,8 @@
     depthguard build-map --rig RIG.yaml [--principal NAME] [--d-min M --d-max M --delta-d M] --out MAP
     depthguard simulate [SCENE.yaml] --out DIR [--seed N] [--duration S] [--bag]
     depthguard replay RECORDING --out RESULTS.csv [--robot URDF|iiwa|panda] [--points POINTS] [--rho 0.4] ...
-    depthguard demo [--out DIR] [--duration S]
+    depthguard demo [--out DIR] [--duration S] [--mode none|avoid|ssm ...]
+    depthguard workcell [--out DIR] [--duration S]
     depthguard fusion-workcell [--out DIR] [--scene SCENE.yaml ...] [--all-frames]
     depthguard coverage --rig RIG.yaml [--robot URDF|iiwa|panda] [--trajectory joint_states.csv] [--rho 0.4] ...
     depthguard scenario-a [--out DIR]
@@ -169,11 +170,20 @@ def _build_parser() -> argparse.ArgumentParser:
                         help="do not remember free space: only what the cameras see now clears space")
     replay.add_argument("--json", action="store_true", help="also print a JSON summary to standard output")
 
-    demo = commands.add_parser("demo", help="the Quick start's main job: the simulated workcell of reference "
-                                            "scenario B, each camera's distances against the truth")
+    demo = commands.add_parser("demo", help="the Quick start's main job: a robot doing its task next to a person "
+                                            "in closed loop, without avoidance, with the papers' avoidance and "
+                                            "with speed and separation monitoring, judged by exact geometry")
     demo.add_argument("--out", default="out/demo", help="output folder for plots and summary.json")
     demo.add_argument("--duration", type=_SECONDS, default=None,
-                      help="only the first S seconds, at least one frame (1/30 s) (default: all 12)")
+                      help="only the first S seconds, at least one frame (1/30 s) (default: all 4)")
+    demo.add_argument("--mode", action="append", choices=("none", "avoid", "ssm"),
+                      help="run only this mode (repeatable; default: none, avoid and ssm)")
+
+    workcell = commands.add_parser("workcell", help="the simulated workcell of reference scenario B, each camera's "
+                                                    "distances on its own against the truth")
+    workcell.add_argument("--out", default="out/workcell", help="output folder for plots and summary.json")
+    workcell.add_argument("--duration", type=_SECONDS, default=None,
+                          help="only the first S seconds, at least one frame (1/30 s) (default: all 12)")
 
     fusion = commands.add_parser("fusion-workcell", help="scenario B's shadow and hidden-hand cases: a camera alone "
                                                          "against all fused through the depth grid, without and with "
@@ -233,6 +243,11 @@ def main(argv=None) -> int:
 
             return real_room.main(args.out, folder=args.data)
         if args.command == "demo":
+            from depthguard.experiments import avoidance_demo
+
+            return avoidance_demo.main(out=args.out, duration=_duration(args.duration, config.SIM_RATE),
+                                       modes=args.mode)
+        if args.command == "workcell":
             from depthguard.experiments import workcell
 
             return workcell.main(out=args.out, duration=_duration(args.duration, config.SIM_RATE))

@@ -399,6 +399,8 @@ def _option_cases(work, tmp):
         "simulate seed 5000 digits": (simulate + ["--seed", "9" * 5000], "--seed"),
         "demo duration 1e-9": (["demo", "--out", tmp / "demo", "--duration", "1e-9"], "--duration"),
         "demo duration inf": (["demo", "--out", tmp / "demo", "--duration", "inf"], "--duration"),
+        "demo unknown mode": (["demo", "--out", tmp / "demo", "--mode", "fast"], "--mode"),
+        "workcell duration 1e-9": (["workcell", "--out", tmp / "demo", "--duration", "1e-9"], "--duration"),
         "repeats zero": (["scenario-a", "--out", tmp / "a", "--repeats", "0"], "--repeats"),
         "repeats huge": (["scenario-a", "--out", tmp / "a", "--repeats", "1000000000"], "--repeats"),
     }
@@ -408,7 +410,7 @@ OPTION_CASES = ["rho inf", "rho 1e999", "rho -inf", "rho zero", "rho too large",
                 "d-max inf", "d-max below d-min", "delta-d nan", "delta-d tiny", "simulate duration inf",
                 "simulate duration nan", "simulate duration below a frame", "simulate seed negative",
                 "simulate seed 2**64", "simulate seed 1.5", "simulate seed 5000 digits", "demo duration 1e-9",
-                "demo duration inf", "repeats zero", "repeats huge"]
+                "demo duration inf", "demo unknown mode", "workcell duration 1e-9", "repeats zero", "repeats huge"]
 
 
 @pytest.mark.parametrize("case", OPTION_CASES)

@@ -1,6 +1,6 @@
 """Single-camera distances over a simulated episode of reference scenario B (issue 3): never above the ground truth
 plus the tolerance unless flagged, the blind distance never; the 2016 paper's shadow and hidden-hand cases as one
-camera sees them; the demo's outputs."""
+camera sees them; the outputs of ``depthguard workcell``."""
 
 import json
 
@@ -54,8 +54,8 @@ def allowed(episode):
     return np.array([[allowed_excess(scene.rig.cameras[name], p) for p in points] for name in episode.cameras])
 
 
-def test_the_demo_judges_no_more_loosely_than_this_test(episode, allowed):
-    """The demo's summary counts misses with its own tolerance: loosening it must fail here."""
+def test_the_workcell_summary_judges_no_more_loosely_than_this_test(episode, allowed):
+    """The workcell summary counts misses with its own tolerance: loosening it must fail here."""
     assert np.all(workcell.tolerance(episode) <= allowed + 1e-12)
 
 
@@ -110,10 +110,10 @@ def test_hidden_hand_is_missed_by_the_principal_camera_and_seen_by_the_other(epi
     assert np.median(np.abs(second - truth)) < 0.05  # the second camera sees it
 
 
-def test_demo_writes_its_plots_and_summary(tmp_path, capsys):
+def test_workcell_writes_its_plots_and_summary(tmp_path, capsys):
     from depthguard import cli
 
-    assert cli.main(["demo", "--out", str(tmp_path), "--duration", "0.4"]) == 0
+    assert cli.main(["workcell", "--out", str(tmp_path), "--duration", "0.4"]) == 0
     out = capsys.readouterr().out
     assert "camera 'principal' alone" in out and "camera 'second' alone" in out
     for name in ("workcell_principal.png", "workcell_second.png", "workcell_overview.png", "summary.json"):

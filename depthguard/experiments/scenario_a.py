@@ -15,7 +15,7 @@ World frame: z up, metres. The depth image is ray-cast exactly (:func:`depthguar
 run adds Gaussian depth noise of the default noise model and uint16 millimetre quantisation.
 
 :func:`main` writes the plots (the paper's Figs. 7-11 and an overview) and ``summary.json`` and prints a summary;
-``depthguard scenario-a`` and ``depthguard demo`` call it.
+``depthguard scenario-a`` calls it.
 """
 
 from __future__ import annotations

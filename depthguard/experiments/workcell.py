@@ -1,4 +1,5 @@
-"""The Quick start's main job: reference scenario B simulated, watched by each depth camera on its own.
+"""Reference scenario B simulated, watched by each depth camera on its own (``depthguard workcell``; the Quick start's
+main job before the closed loop, ``depthguard demo``).
 
 A KUKA iiwa traces a vertical hexagon at 0.4 m/s while a person walks in, reaches for the end-effector, carries a
 box past the robot, stands between the principal camera and the robot (the 2016 paper's shadow case) and holds a
@@ -11,7 +12,7 @@ What it shows: single-camera distances are never above the truth plus the pixel 
 the shadow case); the principal camera cannot see the hidden hand. Fusing both cameras is the depth grid's job
 (``depthguard.depthgrid``).
 
-    depthguard demo [--out DIR] [--duration SECONDS]
+    depthguard workcell [--out DIR] [--duration SECONDS]
 """
 
 from __future__ import annotations
@@ -204,7 +205,7 @@ def plot(episode: Episode, out: Path) -> list[Path]:
     return written
 
 
-def main(out="out/demo", duration: float | None = None, progress: bool = True) -> int:
+def main(out="out/workcell", duration: float | None = None, progress: bool = True) -> int:
     """Run, print the summary table, write plots and summary.json into ``out``."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
