@@ -4,7 +4,7 @@
     depthguard build-map --rig RIG.yaml [--principal NAME] [--d-min M --d-max M --delta-d M] --out MAP
     depthguard simulate [SCENE.yaml] --out DIR [--seed N] [--duration S] [--bag]
     depthguard replay RECORDING --out RESULTS.csv [--robot URDF|iiwa|panda] [--points POINTS] [--rho 0.4] ...
-    depthguard demo [--out DIR] [--duration S] [--mode none|avoid|ssm ...]
+    depthguard demo [--out DIR] [--duration S] [--mode none|avoid|ssm ...] [--no-bag]
     depthguard workcell [--out DIR] [--duration S]
     depthguard fusion-workcell [--out DIR] [--scene SCENE.yaml ...] [--all-frames]
     depthguard coverage --rig RIG.yaml [--robot URDF|iiwa|panda] [--trajectory joint_states.csv] [--rho 0.4] ...
@@ -178,6 +178,8 @@ def _build_parser() -> argparse.ArgumentParser:
                       help="only the first S seconds, at least one frame (1/30 s) (default: all 4)")
     demo.add_argument("--mode", action="append", choices=("none", "avoid", "ssm"),
                       help="run only this mode (repeatable; default: none, avoid and ssm)")
+    demo.add_argument("--no-bag", action="store_true",
+                      help="do not write the avoid run as a recording (DIR/bag_avoid, an MCAP file of about 150 MB)")
 
     workcell = commands.add_parser("workcell", help="the simulated workcell of reference scenario B, each camera's "
                                                     "distances on its own against the truth")
@@ -246,7 +248,7 @@ def main(argv=None) -> int:
             from depthguard.experiments import avoidance_demo
 
             return avoidance_demo.main(out=args.out, duration=_duration(args.duration, config.SIM_RATE),
-                                       modes=args.mode)
+                                       modes=args.mode, bag=not args.no_bag)
         if args.command == "workcell":
             from depthguard.experiments import workcell
 

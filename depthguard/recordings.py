@@ -404,7 +404,8 @@ def _finite(text: str, what: str, path: Path, **context) -> float:
 # ------------------------------------------------------------------------------------------------------ bags
 
 
-def _typestore():
+def ros_typestore():
+    """The ROS 2 message types (Humble) bags are read and written with."""
     from rosbags.typesys import Stores, get_typestore
 
     return get_typestore(Stores.ROS2_HUMBLE)
@@ -425,14 +426,14 @@ class _Bag:
             if self.folder:
                 from rosbags.highlevel import AnyReader
 
-                self._reader = AnyReader([self.path], default_typestore=_typestore())
+                self._reader = AnyReader([self.path], default_typestore=ros_typestore())
                 self._reader.open()
                 self.connections = list(self._reader.connections)
                 self.deserialize = self._reader.deserialize
             else:
                 from rosbags.rosbag2.storage_mcap import McapReader
 
-                store = _typestore()
+                store = ros_typestore()
                 self._reader = McapReader(self.path)
                 self._reader.open()
                 self.connections = list(self._reader.connections)
@@ -711,28 +712,10 @@ def write_bag(recording: Recording, path, storage: str = "mcap") -> Path:
     path = check_path(path, "bag folder")
     if path.exists() or path.is_symlink():
         raise InputError("exists already; a bag is written into a new folder", source=str(path))
-    store = _typestore()
-    types = store.types
-    Header, Time = types["std_msgs/msg/Header"], types["builtin_interfaces/msg/Time"]
-    Image, CameraInfo = types[_IMAGE], types[_CAMERA_INFO]
-    JointState, RegionOfInterest = types[_JOINT_STATE], types["sensor_msgs/msg/RegionOfInterest"]
+    store = ros_typestore()
     rig = recording.rig
-
-    def header(ns: int, frame_id: str):
-        return Header(stamp=Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=frame_id)
-
-    infos = {}
-    for name, camera in rig.cameras.items():
-        infos[name] = dict(
-            height=camera.height, width=camera.width, distortion_model="plumb_bob", d=np.zeros(5),
-            k=np.array([camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0]),
-            r=np.eye(3).ravel(),
-            p=np.array([camera.fx, 0.0, camera.cx, 0.0, 0.0, camera.fy, camera.cy, 0.0, 0.0, 0.0, 1.0, 0.0]),
-            binning_x=0, binning_y=0,
-            roi=RegionOfInterest(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))
-    joint_ns = [_nanoseconds(t, "joint state time") for t in recording.joint_times]
+    joint_ns = [ros_nanoseconds(t, "joint state time") for t in recording.joint_times]
     names = list(recording.joint_names)
-    empty = np.zeros(0)
     try:
         with Writer(path, version=Writer.VERSION_LATEST, storage_plugin=plugins[storage]) as writer:
             joints_out = writer.add_connection(JOINT_STATES_TOPIC, _JOINT_STATE, typestore=store)
@@ -746,24 +729,16 @@ def write_bag(recording: Recording, path, storage: str = "mcap") -> Path:
                 nonlocal written
                 while written < len(joint_ns) and joint_ns[written] <= ns_limit:
                     ns = joint_ns[written]
-                    message = JointState(header=header(ns, ""), name=names,
-                                         position=np.array(recording.joint_positions[written]), velocity=empty,
-                                         effort=empty)
+                    message = joint_state_message(store, ns, names, recording.joint_positions[written])
                     writer.write(joints_out, ns, store.serialize_cdr(message, _JOINT_STATE))
                     written += 1
 
             for frame_set in recording.frame_sets():
-                joints_until(_nanoseconds(frame_set.time, "capture time"))
+                joints_until(ros_nanoseconds(frame_set.time, "capture time"))
                 for name, image in frame_set.images.items():
-                    ns = _nanoseconds(image.timestamp, "capture time")
-                    frame_id = f"{name}_optical_frame"
-                    info = CameraInfo(header=header(ns, frame_id), **infos[name])
+                    ns = ros_nanoseconds(image.timestamp, "capture time")
+                    info, message = depth_messages(store, ns, rig.cameras[name], image.data)
                     writer.write(infos_out[name], ns, store.serialize_cdr(info, _CAMERA_INFO))
-                    data = np.ascontiguousarray(image.data, dtype=image.data.dtype.newbyteorder("<"))
-                    encoding = "16UC1" if data.dtype.kind == "u" else "32FC1"
-                    message = Image(header=header(ns, frame_id), height=data.shape[0], width=data.shape[1],
-                                    encoding=encoding, is_bigendian=0, step=data.shape[1] * data.itemsize,
-                                    data=data.view(np.uint8).ravel())
                     writer.write(images_out[name], ns, store.serialize_cdr(message, _IMAGE))
             joints_until(math.inf)
     except DepthguardError:
@@ -775,7 +750,42 @@ def write_bag(recording: Recording, path, storage: str = "mcap") -> Path:
     return path
 
 
-def _nanoseconds(time: float, what: str) -> int:
+def ros_header(store, ns: int, frame_id: str):
+    """A std_msgs/Header stamped ``ns`` nanoseconds."""
+    types = store.types
+    return types["std_msgs/msg/Header"](stamp=types["builtin_interfaces/msg/Time"](
+        sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=frame_id)
+
+
+def joint_state_message(store, ns: int, names, positions):
+    """A sensor_msgs/JointState of ``positions`` (radians, ``names`` order) stamped ``ns`` nanoseconds."""
+    empty = np.zeros(0)
+    return store.types[_JOINT_STATE](header=ros_header(store, ns, ""), name=list(names),
+                                      position=np.array(positions, dtype=np.float64), velocity=empty, effort=empty)
+
+
+def depth_messages(store, ns: int, camera: PinholeCamera, data: np.ndarray):
+    """(sensor_msgs/CameraInfo, sensor_msgs/Image) of one depth image of ``camera`` stamped ``ns`` nanoseconds, in
+    frame ``<camera>_optical_frame``: ``16UC1`` for an unsigned image (units of the rig's depth_scale), ``32FC1``
+    for a float one (metres); a pinhole camera without distortion."""
+    types = store.types
+    frame_id = f"{camera.name}_optical_frame"
+    roi = types["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
+    info = types[_CAMERA_INFO](
+        header=ros_header(store, ns, frame_id), height=camera.height, width=camera.width,
+        distortion_model="plumb_bob", d=np.zeros(5),
+        k=np.array([camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0]), r=np.eye(3).ravel(),
+        p=np.array([camera.fx, 0.0, camera.cx, 0.0, 0.0, camera.fy, camera.cy, 0.0, 0.0, 0.0, 1.0, 0.0]),
+        binning_x=0, binning_y=0, roi=roi)
+    data = np.ascontiguousarray(data, dtype=data.dtype.newbyteorder("<"))
+    encoding = "16UC1" if data.dtype.kind == "u" else "32FC1"
+    image = types[_IMAGE](header=ros_header(store, ns, frame_id), height=data.shape[0], width=data.shape[1],
+                          encoding=encoding, is_bigendian=0, step=data.shape[1] * data.itemsize,
+                          data=data.view(np.uint8).ravel())
+    return info, image
+
+
+def ros_nanoseconds(time: float, what: str) -> int:
     """A time in seconds as whole nanoseconds: its shortest decimal (repr) rounded, so 0.033333 is 33333000."""
     if time is None or not math.isfinite(time) or not 0.0 <= time < 2.0**31:
         raise InputError(f"a {what} of {short_repr(time)} s cannot be a ROS time (0 to 2**31 s)", field="time")

@@ -92,3 +92,10 @@ def test_demo_writes_one_summary_per_mode_and_plots(tmp_path, capsys):
         assert len(figures["per_control_point"]["true_min_m"]) == len(summary["control_points"]) == 9
         assert (tmp_path / f"demo_{mode}.png").stat().st_size > 5000
     assert not (tmp_path / "demo_ssm.png").exists()
+    assert (tmp_path / "bag_avoid" / "metadata.yaml").is_file() and list((tmp_path / "bag_avoid").glob("*.mcap"))
+    assert "bag_avoid" in out
+    # Run again: the command replaces its own recording; --no-bag writes none.
+    assert cli.main(["demo", "--out", str(tmp_path), "--duration", "0.05", "--mode", "avoid"]) == 0
+    assert cli.main(["demo", "--out", str(tmp_path / "quiet"), "--duration", "0.05", "--mode", "avoid",
+                     "--no-bag"]) == 0
+    assert not (tmp_path / "quiet" / "bag_avoid").exists()

@@ -30,13 +30,17 @@ run. Per mode it reports (``summary.json``, one object per mode):
   monitor has seen nothing and answers 0).
 
 It writes a plot per mode like the 2016 paper's Fig. 15 (``demo_<mode>.png``: the end-effector's path against the
-task's, the distances over time, the repulsive speed and the speed factor) and ``summary.json``.
+task's, the distances over time, the repulsive speed and the speed factor), ``summary.json``, and the run with the
+papers' avoidance as a recording a user can open in Foxglove or rerun (``bag_avoid/``, an MCAP file: depth images,
+joint states, the robot's capsules and control points coloured by distance, the distances over time;
+:mod:`depthguard.simulation._loop_bag`; about 0.6 MB per depth image, 150 MB for the whole run).
 
-    depthguard demo [--out DIR] [--duration S] [--mode none|avoid|ssm ...]
+    depthguard demo [--out DIR] [--duration S] [--mode none|avoid|ssm ...] [--no-bag]
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from importlib import resources
 from pathlib import Path
@@ -137,8 +141,12 @@ def plot(log, mode_summary: dict, path: Path, control_points, rho: float) -> Non
     plt.close(fig)
 
 
-def main(out="out/demo", duration: float | None = None, modes=None, progress: bool = True) -> int:
-    """Run the scene once per mode, print a table, write the plots and summary.json into ``out``."""
+BAG_MODE = "avoid"  # the run written as a recording
+
+
+def main(out="out/demo", duration: float | None = None, modes=None, progress: bool = True, bag: bool = True) -> int:
+    """Run the scene once per mode, print a table, write the plots and summary.json into ``out`` (and, with
+    ``bag``, the ``avoid`` run as a recording in ``out/bag_avoid``, replacing an earlier one)."""
     from depthguard.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
 
     modes = list(MODES) if not modes else list(dict.fromkeys(modes))
@@ -153,12 +161,24 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
           f"{len(cameras)} simulated 640x480 depth cameras ({', '.join(cameras)}) at {workcell.rate:g} Hz fused "
           f"through the depth grid; control at {settings.control_rate:g} Hz; {span:g} s simulated per mode;\n"
           "judged by the exact distances between the robot's meshes and the obstacles (coal).\n")
-    results, logs = {}, {}
+    rho = {mode: settings.ssm_rho if mode == "ssm" else settings.avoidance.rho for mode in modes}
+    results, logs, bags = {}, {}, []
     for mode in modes:
-        log = run_closed_loop(workcell, mode, duration=span, settings=settings, progress=progress)
+        record = bag and mode == BAG_MODE
+        log = run_closed_loop(workcell, mode, duration=span, settings=settings, progress=progress,
+                              keep_frames=record)
+        if record:
+            import shutil
+
+            from depthguard.simulation._loop_bag import write_loop_bag
+
+            folder = out / f"bag_{mode}"
+            if folder.is_dir() and (folder / "metadata.yaml").is_file():
+                shutil.rmtree(folder)  # this command's own earlier recording
+            bags.append(write_loop_bag(folder, workcell, log, rho[mode]))
+            log = dataclasses.replace(log, captures=())
         logs[mode] = log
         results[mode] = summarize(log, dt)
-    rho = {mode: settings.ssm_rho if mode == "ssm" else settings.avoidance.rho for mode in modes}
     for mode in modes:
         plot(logs[mode], results[mode], out / f"demo_{mode}.png", workcell.robot.control_point_names, rho[mode])
     summary = {"scene": SCENE, "cameras": cameras, "control_hz": settings.control_rate, "camera_hz": workcell.rate,
@@ -183,4 +203,7 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
             cells.append(f"{per['true_min_m'][j]:.3f} / {'-' if rep is None else f'{rep:.3f}'}")
         print(f"  {name:14s} " + " ".join(f"{c:>15s}" for c in cells))
     print(f"\nPlots: {', '.join(str(out / f'demo_{m}.png') for m in modes)}; numbers: {out / 'summary.json'}")
+    for folder in bags:
+        print(f"Recording (open the .mcap file in Foxglove or rerun; `depthguard replay {folder} --out RESULTS.csv` "
+              f"runs it through the monitor again): {folder}")
     return 0

@@ -98,6 +98,8 @@ class LoopLog:
         truth: (K, m) metres, each control point to the nearest obstacle.
         clearance: (K,) metres, robot collision meshes to the nearest obstacle (<= 0: a collision).
         frames: how many camera sets were captured. wall_seconds: the whole run, wall clock.
+        captures: with ``keep_frames``, each captured set as (capture time, joints, {camera: DepthImage}); else
+            empty.
     """
 
     mode: str
@@ -117,6 +119,7 @@ class LoopLog:
     clearance: np.ndarray
     frames: int
     wall_seconds: float
+    captures: tuple = ()
 
     @property
     def task_error(self) -> np.ndarray:
@@ -126,9 +129,11 @@ class LoopLog:
 
 def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None, start: float = 0.0,
                     settings: LoopSettings | None = None, seed: int | None = None, progress: bool = False,
-                    renderer=None) -> LoopLog:
+                    renderer=None, keep_frames: bool = False) -> LoopLog:
     """Run ``workcell`` (:class:`~depthguard.simulation.Workcell`) in closed loop from ``start`` for ``duration``
-    seconds (default: to the episode's end) with ``mode`` ("none", "avoid", "ssm"). See the module's docstring."""
+    seconds (default: to the episode's end) with ``mode`` ("none", "avoid", "ssm"). See the module's docstring.
+    ``keep_frames``: keep every captured set of depth images in the log (``LoopLog.captures``, for a recording:
+    about 0.6 MB per 640x480 image)."""
     import depthguard as dg
     from depthguard.simulation._episode import SceneRenderer, check_seed, sense
     from depthguard.simulation._truth import TruthComputer
@@ -175,6 +180,7 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
     next_frame = start
     upcoming = reference(start)  # (end-effector, joints) the task wants at the step about to run
     frames = 0
+    captures = []
     scene = SceneRenderer(workcell, renderer)
     wall = time.perf_counter()
     try:
@@ -192,6 +198,8 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
                 pending.append((t + settings.latency, prepared, t))
                 next_frame += camera_period
                 frames += 1
+                if keep_frames:
+                    captures.append((t, q.copy(), dict(frame.depth)))
             while pending and pending[0][0] <= t + 1e-9:
                 _, prepared, captured_at = pending.pop(0)
                 current = (prepared, captured_at)
@@ -238,7 +246,8 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
         scene.release()
     arrays = {key: np.array(value) for key, value in log.items()}
     return LoopLog(mode=mode, truth_steps=np.array(truth_steps, dtype=np.int64), truth=np.array(truth_rows),
-                   clearance=np.array(clearance), frames=frames, wall_seconds=time.perf_counter() - wall, **arrays)
+                   clearance=np.array(clearance), frames=frames, wall_seconds=time.perf_counter() - wall,
+                   captures=tuple(captures), **arrays)
 
 
 def _empty_result(m: int) -> DistanceResult:
