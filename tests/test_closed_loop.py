@@ -14,6 +14,9 @@ from depthguard.simulation._closed_loop import LoopSettings, run_closed_loop
 #: The person reaches into the end-effector (no standoff): without avoidance the hand meets the robot at about 3.0 s.
 CONTACT_WINDOW = (1.9, 1.3)  # start, duration (s)
 CLEARANCE = 0.05  # metres the avoidance must keep between the robot's meshes and the person in that window
+#: Reversals of the reaction per second (the demo's oscillation_per_s: the repulsive velocity turning by more than
+#: 90 degrees between control steps, or SSM's speed factor crossing 0.5) that a run may have: at most one every 0.5 s.
+OSCILLATION_BOUND = 2.0
 
 
 @pytest.fixture(scope="module")
@@ -24,17 +27,30 @@ def reach_workcell():
 @pytest.fixture(scope="module")
 def runs(reach_workcell):
     start, duration = CONTACT_WINDOW
-    return {mode: run_closed_loop(reach_workcell, mode, start=start, duration=duration) for mode in ("none", "avoid")}
+    return {mode: run_closed_loop(reach_workcell, mode, start=start, duration=duration)
+            for mode in ("none", "avoid", "ssm")}
 
 
 @pytest.mark.slow
 def test_without_avoidance_the_hand_meets_the_robot_and_with_it_the_robot_keeps_clear(runs):
     assert runs["none"].clearance.min() <= 0.0
     assert runs["avoid"].clearance.min() >= CLEARANCE
+    assert runs["ssm"].clearance.min() >= CLEARANCE
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("mode", ["none", "avoid"])
+@pytest.mark.parametrize("mode", ["avoid", "ssm"])
+def test_the_reaction_does_not_oscillate(runs, mode):
+    from depthguard.experiments.avoidance_demo import summarize
+
+    log = runs[mode]
+    figures = summarize(log, 1.0 / LoopSettings().control_rate)
+    assert figures["time_reacting_s"] > 0.5  # it does react in this window (else the bound would say nothing)
+    assert figures["oscillation_per_s"] <= OSCILLATION_BOUND, figures["oscillation_per_s"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mode", ["none", "avoid", "ssm"])
 def test_every_step_respects_the_joint_limits(runs, reach_workcell, mode):
     log = runs[mode]
     limits = JointLimits.from_robot(reach_workcell.robot, acceleration=LoopSettings().acceleration)
