@@ -57,6 +57,11 @@ class DistanceMonitor:
             guarantee.
         v_max: metres/second, finite, > 0: the fastest a person may move (default 2.0, ISO 13855's hand speed).
         memory_voxel: metres, > 0: the memory's voxel side.
+        robot_zone: metres, in [0, ``config.ROBOT_ZONE_MAX``]; fused answers with a robot take space within this much
+            of the robot's padded capsules (at the principal frame's capture time) for the robot, in every direction,
+            as the self-filter takes a measurement up to its tolerance in front of the robot for the robot. An object
+            wholly inside it is not seen, and a distance to one that reaches into it may exceed the truth by up to
+            this much: state it with your other tolerances (SSM's Z_d). 0 (default) turns it off.
 
     Every argument is checked here, once: a wrong type or a value out of range raises
     :class:`~depthguard.errors.InputError` naming it.
@@ -75,7 +80,8 @@ class DistanceMonitor:
                  self_filter_tolerance: float = config.SELF_FILTER_TOLERANCE, principals=None, maps=None,
                  fusion_margin: float = config.DEFAULT_FUSION_MARGIN,
                  fusion_pixels: int = config.DEFAULT_FUSION_PIXELS, memory: bool = config.DEFAULT_MEMORY,
-                 v_max: float = config.FREESPACE_V_MAX, memory_voxel: float = config.FREESPACE_VOXEL):
+                 v_max: float = config.FREESPACE_V_MAX, memory_voxel: float = config.FREESPACE_VOXEL,
+                 robot_zone: float = config.DEFAULT_ROBOT_ZONE):
         if not isinstance(rig, Rig):
             raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}", field="rig")
         self.rig = rig
@@ -108,6 +114,8 @@ class DistanceMonitor:
             from depthguard.self_filter import RobotSilhouette  # needs OpenGL: only with a robot
 
             self._silhouette = RobotSilhouette(robot, geometry=self.self_filter)
+        self.robot_zone = check_real(robot_zone, "robot_zone", minimum=0.0, maximum=config.ROBOT_ZONE_MAX,
+                                     unit="metres", field="robot_zone")
         self.memory = None
         if not isinstance(memory, bool):
             raise InputError(f"memory must be True or False, got {short_repr(memory)}", field="memory")
@@ -362,10 +370,21 @@ class DistanceMonitor:
                 state = usable[name]
                 cached = self._fused_frames[name] = (key, FusedFrames(
                     grid, self.rig, state.occupancy, secondaries, robot_far=state.robot_far,
-                    margin=self.fusion_margin, pad=self.fusion_pixels, check=False, robot_near=state.robot_near,
-                    robot_exit=state.robot_exit, remembered=self._remembered_free(usable)))
+                    margin=self.fusion_margin, pad=self.fusion_pixels,
+                    robot_tolerance=self.self_filter_tolerance, check=False, robot_near=state.robot_near,
+                    robot_exit=state.robot_exit, remembered=self._remembered_free(usable),
+                    robot_zone=self._robot_zone(state)))
             out.append(cached[1])
         return tuple(out)
+
+    def _robot_zone(self, state: "_CameraFrame"):
+        """(capsules, thickness) for FusedFrames' robot zone: the robot's capsules when ``state``'s frame was
+        captured ((n, 7) world frame: p0, p1, radius with the padding) and ``robot_zone``; None without a robot or
+        with ``robot_zone=0``."""
+        if not self.robot_zone or self.robot is None or state._joints is None:
+            return None
+        capsules = self.robot.capsules_world(state._joints, check=False)
+        return np.array([c.p0 + c.p1 + (c.radius,) for c in capsules]), self.robot_zone
 
     def _remembered_free(self, usable: dict):
         """(free voxels, box) for FusedFrames: what the memory certifies free at the latest capture time of the

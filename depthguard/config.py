@@ -312,6 +312,12 @@ FREESPACE_V_MAX = 2.0
 
 #: The monitor remembers free space (SPEC 8a) by default, in voxels of FREESPACE_VOXEL metres over the rig's workspace.
 DEFAULT_MEMORY = True
+#: DistanceMonitor(robot_zone=...), metres: fused answers may take space within this much of the robot's padded
+#: capsules for the robot, in every direction (the robot zone; README, "Several cameras"). An object wholly inside it
+#: is not seen, and a distance to one that reaches into it may exceed the truth by up to this much. Off (0) by default:
+#: it removes few false alarms at a thickness that stays safe (benchmarks/probe_robot_zone.py).
+DEFAULT_ROBOT_ZONE = 0.0
+ROBOT_ZONE_MAX = 0.2
 FREESPACE_VOXEL = 0.04
 
 #: Largest free-space box, in voxels: its arrival times (float64), the distance transform's work space (int32) and a

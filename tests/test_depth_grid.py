@@ -332,7 +332,8 @@ def test_nearest_by_run_equals_the_walk_on_random_pixels():
         runs = np.full(camera.shape, K.NO_FREE_RUN, dtype=np.int64)
         runs[v, u] = (run_lo << 32) | run_hi
         state = K.GridState(d_min, delta_d, n, frames._corners, frames._offsets, frames._eroded, frames._sizes,
-                            frames._z_near, frames._margin, frames._cells, *frames._memory, runs, runs.copy())
+                            frames._z_near, frames._margin, frames._cells, *frames._memory, runs, runs.copy(),
+                            *frames._zone)
         a0, a1 = (u - 0.5 - camera.cx) / camera.fx, (u + 0.5 - camera.cx) / camera.fx
         b0, b1 = (v - 0.5 - camera.cy) / camera.fy, (v + 0.5 - camera.cy) / camera.fy
         z_run = d_min + delta_d * (rng.uniform(run_lo, run_hi + 1) if rng.random() < 0.7 else rng.uniform(0, n))

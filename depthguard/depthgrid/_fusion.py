@@ -94,13 +94,18 @@ class FusedFrames:
             free-space memory certifies free at these frames' time (``free``: box.shape bool, from
             :meth:`depthguard.freespace.FreeSpaceMemory.free_at`). A cell that no secondary camera clears is then free
             when every voxel it touches is (SPEC section 8a). The caller flags the answers that rest on it.
+        robot_zone: optional (capsules, thickness): capsules (n, 7) float64, world frame, metres, the robot's padded
+            capsules when the principal frame was captured (p0 (3), p1 (3), radius with the padding;
+            :meth:`RobotModel.capsules_world`), and thickness, metres. A cell within ``thickness`` of one of them is
+            the robot's (the robot zone, :func:`depthguard.depthgrid._kernels.zoned_cells`): an object wholly inside
+            it is not seen, and one that reaches into it may be reported up to ``thickness`` too far.
     """
 
     def __init__(self, grid: DepthGridMap, rig: Rig, principal: OccupancyImage, secondaries: dict,
                  robot_far: np.ndarray | None = None, margin: float = config.DEFAULT_FUSION_MARGIN,
                  pad: int = config.DEFAULT_FUSION_PIXELS, robot_tolerance: float = config.SELF_FILTER_TOLERANCE,
                  check: bool = True, robot_near: np.ndarray | None = None,
-                 robot_exit: np.ndarray | None = None, remembered=None):
+                 robot_exit: np.ndarray | None = None, remembered=None, robot_zone=None):
         if check:
             if not isinstance(grid, DepthGridMap) or not isinstance(rig, Rig) or \
                     not isinstance(principal, OccupancyImage):
@@ -181,6 +186,7 @@ class FusedFrames:
         self._free_run = np.full(camera.shape, _kernels.NO_FREE_RUN, dtype=np.int64)
         self._behind_run = np.full(camera.shape, _kernels.NO_FREE_RUN, dtype=np.int64)
         self._memory = _NO_MEMORY if remembered is None else _memory_tuple(remembered, camera)
+        self._zone = _zone_arrays(robot_zone, camera)
 
     def distances(self, points_world, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
                   unseen: str = config.DEFAULT_UNSEEN, check: bool = True) -> DistanceResult:
@@ -212,7 +218,7 @@ class FusedFrames:
                                             config.MIN_DIRECTION_NORM, config.FUSION_ROW_CHUNKS)
             state = _kernels.GridState(grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets,
                                        self._eroded, self._sizes, self._z_near, self._margin, self._cells,
-                                       *self._memory, self._free_run, self._behind_run)
+                                       *self._memory, self._free_run, self._behind_run, *self._zone)
             out = _kernels.FusedOutput(distance, direction_camera, count, invalid_count, flags, unchecked)
             with parallel_chunksize(1):
                 _kernels.fused_query_points(points_camera, float(rho), view, options, state, out)
@@ -237,6 +243,34 @@ class FusedFrames:
 
 
 _NO_MEMORY = (np.zeros((0, 0, 0), dtype=np.uint8), np.zeros(_kernels.MEM_GEOMETRY_SIZE))
+NO_ZONE = (np.zeros((0, 7)), np.zeros(_kernels.ZONE_PARAMS))
+
+
+def _zone_arrays(robot_zone, camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
+    """The kernels' form of the robot zone (capsules, thickness) for principal ``camera``: ((n, 7) capsules in its
+    optical frame, zone_params); :data:`NO_ZONE` for None."""
+    if robot_zone is None:
+        return NO_ZONE
+    try:
+        capsules, thickness = robot_zone
+    except (TypeError, ValueError):
+        raise InputError("robot_zone must be (capsules, thickness)", field="robot_zone") from None
+    thickness = check_real(thickness, "robot_zone thickness", minimum=0.0, unit="metres", field="robot_zone")
+    capsules = np.asarray(capsules, dtype=np.float64)
+    if capsules.ndim != 2 or capsules.shape[1] != 7 or not np.all(np.isfinite(capsules)) or \
+            np.any(capsules[:, 6] < 0.0):
+        raise InputError(f"robot_zone's capsules must be an (n, 7) array of finite capsules (p0, p1, radius >= 0), "
+                         f"got {short_repr(capsules)}", field="robot_zone")
+    T_camera_world = np.linalg.inv(camera.T_world_camera)
+    R, t = T_camera_world[:3, :3], T_camera_world[:3, 3]
+    zone = np.empty_like(capsules)
+    zone[:, 0:3] = capsules[:, 0:3] @ R.T + t
+    zone[:, 3:6] = capsules[:, 3:6] @ R.T + t
+    zone[:, 6] = capsules[:, 6]
+    params = np.empty(_kernels.ZONE_PARAMS)
+    params[_kernels.ZONE_THICKNESS] = thickness
+    params[_kernels.ZONE_INTRINSICS:] = (camera.fx, camera.fy, camera.cx, camera.cy)
+    return np.ascontiguousarray(zone), params
 
 
 def _memory_tuple(remembered, camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:

@@ -47,8 +47,10 @@ from depthguard._jit import kernel
 #: numba's parallel loops do not take); free_run, behind_run (H, W) int64: per pixel, one run of cells known free in
 #: its gray area (or, without a measurement, its frustum) and one in the space behind the robot (two, so that the
 #: two runs of a pixel that shows the robot behind a surface do not replace each other).
+#: zone (n_caps, 7) float64 and zone_params (ZONE_PARAMS,) float64: the robot zone (:func:`zoned_cells`; zero rows for
+#: none).
 GridState = namedtuple("GridState", "d_min delta_d n_cells corners offsets eroded sizes z_near margin cells mem_free "
-                                    "mem_geometry free_run behind_run")
+                                    "mem_geometry free_run behind_run zone zone_params")
 
 #: What the fused kernels need of the principal camera's frame, one record: its per-pixel arrays ((h, w) each, from
 #: :func:`principal_arrays`: z_start float32, z_end float32, certain uint8, blind_from float32, unchecked_from
@@ -233,15 +235,66 @@ def box_seen_through(eroded, width, height, x_lo, x_hi, y_lo, y_hi, need):
     return True
 
 
+#: Layout of ``zone_params``: the zone's thickness (metres) and the principal's intrinsics fx, fy, cx, cy.
+ZONE_THICKNESS, ZONE_INTRINSICS, ZONE_PARAMS = 0, 1, 5
+
+
+@kernel(inline=True)
+def zoned_cells(u, v, k_a, k_b, d_min, delta_d, zone, zone_params):
+    """Bit i set when cell k_a + i of principal pixel (u, v) lies wholly in the robot zone: within the zone's
+    thickness of one of the robot's padded capsules (``zone`` rows: p0 (3), p1 (3) in the principal's optical frame,
+    metres, and the radius with the padding). It is the self-filter's rule (a measurement up to its tolerance in front
+    of the robot is the robot; the principal takes as much behind a link for the robot, ``principal_arrays``), made
+    the same in every direction: the space right beside a link lies within every camera's noise margin of the link it
+    sees, and no camera can clear it. The test is conservative: the cell's bounding sphere (centre on the pixel's
+    central ray at mid-depth, radius reaching its corners) must fit in one capsule grown by the thickness."""
+    if zone.shape[0] == 0:
+        return np.uint64(0)
+    grow = zone_params[ZONE_THICKNESS]
+    fx = zone_params[ZONE_INTRINSICS]
+    fy = zone_params[ZONE_INTRINSICS + 1]
+    tx = (u - zone_params[ZONE_INTRINSICS + 2]) / fx
+    ty = (v - zone_params[ZONE_INTRINSICS + 3]) / fy
+    bits = np.uint64(0)
+    for i in range(k_b - k_a + 1):
+        z0 = d_min + (k_a + i) * delta_d
+        z1 = z0 + delta_d
+        zc = 0.5 * (z0 + z1)
+        cx = tx * zc
+        cy = ty * zc
+        # Each corner lies within half a pixel's footprint at z1 of the central ray, plus the ray's slope over half a
+        # cell, in x and in y, and within half a cell in depth.
+        hx = 0.5 * z1 / fx + abs(tx) * 0.5 * delta_d
+        hy = 0.5 * z1 / fy + abs(ty) * 0.5 * delta_d
+        radius = np.sqrt(hx * hx + hy * hy + 0.25 * delta_d * delta_d)
+        for c in range(zone.shape[0]):
+            ax = zone[c, 3] - zone[c, 0]
+            ay = zone[c, 4] - zone[c, 1]
+            az = zone[c, 5] - zone[c, 2]
+            px = cx - zone[c, 0]
+            py = cy - zone[c, 1]
+            pz = zc - zone[c, 2]
+            length2 = ax * ax + ay * ay + az * az
+            t = 0.0 if length2 <= 0.0 else min(max((px * ax + py * ay + pz * az) / length2, 0.0), 1.0)
+            dx = px - t * ax
+            dy = py - t * ay
+            dz = pz - t * az
+            if np.sqrt(dx * dx + dy * dy + dz * dz) + radius <= zone[c, 6] + grow:
+                bits |= np.uint64(1) << np.uint64(i)
+                break
+    return bits
+
+
 _ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
 CLASSIFY_RUN = 8  # cells classified together: neighbours share a face, projected once
 
 
 @kernel()
 def classify_run(u, v, k_a, k_b, grid):
-    """Classify cells k_a..k_b (at most 64) of principal pixel (u, v) into cells[v, u, k]: 1 when some secondary
-    camera saw through the whole cell, else 3 when the free-space memory (``memory``, :func:`remembered_cells`)
-    certifies every voxel the cell touches, else 2 (occupied, or hidden from every camera). Each face between two cells
+    """Classify cells k_a..k_b (at most 64) of principal pixel (u, v) into cells[v, u, k]: 1 when the cell lies in
+    the robot zone (:func:`zoned_cells`) or some secondary camera saw through the whole cell, else 3 when the
+    free-space memory (``memory``, :func:`remembered_cells`) certifies every voxel the cell touches, else 2 (occupied,
+    or hidden from every camera). Each face between two cells
     is projected once per camera.
 
     A camera is first asked about the whole run at once: the run's footprint lies within the box of its two end
@@ -249,11 +302,13 @@ def classify_run(u, v, k_a, k_b, grid):
     saw beyond that over that box, it saw through every cell, and the per-cell tests would all agree. Behind the
     robot, where a secondary camera sees the room far beyond, that settles a run with one test."""
     d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run, behind_run = grid
+        free_run, behind_run, zone, zone_params = grid
     n = k_b - k_a + 1
     everything = _ALL if n == 64 else (np.uint64(1) << np.uint64(n)) - np.uint64(1)
-    cleared = np.uint64(0)
+    cleared = zoned_cells(u, v, k_a, k_b, d_min, delta_d, zone, zone_params)
     for j in range(corners.shape[0]):
+        if cleared == everything:
+            break
         width = sizes[j, 0]
         height = sizes[j, 1]
         ok0, x_lo0, x_hi0, y_lo0, y_hi0, far0 = face_box(corners[j], offsets[j], u, v, d_min + k_a * delta_d,
@@ -375,7 +430,7 @@ def occupied_in(u, v, k_lo, k_hi, highest, grid):
     alone, so whichever write lands, the cache holds the right class.
     """
     d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run, behind_run = grid
+        free_run, behind_run, zone, zone_params = grid
     if k_lo > k_hi:
         return -1
     step = -1 if highest else 1
@@ -439,7 +494,7 @@ def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, grid, runs):
     it) to the first occupied cell each way within k_lo..k_hi. Returns (k_left, k_right), -1 for none, or (-2, -2)
     when k_star's own cell is occupied. Records the free run found between them in ``runs``."""
     d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run, behind_run = grid
+        free_run, behind_run, zone, zone_params = grid
     # np.bool_, not a literal True or False, for which numba would compile occupied_in twice.
     if not in_run and occupied_in(u, v, k_star, k_star, np.bool_(False), grid) >= 0:
         return -2, -2
@@ -471,7 +526,7 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
     comes nearer than bound2.
     """
     d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run, behind_run = grid
+        free_run, behind_run, zone, zone_params = grid
     if lo > hi:
         return np.inf, 0.0
     d_max = d_min + n_cells * delta_d
@@ -642,7 +697,7 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
     where the space behind the robot starts (after its body), inf for none.
     """
     d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run, behind_run = grid
+        free_run, behind_run, zone, zone_params = grid
     z_far = Z + rho
     best2 = np.inf
     best_z = 0.0
@@ -686,7 +741,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
     without a measurement, whether P is inside, the sums of their distances and unit directions, and the nearest
     one (squared distance, pixel, depth, from a pixel without a measurement?). ``scratch`` (5, width) float64."""
     d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run, behind_run = grid
+        free_run, behind_run, zone, zone_params = grid
     z_start, z_end, certain, blind_from = view.z_start, view.z_end, view.certain, view.blind_from
     fx, fy, cx, cy = view.fx, view.fy, view.cx, view.cy
     rho2 = rho_squared(rho)
