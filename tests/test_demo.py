@@ -23,7 +23,8 @@ def make_log(mode="avoid", steps=10, clearance=None, repulsive=None, scale=None,
     ee_ref = np.zeros((steps, 3))
     ee_ref[-1] = [0.03, 0.0, 0.04]  # 5 cm off at the end
     return LoopLog(
-        mode=mode, times=t, q=np.zeros((steps, 7)), dq=np.zeros((steps, 7)), ee=ee, ee_ref=ee_ref,
+        mode=mode, times=t, q=np.zeros((steps, 7)), dq=np.zeros((steps, 7)), dq_requested=np.zeros((steps, 7)),
+        ee=ee, ee_ref=ee_ref,
         reported=np.full((steps, 2), 0.3) if reported is None else reported,
         flags=np.zeros((steps, 2), dtype=np.int64),
         repulsive=np.zeros((steps, 3)) if repulsive is None else repulsive,

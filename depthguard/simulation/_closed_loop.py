@@ -87,6 +87,8 @@ class LoopLog:
         mode: "none", "avoid" or "ssm".
         times: (T,) seconds.
         q, dq: (T, n) joints and the command applied from that step.
+        dq_requested: (T, n) what the task asked for before speed and separation monitoring scaled it (mode "ssm";
+            the command itself in the other modes).
         ee, ee_ref: (T, 3) the end-effector control point and where the task wants it.
         reported: (T, m) the monitor's distances (inf: nothing within rho).
         flags: (T, m) int flag bits.
@@ -106,6 +108,7 @@ class LoopLog:
     times: np.ndarray
     q: np.ndarray
     dq: np.ndarray
+    dq_requested: np.ndarray
     ee: np.ndarray
     ee_ref: np.ndarray
     reported: np.ndarray
@@ -172,8 +175,8 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
 
     q = workcell.joints_at(start).copy()
     dq = np.zeros(n)
-    log = {key: [] for key in ("times", "q", "dq", "ee", "ee_ref", "reported", "flags", "repulsive", "scale",
-                               "data_age", "step_seconds")}
+    log = {key: [] for key in ("times", "q", "dq", "dq_requested", "ee", "ee_ref", "reported", "flags", "repulsive",
+                               "scale", "data_age", "step_seconds")}
     truth_steps, truth_rows, clearance = [], [], []
     pending = []  # (usable from, PreparedSet, capture time)
     current = None  # (PreparedSet, capture time)
@@ -218,10 +221,12 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
                 command = controller.command(result, q, task, dq, dt, jacobians=jacobians, posture=q_ref,
                                              check=False)
                 dq_new, scale, repulsive = command.dq, command.scale, command.repulsive
+                requested = dq_new
             else:
                 command = controller.command(nothing, q, task, dq, dt, jacobians=jacobians, posture=q_ref,
                                              check=False)
                 dq_new, scale, repulsive = command.dq, command.scale, np.zeros(3)
+                requested = dq_new
                 if mode == "ssm":
                     # Nothing seen yet: no reaction time can be stated, and the robot stays.
                     scale = 0.0 if current is None else ssm.speed_factor(result, None, jacobians, dq_new,
@@ -236,7 +241,8 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
                 truth_steps.append(k)
                 truth_rows.append(g.distance)
                 clearance.append(g.clearance)
-            for key, value in (("times", t), ("q", q.copy()), ("dq", dq_new), ("ee", points[ee]), ("ee_ref", x_ref),
+            for key, value in (("times", t), ("q", q.copy()), ("dq", dq_new), ("dq_requested", requested),
+                               ("ee", points[ee]), ("ee_ref", x_ref),
                                ("reported", result.distance), ("flags", [int(f) for f in result.flags]),
                                ("repulsive", repulsive), ("scale", scale), ("data_age", age)):
                 log[key].append(value)
