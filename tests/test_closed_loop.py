@@ -97,6 +97,19 @@ def test_a_box_on_the_elbows_path_is_avoided_by_the_arm(elbow_runs):
         assert summarize(log, 1.0 / LoopSettings().control_rate)["oscillation_per_s"] <= OSCILLATION_BOUND
 
 
+@pytest.mark.slow
+def test_four_cameras_keep_the_reaching_hand_clear_too(reach_workcell):
+    """Issue 9 asks for each scenario with the four-camera layout of issue 8 as well (scenario_b_four.yaml's room
+    corners; the three scenarios in both layouts: benchmarks/bench_avoidance_scenarios.py)."""
+    four = load_workcell(Path(str(resources.files("depthguard.simulation").joinpath("scenario_b_reach.yaml"))),
+                         layout=Path(str(resources.files("depthguard.simulation").joinpath("scenario_b_four.yaml"))))
+    assert len(four.rig.cameras) == 4
+    start, duration = CONTACT_WINDOW
+    for mode in ("avoid", "ssm"):
+        log = run_closed_loop(four, mode, start=start, duration=duration)
+        assert log.clearance.min() >= CLEARANCE, (mode, log.clearance.min())
+
+
 def test_the_board_is_mostly_hidden_from_the_principal_camera():
     from depthguard.simulation import simulate
 

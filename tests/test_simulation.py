@@ -633,3 +633,29 @@ def test_scene_options_urdf_waypoints_intensity_cameras_and_simple_actions(tmp_p
     out = write_episode(wc, tmp_path / "ep", progress=False, frames=[0])
     assert dg.load_rig(out / "intensity_rig.yaml").fingerprint() == wc.intensity_rig.fingerprint()
     assert (out / "intensity" / "grey" / "000000.png").is_file()
+
+
+def test_a_scene_loads_with_another_scenes_camera_layout(tmp_path):
+    """load_workcell(scene, layout=other): the scene's robot, task and people, the other file's cameras, principal
+    and workspace (issue 9's four-camera runs of the avoidance scenarios)."""
+    from importlib import resources
+    from pathlib import Path
+
+    folder = Path(str(resources.files("depthguard.simulation")))
+    scene = load_workcell(folder / "scenario_b_reach.yaml")
+    four = load_workcell(folder / "scenario_b_four.yaml")
+    both = load_workcell(folder / "scenario_b_reach.yaml", layout=folder / "scenario_b_four.yaml")
+    assert tuple(both.rig.cameras) == tuple(four.rig.cameras) != tuple(scene.rig.cameras)
+    assert both.rig.principal == four.rig.principal
+    for name, camera in four.rig.cameras.items():
+        assert np.array_equal(both.rig.cameras[name].T_world_camera, camera.T_world_camera)
+    assert [p.name for p in both.people] == [p.name for p in scene.people]
+    for t in (0.5, 2.5):
+        assert np.array_equal(both.joints_at(t), scene.joints_at(t))
+        assert np.allclose(both.control_points_at(t), scene.control_points_at(t))
+    (tmp_path / "empty.yaml").write_text("duration: 4.0\n")
+    with pytest.raises(SceneError, match="with the cameras of"):
+        load_workcell(folder / "scenario_b_reach.yaml", layout=tmp_path / "empty.yaml")
+    (tmp_path / "bad.yaml").write_text("cameras: 3\n")
+    with pytest.raises(SceneError, match="with the cameras of"):
+        load_workcell(folder / "scenario_b_reach.yaml", layout=tmp_path / "bad.yaml")

@@ -283,15 +283,33 @@ class Workcell:
 
 # ------------------------------------------------------------------------------------------------- loading
 
-def load_workcell(path) -> Workcell:
+#: The keys of a scene file that make its camera layout (:func:`load_workcell`'s ``layout``).
+LAYOUT_KEYS = ("cameras", "principal", "workspace")
+
+
+def load_workcell(path, layout=None) -> Workcell:
     """Read a scene YAML file (safe loader) into a :class:`Workcell`; a :class:`SceneError` names the file and the
-    offending field."""
+    offending field.
+
+    layout: optional, another scene file whose camera layout (its ``cameras``, ``principal`` and ``workspace``)
+    replaces this one's: the same robot, task and people seen by other cameras (for example ``scenario_b_four.yaml``'s
+    four corners for a scene written with scenario B's two cameras)."""
     path = Path(path)
     data = read_yaml(path, what="scene file", max_bytes=config.MAX_TEXT_FILE_BYTES, error=SceneError)
+    source = str(path)
+    if layout is not None:
+        layout = Path(layout)
+        cameras = read_yaml(layout, what="scene file", max_bytes=config.MAX_TEXT_FILE_BYTES, error=SceneError)
+        if not isinstance(data, dict) or not isinstance(cameras, dict) or "cameras" not in cameras:
+            raise SceneError("a scene and a layout must both be mappings, the layout with 'cameras'",
+                             source=f"{path} with the cameras of {layout}")
+        data = {key: value for key, value in data.items() if key not in LAYOUT_KEYS}
+        data.update({key: cameras[key] for key in LAYOUT_KEYS if key in cameras})
+        source = f"{path} with the cameras of {layout}"
     try:
         return workcell_from_dict(data, base_dir=path.parent)
     except SceneError as exc:
-        raise exc.with_source(str(path)) from None
+        raise exc.with_source(source) from None
 
 
 def default_workcell() -> Workcell:
