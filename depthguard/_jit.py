@@ -30,6 +30,7 @@ from numba.core import caching, event
 KERNEL_MODULES = (
     "depthguard._frustum_kernels",
     "depthguard.baselines",
+    "depthguard.collision._kernels",
     "depthguard.depth._kernels",
     "depthguard.depthgrid._kernels",
     "depthguard.depthspace._frustum",

@@ -157,6 +157,10 @@ def _run_workloads() -> None:
     tangents = np.array([[-0.1, 0.1, -0.1, 0.1], [0.0, 0.2, 0.0, 0.2]])
     dg.frustum_distance([0.0, 0.0, 1.0], tangents, [0.5, np.inf])
     dg.paper_frustum_distance([0.0, 0.0, 1.0], tangents, [0.5, np.inf])
+    # The collision test's epipolar bands (SPEC 10), between the small rig's two cameras.
+    from depthguard.collision import EpipolarBands, TileGrid
+
+    EpipolarBands([TileGrid(camera, 6, 8) for camera in rig.cameras.values()], [box.lo, box.hi])
     rng = np.random.default_rng(0)
     fit_capsule(rng.normal(size=(40, 3)) * [0.05, 0.05, 0.2], link="warmup", padding=0.01)
     enclosing_circle(rng.normal(size=(20, 2)))

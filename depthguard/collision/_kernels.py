@@ -1,0 +1,129 @@
+"""Numba kernels of the image-based collision test (SPEC section 10): the epipolar bands between two cameras' tile
+grids. They trust their inputs; ``_epipolar.py`` checks them."""
+
+import numpy as np
+from numba import prange
+
+from depthguard._jit import kernel
+
+
+@kernel(inline=True)
+def _cross(ox, oy, ax, ay, bx, by):
+    return (ax - ox) * (by - oy) - (ay - oy) * (bx - ox)
+
+
+@kernel()
+def convex_hull(xs, ys, hull_x, hull_y):
+    """Andrew's monotone chain over the points (xs, ys) (n <= 16): writes the hull's vertices counter-clockwise
+    into hull_x, hull_y (length >= 2 n) and returns their number (collinear points dropped)."""
+    n = xs.shape[0]
+    order = np.arange(n)
+    for i in range(1, n):  # insertion sort by x, then y
+        j = i
+        while j > 0 and (xs[order[j - 1]] > xs[order[j]] or
+                         (xs[order[j - 1]] == xs[order[j]] and ys[order[j - 1]] > ys[order[j]])):
+            order[j - 1], order[j] = order[j], order[j - 1]
+            j -= 1
+    k = 0
+    for step in range(2):
+        start = k
+        for idx in range(n):
+            i = order[idx] if step == 0 else order[n - 1 - idx]
+            while k >= start + 2 and _cross(hull_x[k - 2], hull_y[k - 2], hull_x[k - 1], hull_y[k - 1],
+                                            xs[i], ys[i]) <= 0.0:
+                k -= 1
+            hull_x[k] = xs[i]
+            hull_y[k] = ys[i]
+            k += 1
+        k -= 1  # the last point of each chain is the first of the other
+    return max(k, 1)
+
+
+@kernel(inline=True)
+def _rect_meets_hull(x0, x1, y0, y1, hull_x, hull_y, m):
+    """Whether the axis-aligned rectangle [x0, x1] x [y0, y1] meets the convex polygon (hull_x, hull_y)[:m]
+    (counter-clockwise), by separating axes: the rectangle's two and the polygon's edge normals."""
+    lo_x = np.inf
+    hi_x = -np.inf
+    lo_y = np.inf
+    hi_y = -np.inf
+    for i in range(m):
+        lo_x = min(lo_x, hull_x[i])
+        hi_x = max(hi_x, hull_x[i])
+        lo_y = min(lo_y, hull_y[i])
+        hi_y = max(hi_y, hull_y[i])
+    if hi_x < x0 or lo_x > x1 or hi_y < y0 or lo_y > y1:
+        return False
+    for i in range(m):
+        j = (i + 1) % m
+        ex = hull_x[j] - hull_x[i]
+        ey = hull_y[j] - hull_y[i]
+        # Outward normal of a counter-clockwise edge: (ey, -ex). The rectangle is separated when all its corners
+        # lie beyond the edge's line.
+        nx = ey
+        ny = -ex
+        limit = nx * hull_x[i] + ny * hull_y[i]
+        nearest = min(nx * x0, nx * x1) + min(ny * y0, ny * y1)
+        if nearest > limit:
+            return False
+    return True
+
+
+@kernel(parallel=True)
+def tile_bands(rays, depths, R, t, fx, fy, cx, cy, tile_w, tile_h, rows, cols, words, out):
+    """For every tile of camera A, the tiles of camera B that its frustum between depths[tile, 0] and depths[tile, 1]
+    (A's optical depth, metres) can project onto, as bits in out (n_tiles_A, words) uint64 (tile index r * cols + c
+    of B's grid of rows x cols tiles of tile_w x tile_h pixels).
+
+    rays: (n_tiles_A, 4, 3) the tile's corner rays in A's optical frame (z = 1); R, t: A's optical frame -> B's;
+    fx, fy, cx, cy: B's intrinsics. The frustum piece is the convex hull of its 8 corners; its projection is the
+    convex hull of theirs, and a tile of B is set when its pixel rectangle meets that polygon (tiles are sets of
+    pixel footprints: pixel p covers [p - 0.5, p + 0.5]). A piece that reaches behind B's image plane (a corner at
+    B's depth <= 1 mm) sets every tile: it may be seen anywhere."""
+    n = rays.shape[0]
+    for a in prange(n):
+        xs = np.empty(8)
+        ys = np.empty(8)
+        hull_x = np.empty(16)
+        hull_y = np.empty(16)
+        for w in range(words):
+            out[a, w] = np.uint64(0)
+        behind = False
+        for corner in range(8):
+            ray = corner % 4
+            z = depths[a, corner // 4]
+            px = rays[a, ray, 0] * z
+            py = rays[a, ray, 1] * z
+            pz = rays[a, ray, 2] * z
+            bx = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz + t[0]
+            by = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + t[1]
+            bz = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + t[2]
+            if not bz > 1e-3:
+                behind = True
+                break
+            xs[corner] = fx * bx / bz + cx
+            ys[corner] = fy * by / bz + cy
+        if behind:
+            for tile in range(rows * cols):
+                out[a, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
+            continue
+        m = convex_hull(xs, ys, hull_x, hull_y)
+        lo_x = np.inf
+        hi_x = -np.inf
+        lo_y = np.inf
+        hi_y = -np.inf
+        for i in range(8):
+            lo_x = min(lo_x, xs[i])
+            hi_x = max(hi_x, xs[i])
+            lo_y = min(lo_y, ys[i])
+            hi_y = max(hi_y, ys[i])
+        c_lo = max(int(np.floor((lo_x + 0.5) / tile_w)), 0)
+        c_hi = min(int(np.floor((hi_x + 0.5) / tile_w)), cols - 1)
+        r_lo = max(int(np.floor((lo_y + 0.5) / tile_h)), 0)
+        r_hi = min(int(np.floor((hi_y + 0.5) / tile_h)), rows - 1)
+        for r in range(r_lo, r_hi + 1):
+            for c in range(c_lo, c_hi + 1):
+                if _rect_meets_hull(c * tile_w - 0.5, (c + 1) * tile_w - 0.5, r * tile_h - 0.5,
+                                    (r + 1) * tile_h - 0.5, hull_x, hull_y, m):
+                    tile = r * cols + c
+                    out[a, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)

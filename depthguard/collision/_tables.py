@@ -1,0 +1,133 @@
+"""The collision test of Henrich & Gecks (SPEC section 10, steps 4-6) on tile images: the obstacle image (paper
+Table I), the revised obstacle image (Table III, for C cameras and occlusion threshold theta), the intersection with
+a robot image (Table II) and the verdict with its class A-D (Table IV, section 3.5).
+
+Every image is at tile resolution: a (rows, cols) array with one value per tile of a :class:`TileGrid`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from depthguard.collision._epipolar import EpipolarBands
+from depthguard.errors import InputError
+
+#: Tile labels of the obstacle image (Table I) and of the revised obstacle image (Table III).
+BACKGROUND, OBSTACLE, UNKNOWN, ERROR, POSSIBLE = 0, 1, 2, 3, 4
+LABELS = ("background", "obstacle", "unknown", "error", "possible obstacle")
+
+
+def _mask(image, name: str, shape=None) -> np.ndarray:
+    array = np.asarray(image)
+    if array.dtype != np.bool_ or array.ndim != 2 or (shape is not None and array.shape != shape):
+        want = "2-D bool" if shape is None else f"{shape} bool"
+        raise InputError(f"{name} must be a {want} tile image, got {array.dtype} {array.shape}", field=name)
+    return array
+
+
+def obstacle_image(foreground, robot) -> np.ndarray:
+    """Table I: (rows, cols) uint8 labels from the difference image ``foreground`` and the current robot image
+    ``robot`` (both (rows, cols) bool): background where neither is set, obstacle where only the difference is,
+    unknown where both are (an obstacle may be in front of or behind the robot), error where only the robot is (the
+    background is seen where the robot should be)."""
+    foreground = _mask(foreground, "foreground")
+    robot = _mask(robot, "robot", foreground.shape)
+    return (np.where(foreground, np.where(robot, UNKNOWN, OBSTACLE), np.where(robot, ERROR, BACKGROUND))
+            .astype(np.uint8))
+
+
+def revised_obstacle_images(obstacles: Sequence[np.ndarray], bands: EpipolarBands, theta: int) -> list[np.ndarray]:
+    """Table III for C cameras: each unknown or error tile becomes a possible obstacle when at least C - theta of the
+    other cameras have an obstacle tile in its epipolar band, else background; the other tiles keep their label.
+
+    obstacles: per camera, its :func:`obstacle_image` (the grids of ``bands``, in their order). theta: the occlusion
+    threshold, the most cameras in which the robot may hide an obstacle at once, in [0, C - 1].
+    """
+    c = len(obstacles)
+    if len(bands.grids) != c or c < 1:
+        raise InputError(f"{c} obstacle images for {len(bands.grids)} cameras", field="obstacles")
+    theta = _theta(theta, c)
+    packed = []
+    for k, (image, grid) in enumerate(zip(obstacles, bands.grids)):
+        image = np.asarray(image)
+        if image.shape != (grid.rows, grid.cols) or image.dtype != np.uint8 or image.max(initial=0) > ERROR:
+            raise InputError(f"obstacle image {k} must be ({grid.rows}, {grid.cols}) uint8 labels of Table I",
+                             camera=grid.camera.name, field="obstacles")
+        packed.append(grid.pack(image == OBSTACLE))
+    out = []
+    for a, image in enumerate(obstacles):
+        revised = np.array(image, dtype=np.uint8, copy=True)
+        tiles = np.flatnonzero((image == UNKNOWN) | (image == ERROR))
+        if len(tiles):
+            seen = np.zeros(len(tiles), dtype=np.int64)
+            for b in range(c):
+                if b != a:
+                    seen += np.any(bands.bits[(a, b)][tiles] & packed[b], axis=1)
+            flat = revised.reshape(-1)
+            flat[tiles] = np.where(seen >= c - theta, POSSIBLE, BACKGROUND)
+        out.append(revised)
+    return out
+
+
+def intersection_image(revised, robot) -> np.ndarray:
+    """Table II: (rows, cols) bool, true where the (future) robot image ``robot`` meets an obstacle or a possible
+    obstacle of the revised obstacle image."""
+    revised = np.asarray(revised)
+    robot = _mask(robot, "robot", revised.shape)
+    return robot & ((revised == OBSTACLE) | (revised == POSSIBLE))
+
+
+def camera_collisions(revised, robot) -> tuple[bool, bool]:
+    """(Coll_RO, Coll_RP) of one camera: whether the robot pixel set meets the obstacle set, and the possible
+    obstacle set (section 3.5)."""
+    revised = np.asarray(revised)
+    robot = _mask(robot, "robot", revised.shape)
+    return bool(np.any(robot & (revised == OBSTACLE))), bool(np.any(robot & (revised == POSSIBLE)))
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The collision test of one robot configuration (or swept volume) over C cameras.
+
+    Attributes:
+        collision: True iff at least C - theta cameras report Coll_RO and every camera reports Coll_RO or Coll_RP.
+        klass: "A" (some camera sees no intersection at all: free), "B" (fewer than C - theta cameras see an
+            obstacle: free), "C" (at least C - theta but not all do: a collision is assumed), "D" (all C do).
+        obstacle: (C,) Coll_RO per camera; possible: (C,) Coll_RP per camera.
+    """
+
+    collision: bool
+    klass: str
+    obstacle: tuple
+    possible: tuple
+
+
+def verdict(obstacle: Sequence[bool], possible: Sequence[bool], theta: int) -> Verdict:
+    """The classes of Table IV generalised to C cameras (section 3.5) from each camera's (Coll_RO, Coll_RP)."""
+    ro = tuple(bool(x) for x in obstacle)
+    rp = tuple(bool(x) for x in possible)
+    c = len(ro)
+    if c < 1 or len(rp) != c:
+        raise InputError(f"obstacle and possible must hold one flag per camera (got {len(ro)} and {len(rp)})",
+                         field="obstacle")
+    theta = _theta(theta, c)
+    n_ro = sum(ro)
+    if not all(a or b for a, b in zip(ro, rp)):
+        klass = "A"
+    elif n_ro < c - theta:
+        klass = "B"
+    elif n_ro < c:
+        klass = "C"
+    else:
+        klass = "D"
+    return Verdict(collision=klass in ("C", "D"), klass=klass, obstacle=ro, possible=rp)
+
+
+def _theta(theta, c: int) -> int:
+    if isinstance(theta, bool) or not isinstance(theta, (int, np.integer)) or not 0 <= theta <= c - 1:
+        raise InputError(f"theta must be a whole number of cameras in [0, {c - 1}] for {c} cameras, got {theta!r}",
+                         field="theta")
+    return int(theta)

@@ -1,0 +1,272 @@
+"""The collision test of Henrich & Gecks (SPEC section 10): the paper's Tables I-IV row by row, the Fig. 3-5 example
+images, and the epipolar bands judged by sampling the tiles' frusta (the projection by the cameras' own model)."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+import depthguard as dg
+from depthguard.collision import (
+    BACKGROUND,
+    ERROR,
+    OBSTACLE,
+    POSSIBLE,
+    UNKNOWN,
+    EpipolarBands,
+    TileGrid,
+    camera_collisions,
+    intersection_image,
+    obstacle_image,
+    revised_obstacle_images,
+    verdict,
+)
+from depthguard.errors import InputError
+
+
+def _camera(name, eye, target=(0.0, 0.0, 0.5), width=160, height=128, f=140.0):
+    """A camera at ``eye`` looking at ``target`` (z up), optical frame REP 103 (x right, y down, z forward)."""
+    eye, target = np.asarray(eye, float), np.asarray(target, float)
+    z = (target - eye) / np.linalg.norm(target - eye)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    T = np.eye(4)
+    T[:3, :3] = np.stack([x, y, z], axis=1)
+    T[:3, 3] = eye
+    return dg.PinholeCamera(name, width, height, f, f, (width - 1) / 2, (height - 1) / 2, T)
+
+
+# ------------------------------------------------------------------------------------------------- Table I
+
+@pytest.mark.parametrize("foreground, robot, label", [
+    (False, False, BACKGROUND),
+    (True, False, OBSTACLE),
+    (True, True, UNKNOWN),
+    (False, True, ERROR),
+])
+def test_table_1_row(foreground, robot, label):
+    assert obstacle_image(np.array([[foreground]]), np.array([[robot]]))[0, 0] == label
+
+
+def _letters(rows: str, mapping: dict) -> np.ndarray:
+    return np.array([[mapping[ch] for ch in row.split()] for row in rows.strip().splitlines()])
+
+
+def test_figure_3_example():
+    """The paper's Fig. 3: difference image and current robot image give the obstacle image. Two cells are blank in
+    the scanned figure: the robot image's row 4, column 3 (R: the obstacle image has U there) and the obstacle
+    image's row 5, column 3 (E by Table I: background seen where the robot is)."""
+    difference = _letters("""
+        B B B B B B F F
+        B B B B B B B B
+        B B B F F F F B
+        B B F F F B B B
+        B F B F B B F F
+        F F F B B B F F
+        F F F B B B B B
+        F F F B B B B B""", {"B": False, "F": True})
+    robot = _letters("""
+        B B B B B B B B
+        B B B B B B B B
+        B B B R R R R B
+        B B R R R B B B
+        B R R R B B B B
+        R R R B B B B B
+        R R R B B B B B
+        R R R B B B B B""", {"B": False, "R": True})
+    expected = _letters("""
+        B B B B B B O O
+        B B B B B B B B
+        B B B U U U U B
+        B B U U U B B B
+        B U E U B B O O
+        U U U B B B O O
+        U U U B B B B B
+        U U U B B B B B""", {"B": BACKGROUND, "O": OBSTACLE, "U": UNKNOWN, "E": ERROR})
+    assert np.array_equal(obstacle_image(difference.astype(bool), robot.astype(bool)), expected)
+
+
+# ------------------------------------------------------------------------------------------------- Table II
+
+@pytest.mark.parametrize("revised, robot, hit", [
+    (BACKGROUND, True, False),
+    (OBSTACLE, True, True),
+    (POSSIBLE, True, True),
+    (BACKGROUND, False, False),
+    (OBSTACLE, False, False),
+    (POSSIBLE, False, False),
+])
+def test_table_2_row(revised, robot, hit):
+    assert intersection_image(np.array([[revised]], dtype=np.uint8), np.array([[robot]]))[0, 0] == hit
+
+
+# ------------------------------------------------------------------------------------------------- Table III
+
+def _one_tile_pair():
+    """Two 1 x 2 tile grids whose bands are given: camera 0's tile 0 -> camera 1's tile 1, and back."""
+    cam = _camera("a", (2.0, 0.0, 0.5), width=2, height=1, f=1.0)
+    grids = [TileGrid(cam, 1, 2), TileGrid(cam, 1, 2)]
+    band = np.array([[False, True], [True, False]])
+    return EpipolarBands.from_dense(grids, {(0, 1): band, (1, 0): band})
+
+
+@pytest.mark.parametrize("label, other, revised", [
+    (BACKGROUND, BACKGROUND, BACKGROUND),
+    (OBSTACLE, BACKGROUND, OBSTACLE),
+    (UNKNOWN, BACKGROUND, BACKGROUND),   # epipolar line meets no obstacle
+    (UNKNOWN, OBSTACLE, POSSIBLE),       # epipolar line meets an obstacle
+    (ERROR, BACKGROUND, BACKGROUND),
+    (ERROR, OBSTACLE, POSSIBLE),
+    (UNKNOWN, UNKNOWN, BACKGROUND),      # an unknown tile is the robot's, not an obstacle
+])
+def test_table_3_row(label, other, revised):
+    bands = _one_tile_pair()
+    first = np.array([[label, BACKGROUND]], dtype=np.uint8)
+    second = np.array([[BACKGROUND, other]], dtype=np.uint8)  # tile 1: in the band of camera 0's tile 0
+    out = revised_obstacle_images([first, second], bands, theta=1)
+    assert out[0][0, 0] == revised
+    assert out[0][0, 1] == BACKGROUND
+
+
+def test_table_3_with_more_cameras_counts_c_minus_theta():
+    """C = 4: an unknown tile becomes a possible obstacle only when at least C - theta other cameras see an obstacle
+    in its band."""
+    cam = _camera("a", (2.0, 0.0, 0.5), width=2, height=1, f=1.0)
+    grids = [TileGrid(cam, 1, 2) for _ in range(4)]
+    dense = {(a, b): np.ones((2, 2), dtype=bool) for a in range(4) for b in range(4) if a != b}
+    bands = EpipolarBands.from_dense(grids, dense)
+    for seeing in range(4):
+        images = [np.array([[UNKNOWN, BACKGROUND]], dtype=np.uint8)]
+        images += [np.array([[OBSTACLE if k < seeing else BACKGROUND, BACKGROUND]], dtype=np.uint8) for k in range(3)]
+        for theta in range(4):
+            out = revised_obstacle_images(images, bands, theta)[0][0, 0]
+            assert out == (POSSIBLE if seeing >= 4 - theta else BACKGROUND), (seeing, theta)
+
+
+# ------------------------------------------------------------------------------------------------- Table IV
+
+#: The paper's Table IV (two cameras, theta = 1): camera 1 (obstacle, possible), camera 2 (obstacle, possible), class.
+TABLE_IV = [
+    (False, False, False, False, "A"), (False, False, False, True, "A"), (False, False, True, False, "A"),
+    (False, False, True, True, "A"), (False, True, False, False, "A"), (False, True, False, True, "B"),
+    (False, True, True, False, "C"), (False, True, True, True, "C"), (True, False, False, False, "A"),
+    (True, False, False, True, "C"), (True, False, True, False, "D"), (True, False, True, True, "D"),
+    (True, True, False, False, "A"), (True, True, False, True, "C"), (True, True, True, False, "D"),
+    (True, True, True, True, "D"),
+]
+
+
+@pytest.mark.parametrize("o1, p1, o2, p2, klass", TABLE_IV)
+def test_table_4_row(o1, p1, o2, p2, klass):
+    v = verdict([o1, o2], [p1, p2], theta=1)
+    assert v.klass == klass
+    # Section 3.5's condition: at least C - theta cameras see an obstacle and every camera sees (a possible) one.
+    assert v.collision == ((o1 + o2 >= 1) and (o1 or p1) and (o2 or p2)) == (klass in "CD")
+
+
+def test_classes_for_four_cameras_follow_section_3_5():
+    for flags in itertools.product([False, True], repeat=8):
+        ro, rp = flags[:4], flags[4:]
+        for theta in range(4):
+            v = verdict(ro, rp, theta)
+            n = sum(ro)
+            if not all(a or b for a, b in zip(ro, rp)):
+                assert v.klass == "A"
+            elif n < 4 - theta:
+                assert v.klass == "B"
+            else:
+                assert v.klass == ("D" if n == 4 else "C")
+            assert v.collision == (n >= 4 - theta and all(a or b for a, b in zip(ro, rp)))
+
+
+def test_camera_collisions_are_the_two_predicates():
+    revised = np.array([[OBSTACLE, POSSIBLE, BACKGROUND]], dtype=np.uint8)
+    assert camera_collisions(revised, np.array([[True, False, False]])) == (True, False)
+    assert camera_collisions(revised, np.array([[False, True, True]])) == (False, True)
+    assert camera_collisions(revised, np.array([[False, False, True]])) == (False, False)
+
+
+# ------------------------------------------------------------------------------------------------- epipolar bands
+
+WORKSPACE = np.array([[-0.6, -0.6, 0.0], [0.6, 0.6, 1.2]])
+
+
+@pytest.fixture(scope="module")
+def four_cameras():
+    eyes = [(2.5, -1.5, 1.8), (2.5, 1.5, 1.8), (-2.0, 2.0, 1.6), (-2.0, -2.0, 2.2)]
+    cameras = [_camera(f"c{k}", eye) for k, eye in enumerate(eyes)]
+    grids = [TileGrid(cam, 16, 20) for cam in cameras]
+    return grids, EpipolarBands(grids, WORKSPACE)
+
+
+def test_bands_hold_every_sampled_point_of_the_tile(four_cameras):
+    """Judge: points sampled uniformly in a tile's frustum between the camera's workspace depths, projected into
+    another camera by its own model, always land on (or within half a pixel of) a tile of the band; and a band is a
+    thin part of the image, not all of it."""
+    from depthguard.collision import workspace_depths
+
+    grids, bands = four_cameras
+    rng = np.random.default_rng(3)
+    widths = []
+    for a, b in itertools.permutations(range(4), 2):
+        ga, gb = grids[a], grids[b]
+        near, far = workspace_depths(ga.camera, WORKSPACE)
+        for tile in rng.choice(ga.n_tiles, 40, replace=False):
+            r, c = divmod(int(tile), ga.cols)
+            u = rng.uniform(c * ga.tile_w - 0.5, (c + 1) * ga.tile_w - 0.5, 300)
+            v = rng.uniform(r * ga.tile_h - 0.5, (r + 1) * ga.tile_h - 0.5, 300)
+            z = rng.uniform(near, far, 300)
+            cam = ga.camera
+            points = np.stack([(u - cam.cx) / cam.fx * z, (v - cam.cy) / cam.fy * z, z], axis=1)
+            pu, pv, pz = gb.camera.project(gb.camera.world_to_camera(cam.camera_to_world(points)))
+            inside = (pz > 0) & (pu >= -0.5) & (pu < gb.camera.width - 0.5) & (pv >= -0.5) & (pv < gb.camera.height - 0.5)
+            band = bands.band(a, b, int(tile))
+            cols = np.clip(np.floor((pu[inside] + 0.5) / gb.tile_w).astype(int), 0, gb.cols - 1)
+            rows = np.clip(np.floor((pv[inside] + 0.5) / gb.tile_h).astype(int), 0, gb.rows - 1)
+            assert band[rows, cols].all(), (a, b, tile)
+            widths.append(band.mean())
+    assert np.median(widths) < 0.25, np.median(widths)
+
+
+def test_a_band_reaching_behind_the_other_camera_sets_every_tile():
+    """A tile whose frustum passes behind the other camera's image plane may be seen anywhere by it."""
+    front = _camera("front", (2.0, 0.0, 0.5), target=(0.0, 0.0, 0.5))
+    inside = _camera("inside", (0.0, 0.0, 0.5), target=(2.0, 0.0, 0.5))  # in the workspace, facing the first
+    grids = [TileGrid(front, 4, 5), TileGrid(inside, 4, 5)]
+    bands = EpipolarBands(grids, WORKSPACE)
+    # Every tile's frustum within the workspace depths (x from 0.6 down to -0.6) crosses x = 0, behind the second
+    # camera: every band is the whole image (the sampling test shows bands are thin otherwise).
+    assert all(bands.band(0, 1, tile).all() for tile in range(grids[0].n_tiles))
+
+
+def test_a_camera_that_does_not_see_the_workspace_is_refused():
+    away = _camera("away", (-2.0, 0.0, 0.5), target=(-4.0, 0.0, 0.5))
+    front = _camera("front", (2.0, 0.0, 0.5), target=(0.0, 0.0, 0.5))
+    with pytest.raises(InputError, match="camera 'away'.*workspace"):
+        EpipolarBands([TileGrid(front, 4, 5), TileGrid(away, 4, 5)], WORKSPACE)
+
+
+@pytest.mark.parametrize("rows, cols", [(0, 4), (4, 0), (True, 4), (4, 2.5), (129, 4), (4, 161)])
+def test_bad_tile_grids_are_refused(rows, cols):
+    with pytest.raises(InputError, match="camera 'c'"):
+        TileGrid(_camera("c", (2.0, 0.0, 0.5)), rows, cols)
+
+
+def test_bad_inputs_to_the_tables_are_refused():
+    bands = _one_tile_pair()
+    good = np.zeros((1, 2), dtype=np.uint8)
+    with pytest.raises(InputError, match="theta"):
+        revised_obstacle_images([good, good], bands, theta=2)
+    with pytest.raises(InputError, match="theta"):
+        verdict([True], [False], theta=-1)
+    with pytest.raises(InputError, match="obstacle image 1"):
+        revised_obstacle_images([good, np.zeros((2, 2), dtype=np.uint8)], bands, theta=1)
+    with pytest.raises(InputError, match="obstacle images"):
+        revised_obstacle_images([good], bands, theta=0)
+    with pytest.raises(InputError, match="robot"):
+        obstacle_image(np.zeros((2, 2), dtype=bool), np.zeros((2, 3), dtype=bool))
+    with pytest.raises(InputError, match="foreground"):
+        obstacle_image(np.zeros((2, 2)), np.zeros((2, 2), dtype=bool))
