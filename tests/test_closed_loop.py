@@ -21,7 +21,7 @@ OSCILLATION_BOUND = 2.0
 
 @pytest.fixture(scope="module")
 def reach_workcell():
-    return load_workcell(Path(str(resources.files("depthguard.simulation").joinpath("scenario_b_reach.yaml"))))
+    return load_workcell(_packaged("scenario_b_reach.yaml"))
 
 
 @pytest.fixture(scope="module")
@@ -43,12 +43,20 @@ def test_without_avoidance_the_hand_meets_the_robot_and_with_it_the_robot_keeps_
 BOARD_WINDOW = (1.6, 1.6)
 
 
+def _packaged(name: str) -> Path:
+    return Path(str(resources.files("depthguard.simulation").joinpath(name)))
+
+
+def _every_mode(name: str, window) -> dict:
+    """The packaged scene ``name`` run in closed loop over ``window`` (start, duration) in each mode."""
+    workcell = load_workcell(_packaged(name))
+    start, duration = window
+    return {mode: run_closed_loop(workcell, mode, start=start, duration=duration) for mode in ("none", "avoid", "ssm")}
+
+
 @pytest.fixture(scope="module")
 def board_runs():
-    workcell = load_workcell(Path(str(resources.files("depthguard.simulation").joinpath("scenario_b_board.yaml"))))
-    start, duration = BOARD_WINDOW
-    return {mode: run_closed_loop(workcell, mode, start=start, duration=duration)
-            for mode in ("none", "avoid", "ssm")}
+    return _every_mode("scenario_b_board.yaml", BOARD_WINDOW)
 
 
 @pytest.mark.slow
@@ -74,10 +82,7 @@ ELBOW_CLEARANCE = 0.01
 
 @pytest.fixture(scope="module")
 def elbow_runs():
-    workcell = load_workcell(Path(str(resources.files("depthguard.simulation").joinpath("scenario_b_elbow.yaml"))))
-    start, duration = ELBOW_WINDOW
-    return {mode: run_closed_loop(workcell, mode, start=start, duration=duration)
-            for mode in ("none", "avoid", "ssm")}
+    return _every_mode("scenario_b_elbow.yaml", ELBOW_WINDOW)
 
 
 @pytest.mark.slow
@@ -101,8 +106,7 @@ def test_a_box_on_the_elbows_path_is_avoided_by_the_arm(elbow_runs):
 def test_four_cameras_keep_the_reaching_hand_clear_too(reach_workcell):
     """Issue 9 asks for each scenario with the four-camera layout of issue 8 as well (scenario_b_four.yaml's room
     corners; the three scenarios in both layouts: benchmarks/bench_avoidance_scenarios.py)."""
-    four = load_workcell(Path(str(resources.files("depthguard.simulation").joinpath("scenario_b_reach.yaml"))),
-                         layout=Path(str(resources.files("depthguard.simulation").joinpath("scenario_b_four.yaml"))))
+    four = load_workcell(_packaged("scenario_b_reach.yaml"), layout=_packaged("scenario_b_four.yaml"))
     assert len(four.rig.cameras) == 4
     start, duration = CONTACT_WINDOW
     for mode in ("avoid", "ssm"):
@@ -113,7 +117,7 @@ def test_four_cameras_keep_the_reaching_hand_clear_too(reach_workcell):
 def test_the_board_is_mostly_hidden_from_the_principal_camera():
     from depthguard.simulation import simulate
 
-    workcell = load_workcell(Path(str(resources.files("depthguard.simulation").joinpath("scenario_b_board.yaml"))))
+    workcell = load_workcell(_packaged("scenario_b_board.yaml"))
     board = [name for name, _ in workcell.labels()].index("board")
     (frame,) = simulate(workcell, frames=[84])  # 2.8 s: the board stands in the end-effector's path
     seen = {camera: int(np.count_nonzero(label == board)) for camera, label in frame.label.items()}
