@@ -10,6 +10,10 @@ of the reaction per second, and the loop's rate in simulated seconds per wall-cl
 and the ground truth included):
 
     .venv/bin/python benchmarks/bench_avoidance_scenarios.py [--scene scenario_b_elbow.yaml ...] [--mode avoid ...]
+        [--layout two|four ...] [--from-surface]
+
+``--from-surface`` runs the avoidance with each control point's distance measured from its link's surface
+(``AvoidanceParams(from_surface=True)``).
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import argparse
 from importlib import resources
 from pathlib import Path
 
+from depthguard.avoidance import AvoidanceParams
 from depthguard.experiments.avoidance_demo import summarize
 from depthguard.simulation import load_workcell
 from depthguard.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
@@ -36,7 +41,9 @@ def main() -> None:
     parser.add_argument("--scene", action="append", choices=sorted(WINDOWS), help="default: all three")
     parser.add_argument("--mode", action="append", choices=MODES, help="default: none, avoid and ssm")
     parser.add_argument("--layout", action="append", choices=sorted(LAYOUTS), help="default: two and four")
+    parser.add_argument("--from-surface", action="store_true", help="distances from the links' surfaces")
     args = parser.parse_args()
+    settings = LoopSettings(avoidance=AvoidanceParams(from_surface=args.from_surface))
     dt = 1.0 / LoopSettings().control_rate
     print(f"{'scene':22s} {'layout':6s} {'mode':6s} {'collisions':>10s} {'clearance m':>12s} {'task error end m':>17s} "
           f"{'reversals /s':>13s} {'sim s / wall s':>15s}")
@@ -46,7 +53,7 @@ def main() -> None:
             cameras = LAYOUTS[layout]
             workcell = load_workcell(_packaged(scene), layout=None if cameras is None else _packaged(cameras))
             for mode in args.mode or MODES:
-                log = run_closed_loop(workcell, mode, start=start, duration=duration)
+                log = run_closed_loop(workcell, mode, start=start, duration=duration, settings=settings)
                 s = summarize(log, dt)
                 print(f"{Path(scene).stem:22s} {layout:6s} {mode:6s} {s['collisions']:10d} {s['clearance_m']:12.3f} "
                       f"{s['task_error_after_m']:17.3f} {s['oscillation_per_s']:13.2f} "

@@ -200,7 +200,29 @@ def test_bad_inputs_name_the_field(iiwa, field, kwargs):
     assert error.value.field == field
 
 
+def test_from_surface_takes_the_links_radius_off_every_distance(iiwa):
+    """AvoidanceParams(from_surface=True): the risk and the repulsion see each distance minus the padded capsule
+    radius of the control point's link (at least 0), written out here from the robot's capsules."""
+    q = np.array([0.0, 0.6, 0.0, -1.2, 0.0, 0.8, 0.0])
+    radius = {capsule.link: capsule.radius for capsule in iiwa.capsules}
+    points = iiwa.control_point_positions(q)
+    rng = np.random.default_rng(5)
+    directions = rng.normal(size=(len(points), 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    distance = rng.uniform(0.02, 0.35, len(points))
+    plain = AvoidanceController(iiwa)
+    surface = AvoidanceController(iiwa, AvoidanceParams(from_surface=True))
+    command = surface.command(result_of(distance, directions), q, np.zeros(3), np.zeros(7), 0.002)
+    shrunk = np.maximum(distance - np.array([radius[p.link] for p in iiwa.control_points]), 0.0)
+    expected = plain.command(result_of(shrunk, directions), q, np.zeros(3), np.zeros(7), 0.002)
+    assert np.allclose(command.risk, expected.risk) and np.allclose(command.dq, expected.dq)
+    assert np.all(command.risk >= plain.command(result_of(distance, directions), q, np.zeros(3), np.zeros(7),
+                                                0.002).risk)
+
+
 def test_parameters_are_checked():
+    with pytest.raises(dg.InputError, match="from_surface"):
+        AvoidanceParams(from_surface=1)
     for bad in (dict(rho=0.0), dict(v_max=-1.0), dict(alpha=np.nan), dict(posture_gain=-1.0)):
         with pytest.raises(dg.InputError):
             AvoidanceParams(**bad)

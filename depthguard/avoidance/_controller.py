@@ -70,12 +70,17 @@ class AvoidanceParams:
         alpha: the shape factor of the repulsive speed and of the risk function.
         posture_gain: 1/s, how fast the arm's redundancy pulls the joints back towards the task's posture when one is
             given (0: no pull; the papers have none).
+        from_surface: measure each control point's distance from its link's surface rather than from the point: the
+            distance minus the radius of the link's padded capsule (at least 0), in the repulsion and the risk
+            alike. The papers measure from the point; control points on a link's axis then let the link's surface
+            come within a few millimetres of an obstacle it passes (README, the elbow scenario with four cameras).
     """
 
     rho: float = config.DEFAULT_RHO
     v_max: float = config.AVOID_V_MAX
     alpha: float = config.AVOID_ALPHA
     posture_gain: float = 0.0
+    from_surface: bool = False
 
     def __post_init__(self):
         check_real(self.rho, "rho", minimum=0.0, maximum=config.RHO_MAX, above_minimum=True, unit="metres",
@@ -83,6 +88,8 @@ class AvoidanceParams:
         check_real(self.v_max, "v_max", minimum=0.0, maximum=100.0, unit="m/s", field="v_max")
         check_real(self.alpha, "alpha", minimum=0.0, maximum=1e3, above_minimum=True, field="alpha")
         check_real(self.posture_gain, "posture_gain", minimum=0.0, maximum=1e3, unit="1/s", field="posture_gain")
+        if not isinstance(self.from_surface, bool):
+            raise InputError("from_surface must be True or False", field="from_surface")
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,6 +135,9 @@ class AvoidanceController:
         if not isinstance(self.limits, JointLimits) or self.limits.n != robot.n_joints:
             raise InputError(f"limits must be JointLimits for {robot.n_joints} joints", field="limits")
         self.ee = robot.end_effector_index
+        # Each control point's link capsule radius (padding included; 0 for a link without geometry).
+        radii = {capsule.link: capsule.radius for capsule in robot.capsules}
+        self._radius = np.array([radii.get(point.link, 0.0) for point in robot.control_points])
 
     def command(self, result, q, task_velocity, dq_previous, dt: float, *, jacobians=None, posture=None,
                 check: bool = True) -> AvoidanceCommand:
@@ -160,6 +170,8 @@ class AvoidanceController:
         if jacobians is None:
             jacobians = self.robot.control_point_jacobians(q, check=False)
         distance = np.asarray(result.distance, dtype=np.float64)
+        if params.from_surface:
+            distance = np.maximum(distance - self._radius, 0.0)
         direction = np.asarray(result.direction, dtype=np.float64)
         f = risk(distance, params.rho, params.alpha)
         # The end-effector: repulsion along the result's direction, added to the task.
