@@ -198,7 +198,8 @@ WORKSPACE = np.array([[-0.6, -0.6, 0.0], [0.6, 0.6, 1.2]])
 def four_cameras():
     eyes = [(2.5, -1.5, 1.8), (2.5, 1.5, 1.8), (-2.0, 2.0, 1.6), (-2.0, -2.0, 2.2)]
     cameras = [_camera(f"c{k}", eye) for k, eye in enumerate(eyes)]
-    grids = [TileGrid(cam, 16, 20) for cam in cameras]
+    # Whole tiles of 8 x 8 pixels for two cameras, fractional ones (10.67 x 10.67) for the others.
+    grids = [TileGrid(cam, 16, 20) if k < 2 else TileGrid(cam, 12, 15) for k, cam in enumerate(cameras)]
     return grids, EpipolarBands(grids, WORKSPACE)
 
 
@@ -216,16 +217,17 @@ def test_bands_hold_every_sampled_point_of_the_tile(four_cameras):
         near, far = workspace_depths(ga.camera, WORKSPACE)
         for tile in rng.choice(ga.n_tiles, 40, replace=False):
             r, c = divmod(int(tile), ga.cols)
-            u = rng.uniform(c * ga.tile_w - 0.5, (c + 1) * ga.tile_w - 0.5, 300)
-            v = rng.uniform(r * ga.tile_h - 0.5, (r + 1) * ga.tile_h - 0.5, 300)
+            u = rng.uniform(ga.col_edges[c], ga.col_edges[c + 1], 300)
+            v = rng.uniform(ga.row_edges[r], ga.row_edges[r + 1], 300)
             z = rng.uniform(near, far, 300)
             cam = ga.camera
             points = np.stack([(u - cam.cx) / cam.fx * z, (v - cam.cy) / cam.fy * z, z], axis=1)
             pu, pv, pz = gb.camera.project(gb.camera.world_to_camera(cam.camera_to_world(points)))
             inside = (pz > 0) & (pu >= -0.5) & (pu < gb.camera.width - 0.5) & (pv >= -0.5) & (pv < gb.camera.height - 0.5)
             band = bands.band(a, b, int(tile))
-            cols = np.clip(np.floor((pu[inside] + 0.5) / gb.tile_w).astype(int), 0, gb.cols - 1)
-            rows = np.clip(np.floor((pv[inside] + 0.5) / gb.tile_h).astype(int), 0, gb.rows - 1)
+            tile_row, tile_col = gb.tile_of_pixels()  # the tile of the pixel whose footprint holds the point
+            cols = tile_col[np.clip(np.floor(pu[inside] + 0.5).astype(int), 0, gb.camera.width - 1)]
+            rows = tile_row[np.clip(np.floor(pv[inside] + 0.5).astype(int), 0, gb.camera.height - 1)]
             assert band[rows, cols].all(), (a, b, tile)
             widths.append(band.mean())
     assert np.median(widths) < 0.25, np.median(widths)
@@ -249,6 +251,19 @@ def test_a_camera_that_does_not_see_the_workspace_is_refused():
         EpipolarBands([TileGrid(front, 4, 5), TileGrid(away, 4, 5)], WORKSPACE)
 
 
+def test_tiles_partition_the_pixels():
+    cam = _camera("c", (2.0, 0.0, 0.5))
+    for rows, cols in [(16, 20), (12, 15), (7, 9), (128, 160), (1, 1)]:
+        grid = TileGrid(cam, rows, cols)
+        tile_row, tile_col = grid.tile_of_pixels()
+        assert tile_row.min() == 0 and tile_row.max() == rows - 1 and np.all(np.diff(tile_row) >= 0)
+        assert tile_col.min() == 0 and tile_col.max() == cols - 1 and np.all(np.diff(tile_col) >= 0)
+        for c in range(cols):  # a tile's pixels are those whose centres lie in [c * tile_w, (c + 1) * tile_w)
+            pixels = np.flatnonzero(tile_col == c)
+            assert np.all(pixels >= c * grid.tile_w - 1e-9) and np.all(pixels < (c + 1) * grid.tile_w - 1e-9)
+            assert grid.col_edges[c] == pixels[0] - 0.5 and grid.col_edges[c + 1] == pixels[-1] + 0.5
+
+
 @pytest.mark.parametrize("rows, cols", [(0, 4), (4, 0), (True, 4), (4, 2.5), (129, 4), (4, 161)])
 def test_bad_tile_grids_are_refused(rows, cols):
     with pytest.raises(InputError, match="camera 'c'"):
@@ -270,3 +285,90 @@ def test_bad_inputs_to_the_tables_are_refused():
         obstacle_image(np.zeros((2, 2), dtype=bool), np.zeros((2, 3), dtype=bool))
     with pytest.raises(InputError, match="foreground"):
         obstacle_image(np.zeros((2, 2)), np.zeros((2, 2), dtype=bool))
+
+
+# ------------------------------------------------------------------------------------------------- steps 1-3
+
+def _loop_features(image, grid):
+    """The features written tile by tile: mean grey value, balance point's row within the tile (0 .. 1)."""
+    out = np.empty((grid.rows, grid.cols, 2))
+    for r in range(grid.rows):
+        for c in range(grid.cols):
+            rows = [v for v in range(grid.camera.height) if r * grid.tile_h <= v < (r + 1) * grid.tile_h]
+            cols = [u for u in range(grid.camera.width) if c * grid.tile_w <= u < (c + 1) * grid.tile_w]
+            tile = image[np.ix_(rows, cols)].astype(float)
+            out[r, c, 0] = tile.mean()
+            y = (np.arange(len(rows)) / (len(rows) - 1)) if len(rows) > 1 else np.full(1, 0.5)
+            out[r, c, 1] = (tile.sum(axis=1) @ y) / tile.sum() if tile.sum() > 0 else 0.5
+    return out
+
+
+@pytest.mark.parametrize("rows, cols", [(16, 20), (12, 15)])
+def test_tile_features_equal_a_tile_by_tile_judge(rows, cols):
+    from depthguard.collision import tile_features
+
+    grid = TileGrid(_camera("c", (2.0, 0.0, 0.5)), rows, cols)
+    rng = np.random.default_rng(rows)
+    image = rng.integers(0, 256, grid.camera.shape).astype(np.uint8)
+    image[:20, :30] = 0  # tiles of zeros: balance point 0.5
+    assert np.allclose(tile_features(image, grid), _loop_features(image, grid))
+
+
+def test_reference_median_removes_a_robot_seen_in_fewer_than_half_of_the_images():
+    from depthguard.collision import reference_image
+
+    grid = TileGrid(_camera("c", (2.0, 0.0, 0.5)), 16, 20)
+    rng = np.random.default_rng(1)
+    background = rng.integers(20, 200, grid.camera.shape).astype(np.uint8)
+    images = []
+    for k in range(5):  # the "robot": a bright block in a different place each time
+        image = background.copy()
+        image[10 + 20 * k: 40 + 20 * k, 15 * k: 15 * k + 40] = 250
+        images.append(image)
+    assert np.array_equal(reference_image(images, grid), background.astype(float))
+
+
+def test_difference_image_finds_an_object_and_closing_only_adds():
+    from depthguard.collision import difference_image, robot_tiles, tile_features
+
+    grid = TileGrid(_camera("c", (2.0, 0.0, 0.5)), 16, 20)
+    rng = np.random.default_rng(2)
+    background = rng.normal(100, 2, grid.camera.shape).clip(0, 255).astype(np.uint8)
+    scene = background.copy()
+    scene[16:40, 24:32] = 220  # an object over tiles (2-4, 3)
+    scene[16:40, 40:48] = 220  # another one column of tiles further: (2-4, 5)
+    foreground = difference_image(tile_features(scene, grid), tile_features(background, grid))
+    expected = np.zeros((16, 20), dtype=bool)
+    expected[2:5, 3] = expected[2:5, 5] = True
+    expected[3, 4] = True  # the closing in the 4-neighbourhood fills the gap where both its row neighbours are set
+    assert np.array_equal(foreground, expected)
+    # A foreground tile on the border stays foreground.
+    scene = background.copy()
+    scene[:8, :8] = 255
+    assert difference_image(tile_features(scene, grid), tile_features(background, grid))[0, 0]
+    # The balance point sees a change that keeps the mean: a tile's bright half moved from its top to its bottom.
+    top, bottom = background.copy(), background.copy()
+    top[64:68, 80:88], bottom[68:72, 80:88] = 250, 250
+    top[68:72, 80:88], bottom[64:68, 80:88] = 0, 0
+    assert difference_image(tile_features(bottom, grid), tile_features(top, grid))[8, 10]
+    # The robot's tile image: a tile with any robot pixel.
+    mask = np.zeros(grid.camera.shape, dtype=bool)
+    mask[17, 9] = True
+    tiles = robot_tiles(mask, grid)
+    assert tiles[2, 1] and tiles.sum() == 1
+
+
+def test_bad_images_are_refused():
+    from depthguard.collision import difference_image, reference_image, robot_tiles, tile_features
+
+    grid = TileGrid(_camera("c", (2.0, 0.0, 0.5)), 16, 20)
+    with pytest.raises(InputError, match="camera 'c'.*image"):
+        tile_features(np.zeros((10, 10)), grid)
+    with pytest.raises(InputError, match="image"):
+        tile_features(np.full(grid.camera.shape, np.nan), grid)
+    with pytest.raises(InputError, match="at least one image"):
+        reference_image([], grid)
+    with pytest.raises(InputError, match="robot_mask"):
+        robot_tiles(np.zeros(grid.camera.shape), grid)
+    with pytest.raises(InputError, match="threshold"):
+        difference_image(np.zeros((16, 20, 2)), np.zeros((16, 20, 2)), thresholds=(1.0, -1.0))

@@ -1,11 +1,20 @@
 """The image-based multi-camera collision test of Henrich & Gecks (SPEC section 10; issue 10, in progress).
 
-Built so far: tile grids and the epipolar bands between cameras (step 5's geometry), the obstacle image (Table I), the
-revised obstacle image (Table III, C cameras, occlusion threshold theta), the intersection image (Table II) and the
-verdict with its class A-D (Table IV). Not yet: the difference images from intensity or depth (steps 1-2), the robot's
-tile images (step 3), swept volumes, pick-and-place, the configuration-space tables and the planner, the command line.
+Built so far: tile grids and the epipolar bands between cameras (step 5's geometry); the reference image, the tiles'
+features, the difference image and the robot's tile image (steps 1-3, thresholds as the linear classifier); the
+obstacle image (Table I), the revised obstacle image (Table III, C cameras, occlusion threshold theta), the
+intersection image (Table II) and the verdict with its class A-D (Table IV). Not yet: the Bayes classifier, the depth
+variant, rendering the robot's tile images in the pipeline, swept volumes, pick-and-place, the configuration-space
+tables and the planner, the command line.
 """
 
+from depthguard.collision._difference import (
+    FOUR_NEIGHBOURS,
+    difference_image,
+    reference_image,
+    robot_tiles,
+    tile_features,
+)
 from depthguard.collision._epipolar import EpipolarBands, TileGrid, workspace_depths
 from depthguard.collision._tables import (
     BACKGROUND,
@@ -26,6 +35,7 @@ __all__ = [
     "BACKGROUND",
     "ERROR",
     "EpipolarBands",
+    "FOUR_NEIGHBOURS",
     "LABELS",
     "OBSTACLE",
     "POSSIBLE",
@@ -33,9 +43,13 @@ __all__ = [
     "UNKNOWN",
     "Verdict",
     "camera_collisions",
+    "difference_image",
     "intersection_image",
     "obstacle_image",
+    "reference_image",
     "revised_obstacle_images",
+    "robot_tiles",
+    "tile_features",
     "verdict",
     "workspace_depths",
 ]

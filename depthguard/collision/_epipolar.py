@@ -20,7 +20,9 @@ class TileGrid:
 
     Tile (r, c) covers the pixels whose centres lie in rows [r * tile_h, (r + 1) * tile_h) and columns
     [c * tile_w, (c + 1) * tile_w); tile_w = width / cols and tile_h = height / rows may be fractional (the paper's
-    704 x 576 images in 64 x 64 tiles: 11 x 9 pixels). Its index is r * cols + c."""
+    704 x 576 images in 64 x 64 tiles: 11 x 9 pixels). Its index is r * cols + c. Its footprint is its pixels'
+    footprints (pixel u covers [u - 0.5, u + 0.5]): columns col_edges[c] to col_edges[c + 1], rows row_edges[r] to
+    row_edges[r + 1]."""
 
     def __init__(self, camera: PinholeCamera, rows: int, cols: int):
         for name, value, side in (("rows", rows, camera.height), ("cols", cols, camera.width)):
@@ -32,6 +34,11 @@ class TileGrid:
         self.cols = int(cols)
         self.tile_w = camera.width / self.cols
         self.tile_h = camera.height / self.rows
+        #: (cols + 1,), (rows + 1,) the first pixel of each tile (and the image's size): ceil(c * tile_w).
+        self.first_col = np.minimum(np.ceil(np.arange(self.cols + 1) * self.tile_w - 1e-9), camera.width).astype(int)
+        self.first_row = np.minimum(np.ceil(np.arange(self.rows + 1) * self.tile_h - 1e-9), camera.height).astype(int)
+        self.col_edges = self.first_col - 0.5
+        self.row_edges = self.first_row - 0.5
 
     @property
     def n_tiles(self) -> int:
@@ -46,14 +53,21 @@ class TileGrid:
         """(n_tiles, 4, 3) the tiles' corner rays in the camera's optical frame (z = 1), metres per metre of depth."""
         cam = self.camera
         r, c = np.divmod(np.arange(self.n_tiles), self.cols)
-        u = np.stack([c * self.tile_w - 0.5, (c + 1) * self.tile_w - 0.5], axis=1)
-        v = np.stack([r * self.tile_h - 0.5, (r + 1) * self.tile_h - 0.5], axis=1)
+        u = np.stack([self.col_edges[c], self.col_edges[c + 1]], axis=1)
+        v = np.stack([self.row_edges[r], self.row_edges[r + 1]], axis=1)
         rays = np.empty((self.n_tiles, 4, 3))
         for k, (i, j) in enumerate(itertools.product(range(2), range(2))):
             rays[:, k, 0] = (u[:, i] - cam.cx) / cam.fx
             rays[:, k, 1] = (v[:, j] - cam.cy) / cam.fy
             rays[:, k, 2] = 1.0
         return rays
+
+    def tile_of_pixels(self) -> tuple[np.ndarray, np.ndarray]:
+        """((height,) tile row of each pixel row, (width,) tile column of each pixel column)."""
+        cam = self.camera
+        rows = np.searchsorted(self.first_row, np.arange(cam.height), side="right") - 1
+        cols = np.searchsorted(self.first_col, np.arange(cam.width), side="right") - 1
+        return rows, cols
 
     def pack(self, mask: np.ndarray) -> np.ndarray:
         """(rows, cols) bool -> (words,) uint64 bitset (tile index order)."""
@@ -103,8 +117,8 @@ class EpipolarBands:
                 T = np.linalg.inv(cam_b.T_world_camera) @ grid_a.camera.T_world_camera  # a's optical -> b's
                 out = np.empty((grid_a.n_tiles, grid_b.words), dtype=np.uint64)
                 _kernels.tile_bands(rays, depths, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
-                                    cam_b.fx, cam_b.fy, cam_b.cx, cam_b.cy, grid_b.tile_w, grid_b.tile_h,
-                                    grid_b.rows, grid_b.cols, grid_b.words, out)
+                                    cam_b.fx, cam_b.fy, cam_b.cx, cam_b.cy, grid_b.col_edges, grid_b.row_edges,
+                                    grid_b.words, out)
                 self.bits[(a, b)] = out
 
     @classmethod

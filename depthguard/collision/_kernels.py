@@ -70,10 +70,10 @@ def _rect_meets_hull(x0, x1, y0, y1, hull_x, hull_y, m):
 
 
 @kernel(parallel=True)
-def tile_bands(rays, depths, R, t, fx, fy, cx, cy, tile_w, tile_h, rows, cols, words, out):
+def tile_bands(rays, depths, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
     """For every tile of camera A, the tiles of camera B that its frustum between depths[tile, 0] and depths[tile, 1]
     (A's optical depth, metres) can project onto, as bits in out (n_tiles_A, words) uint64 (tile index r * cols + c
-    of B's grid of rows x cols tiles of tile_w x tile_h pixels).
+    of B's grid; tile (r, c) spans col_edges[c] to col_edges[c + 1] and row_edges[r] to row_edges[r + 1], pixels).
 
     rays: (n_tiles_A, 4, 3) the tile's corner rays in A's optical frame (z = 1); R, t: A's optical frame -> B's;
     fx, fy, cx, cy: B's intrinsics. The frustum piece is the convex hull of its 8 corners; its projection is the
@@ -81,6 +81,8 @@ def tile_bands(rays, depths, R, t, fx, fy, cx, cy, tile_w, tile_h, rows, cols, w
     pixel footprints: pixel p covers [p - 0.5, p + 0.5]). A piece that reaches behind B's image plane (a corner at
     B's depth <= 1 mm) sets every tile: it may be seen anywhere."""
     n = rays.shape[0]
+    cols = col_edges.shape[0] - 1
+    rows = row_edges.shape[0] - 1
     for a in prange(n):
         xs = np.empty(8)
         ys = np.empty(8)
@@ -117,13 +119,21 @@ def tile_bands(rays, depths, R, t, fx, fy, cx, cy, tile_w, tile_h, rows, cols, w
             hi_x = max(hi_x, xs[i])
             lo_y = min(lo_y, ys[i])
             hi_y = max(hi_y, ys[i])
-        c_lo = max(int(np.floor((lo_x + 0.5) / tile_w)), 0)
-        c_hi = min(int(np.floor((hi_x + 0.5) / tile_w)), cols - 1)
-        r_lo = max(int(np.floor((lo_y + 0.5) / tile_h)), 0)
-        r_hi = min(int(np.floor((hi_y + 0.5) / tile_h)), rows - 1)
+        c_lo = 0
+        while c_lo < cols - 1 and col_edges[c_lo + 1] < lo_x:
+            c_lo += 1
+        c_hi = c_lo
+        while c_hi < cols - 1 and col_edges[c_hi + 1] <= hi_x:
+            c_hi += 1
+        r_lo = 0
+        while r_lo < rows - 1 and row_edges[r_lo + 1] < lo_y:
+            r_lo += 1
+        r_hi = r_lo
+        while r_hi < rows - 1 and row_edges[r_hi + 1] <= hi_y:
+            r_hi += 1
         for r in range(r_lo, r_hi + 1):
             for c in range(c_lo, c_hi + 1):
-                if _rect_meets_hull(c * tile_w - 0.5, (c + 1) * tile_w - 0.5, r * tile_h - 0.5,
-                                    (r + 1) * tile_h - 0.5, hull_x, hull_y, m):
+                if _rect_meets_hull(col_edges[c], col_edges[c + 1], row_edges[r], row_edges[r + 1], hull_x, hull_y,
+                                    m):
                     tile = r * cols + c
                     out[a, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)

@@ -1,0 +1,89 @@
+"""Steps 1-3 of the collision test (SPEC section 10; Henrich & Gecks sections 3.1-3.3) at tile resolution: the
+reference image, the tiles' features and the difference image, and the robot's tile image.
+
+Images are (height, width) arrays of one camera; tile images are (rows, cols) arrays of its :class:`TileGrid`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from scipy import ndimage
+
+from depthguard.collision._epipolar import TileGrid
+from depthguard.errors import InputError
+
+#: The 4-neighbourhood of the morphological closing (section 3.2).
+FOUR_NEIGHBOURS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=bool)
+
+
+def _image(image, grid: TileGrid, name: str) -> np.ndarray:
+    array = np.asarray(image)
+    cam = grid.camera
+    if array.shape != cam.shape or array.dtype.kind not in "uif" or \
+            (array.dtype.kind == "f" and not np.all(np.isfinite(array))):
+        raise InputError(f"{name} must be a {cam.shape} array of finite numbers, got {array.dtype} {array.shape}",
+                         camera=cam.name, field=name)
+    return array
+
+
+def reference_image(images: Sequence[np.ndarray], grid: TileGrid) -> np.ndarray:
+    """Step 1: the per-pixel median of ``images`` (each (height, width), intensity or depth) taken with the robot in
+    different configurations, so that its mobile parts, seen in fewer than half of them at any pixel, disappear.
+    Returns (height, width) float64."""
+    stack = [_image(image, grid, f"images[{k}]") for k, image in enumerate(images)]
+    if not stack:
+        raise InputError("the reference needs at least one image", camera=grid.camera.name, field="images")
+    return np.median(np.stack(stack).astype(np.float64), axis=0)
+
+
+def _tile_sums(values: np.ndarray, grid: TileGrid) -> np.ndarray:
+    """(rows, cols) sums of ``values`` (height, width) over each tile's pixels."""
+    rows = np.add.reduceat(values, grid.first_row[:-1], axis=0)
+    return np.add.reduceat(rows, grid.first_col[:-1], axis=1)
+
+
+def tile_features(image, grid: TileGrid) -> np.ndarray:
+    """Step 2's features of every tile, (rows, cols, 2) float64: the mean grey value, and the y coordinate of the
+    grey-value balance point within the tile (0 at its first pixel row's centre, 1 at its last; 0.5 for a tile
+    whose values are all 0)."""
+    image = _image(image, grid, "image").astype(np.float64)
+    cam = grid.camera
+    tile_row, _ = grid.tile_of_pixels()
+    counts = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
+    total = _tile_sums(image, grid)
+    # Each pixel row's position within its tile, 0 .. 1.
+    first = grid.first_row[tile_row]
+    last = grid.first_row[tile_row + 1] - 1
+    y = np.where(last > first, (np.arange(cam.height) - first) / np.maximum(last - first, 1), 0.5)
+    moment = _tile_sums(image * y[:, None], grid)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        balance = np.where(total > 0.0, moment / np.where(total > 0.0, total, 1.0), 0.5)
+    return np.stack([total / counts, balance], axis=-1)
+
+
+def difference_image(features, reference_features, thresholds=(12.0, 0.1)) -> np.ndarray:
+    """Step 2's difference image, (rows, cols) bool: a tile is foreground when any feature differs from the
+    reference's by more than its threshold (mean grey levels, balance point in tile heights), then the
+    morphological closing in the 4-neighbourhood fills one-tile gaps. The closing only adds: a foreground tile never
+    becomes background (scipy's erosion would clear foreground on the image border)."""
+    features = np.asarray(features, dtype=np.float64)
+    reference_features = np.asarray(reference_features, dtype=np.float64)
+    thresholds = np.asarray(thresholds, dtype=np.float64)
+    if features.shape != reference_features.shape or features.ndim != 3 or \
+            thresholds.shape != (features.shape[2],) or not np.all(thresholds >= 0.0):
+        raise InputError(f"features {features.shape} and reference {reference_features.shape} must match, with one "
+                         f"threshold >= 0 per feature (got {thresholds.tolist()})", field="thresholds")
+    changed = np.any(np.abs(features - reference_features) > thresholds, axis=-1)
+    return changed | ndimage.binary_closing(changed, structure=FOUR_NEIGHBOURS)
+
+
+def robot_tiles(robot_mask, grid: TileGrid) -> np.ndarray:
+    """Step 3's robot image at tile resolution: (rows, cols) bool, true where any pixel of the tile shows the robot
+    (``robot_mask``: (height, width) bool, e.g. where the rendered padded robot has a depth)."""
+    mask = np.asarray(robot_mask)
+    if mask.shape != grid.camera.shape or mask.dtype != np.bool_:
+        raise InputError(f"robot_mask must be a {grid.camera.shape} bool image, got {mask.dtype} {mask.shape}",
+                         camera=grid.camera.name, field="robot_mask")
+    return _tile_sums(mask.astype(np.int64), grid) > 0
