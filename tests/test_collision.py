@@ -372,3 +372,69 @@ def test_bad_images_are_refused():
         robot_tiles(np.zeros(grid.camera.shape), grid)
     with pytest.raises(InputError, match="threshold"):
         difference_image(np.zeros((16, 20, 2)), np.zeros((16, 20, 2)), thresholds=(1.0, -1.0))
+
+
+# ------------------------------------------------------------------------------------------------- the whole test
+
+@pytest.fixture(scope="module")
+def iiwa_scene():
+    """Four 320 x 256 cameras around a KUKA iiwa; a textured room; images drawn from the robot's padded capsules (its
+    render) and exact ray-cast obstacles."""
+    from depthguard.collision import ImageCollisionTest
+    from depthguard.robots import RobotModel
+
+    robot = RobotModel.default()
+    eyes = [(2.2, -1.6, 1.6), (2.2, 1.6, 1.6), (-1.8, 1.8, 1.8), (-1.8, -1.8, 1.4)]
+    cameras = {f"c{k}": _camera(f"c{k}", eye, target=(0.2, 0.0, 0.5), width=320, height=256, f=260.0)
+               for k, eye in enumerate(eyes)}
+    rig = dg.Rig(cameras)
+    workspace = [[-1.0, -1.0, -0.1], [1.2, 1.0, 1.5]]
+    test = ImageCollisionTest(rig, robot, workspace, tiles=(32, 32), theta=1)
+    rng = np.random.default_rng(11)
+    backgrounds = {name: np.kron(rng.integers(40, 160, (32, 40)), np.ones((8, 8))) for name in cameras}
+    return test, robot, cameras, backgrounds
+
+
+def _draw(test, backgrounds, cameras, joints, obstacles=()):
+    """Images of the scene: the background, the robot's render at ``joints`` and the obstacles in bright grey."""
+    from depthguard.scenes import render_depth
+
+    q = test.robot.joint_vector(joints)
+    images = {}
+    for name, camera in cameras.items():
+        image = backgrounds[name].copy()
+        image[test.silhouette.render(camera, q) > 0] = 235
+        if obstacles:
+            image[render_depth(camera, list(obstacles)) > 0] = 250
+        images[name] = image.astype(np.uint8)
+    return images
+
+
+def test_the_whole_test_finds_a_box_in_a_future_configurations_way_and_nothing_without_it(iiwa_scene):
+    from depthguard.scenes import Box
+
+    test, robot, cameras, backgrounds = iiwa_scene
+    poses = [np.array([a, 0.5, 0.0, -1.4, 0.0, 0.8, 0.0]) for a in (-1.2, -0.6, 0.0, 0.6, 1.2)]
+    test.set_reference({name: [_draw(test, backgrounds, cameras, q)[name] for q in poses] for name in cameras})
+    now = np.array([0.0, 0.4, 0.0, -1.5, 0.0, 0.8, 0.0])
+    future = np.array([0.9, 0.7, 0.0, -1.2, 0.0, 0.8, 0.0])
+    # Nothing in the workspace but the robot: its own tiles resolve to background, every configuration is free.
+    test.observe(_draw(test, backgrounds, cameras, now), now)
+    assert not test.test(now).collision
+    assert not test.test(future).collision
+    # A box where the future configuration's end-effector will be: that configuration collides, the current not.
+    target = robot.control_point_positions(future)[robot.end_effector_index]
+    box = Box.from_bounds(target - 0.08, target + 0.08)
+    assert np.linalg.norm(robot.control_point_positions(now)[robot.end_effector_index] - target) > 0.4
+    test.observe(_draw(test, backgrounds, cameras, now, [box]), now)
+    hit = test.test(future)
+    assert hit.collision and hit.klass in "CD", hit
+    assert not test.test(now).collision
+
+
+def test_the_whole_test_refuses_what_it_cannot_use(iiwa_scene):
+    test, robot, cameras, backgrounds = iiwa_scene
+    with pytest.raises(InputError, match="every camera"):
+        test.observe({"c0": backgrounds["c0"]}, np.zeros(7))
+    with pytest.raises(InputError, match="theta"):
+        type(test)(dg.Rig(cameras), robot, [[-1, -1, -0.1], [1, 1, 1.5]], tiles=(8, 8), theta=4)

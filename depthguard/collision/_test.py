@@ -1,0 +1,96 @@
+"""The collision test of Henrich & Gecks over C calibrated cameras, steps 1-6 together (SPEC section 10):
+reference images once, then per set of images the revised obstacle images, then any number of configurations
+tested against them."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from depthguard.cameras import Rig
+from depthguard.collision._difference import difference_image, reference_image, robot_tiles, tile_features
+from depthguard.collision._epipolar import EpipolarBands, TileGrid
+from depthguard.collision._tables import Verdict, camera_collisions, obstacle_image, revised_obstacle_images, verdict
+from depthguard.errors import InputError
+
+
+class ImageCollisionTest:
+    """Whether a robot configuration collides with what the cameras see (the paper's sections 3.1-3.5).
+
+    Args:
+        rig: the cameras (intensity or depth); every camera of the rig takes part.
+        robot: the :class:`~depthguard.robots.RobotModel` seen by them.
+        workspace: (2, 3) world-frame box, metres, holding the robot and the obstacles (bounds the epipolar bands).
+        tiles: (rows, cols) of each camera's difference image (the paper: 64 x 64).
+        theta: the occlusion threshold, the most cameras in which the robot may hide an obstacle at once.
+        thresholds: per tile feature (mean grey value, balance point row in tile heights), the change that makes a
+            tile foreground (:func:`difference_image`).
+        geometry: the robot geometry projected into the cameras (:class:`depthguard.self_filter.RobotSilhouette`:
+            "capsules", "hulls" or "meshes"; padded, so that the robot's own tiles are covered).
+
+    Use: :meth:`set_reference` once (images of the workspace with the robot in several configurations and no
+    obstacle), :meth:`observe` per set of images with the robot's joints at their capture, then :meth:`test` for any
+    configuration (the current one, future ones).
+    """
+
+    def __init__(self, rig: Rig, robot, workspace, tiles=(64, 64), theta: int = 1, thresholds=(12.0, 0.1),
+                 geometry: str = "capsules"):
+        from depthguard.self_filter import RobotSilhouette  # OpenGL: only when used
+
+        if not isinstance(rig, Rig):
+            raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}", field="rig")
+        try:
+            rows, cols = tiles
+        except (TypeError, ValueError):
+            raise InputError(f"tiles must be (rows, cols), got {tiles!r}", field="tiles") from None
+        self.names = tuple(rig.cameras)
+        self.grids = [TileGrid(camera, rows, cols) for camera in rig.cameras.values()]
+        self.bands = EpipolarBands(self.grids, workspace)
+        verdict([True] * len(self.grids), [True] * len(self.grids), theta)  # checks theta for these cameras
+        self.theta = int(theta)
+        self.thresholds = tuple(float(t) for t in thresholds)
+        self.robot = robot
+        self.silhouette = RobotSilhouette(robot, geometry=geometry)
+        self.reference = None
+        self.revised = None
+
+    def _per_camera(self, images: Mapping, field: str) -> list:
+        if not isinstance(images, Mapping) or set(images) != set(self.names):
+            got = sorted(images) if isinstance(images, Mapping) else type(images).__name__
+            raise InputError(f"{field} must map every camera ({', '.join(self.names)}) to its images, got {got}",
+                             field=field)
+        return [images[name] for name in self.names]
+
+    def robot_image(self, joints) -> list[np.ndarray]:
+        """Step 3 at ``joints``: per camera, (rows, cols) bool tiles that the robot's padded geometry covers."""
+        q = self.robot.joint_vector(joints)
+        return [robot_tiles(self.silhouette.render(grid.camera, q) > 0.0, grid) for grid in self.grids]
+
+    def set_reference(self, images: Mapping[str, Sequence[np.ndarray]]) -> None:
+        """Step 1: per camera name, several images of the workspace without obstacles, the robot in different
+        configurations (their per-pixel median is the reference)."""
+        stacks = self._per_camera(images, "images")
+        self.reference = [tile_features(reference_image(stack, grid), grid) for stack, grid in zip(stacks, self.grids)]
+        self.revised = None
+
+    def observe(self, images: Mapping[str, np.ndarray], joints) -> list[np.ndarray]:
+        """Steps 2-5 for one set of images (camera name -> (height, width) image) captured at ``joints``: the revised
+        obstacle images, kept for :meth:`test`, and returned (per camera, (rows, cols) uint8 labels)."""
+        if self.reference is None:
+            raise InputError("set_reference first: the difference images need the reference", field="reference")
+        frames = self._per_camera(images, "images")
+        robot_now = self.robot_image(joints)
+        obstacles = []
+        for frame, grid, reference, robot in zip(frames, self.grids, self.reference, robot_now):
+            foreground = difference_image(tile_features(frame, grid), reference, self.thresholds)
+            obstacles.append(obstacle_image(foreground, robot))
+        self.revised = revised_obstacle_images(obstacles, self.bands, self.theta)
+        return self.revised
+
+    def test(self, joints) -> Verdict:
+        """Step 6 for the configuration ``joints`` against the last observed images."""
+        if self.revised is None:
+            raise InputError("observe a set of images first", field="revised")
+        flags = [camera_collisions(revised, robot) for revised, robot in zip(self.revised, self.robot_image(joints))]
+        return verdict([f[0] for f in flags], [f[1] for f in flags], self.theta)
