@@ -432,8 +432,20 @@ def test_the_whole_test_finds_a_box_in_a_future_configurations_way_and_nothing_w
     assert not test.test(now).collision
 
 
+@pytest.mark.parametrize("workspace", [
+    [[0, 0, 0], [1, 1]], [[0, 0, 0], [np.nan, 1, 1]], [[0, 0, 0], [np.inf, 1, 1]], [[1, 0, 0], [0, 1, 1]], "box", None,
+])
+def test_bad_workspaces_are_refused(workspace):
+    cam = _camera("c", (2.0, 0.0, 0.5))
+    with pytest.raises(InputError, match="workspace"):
+        EpipolarBands([TileGrid(cam, 4, 5), TileGrid(cam, 4, 5)], workspace)
+
+
 def test_the_whole_test_refuses_what_it_cannot_use(iiwa_scene):
     test, robot, cameras, backgrounds = iiwa_scene
+    for thresholds in [(1.0,), (1.0, np.nan), (1.0, -1.0), ("a", 1.0), None]:
+        with pytest.raises(InputError, match="thresholds"):
+            type(test)(dg.Rig(cameras), robot, [[-1, -1, -0.1], [1, 1, 1.5]], tiles=(8, 8), thresholds=thresholds)
     with pytest.raises(InputError, match="every camera"):
         test.observe({"c0": backgrounds["c0"]}, np.zeros(7))
     with pytest.raises(InputError, match="theta"):

@@ -12,7 +12,7 @@ import numpy as np
 
 from depthguard.cameras import PinholeCamera
 from depthguard.collision import _kernels
-from depthguard.errors import InputError
+from depthguard.errors import InputError, short_repr
 
 
 class TileGrid:
@@ -76,10 +76,22 @@ class TileGrid:
         return np.packbits(flat, bitorder="little").view("<u8").copy()
 
 
+def _box(workspace) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) corners of a workspace box given as [[x, y, z], [x, y, z]], metres: finite, low < high."""
+    try:
+        box = np.array(workspace, dtype=np.float64)
+    except (TypeError, ValueError):
+        box = None
+    if box is None or box.shape != (2, 3) or not np.all(np.isfinite(box)) or not np.all(box[0] < box[1]):
+        raise InputError(f"workspace must be [[x, y, z], [x, y, z]] (low and high corners, metres, finite, low < high), "
+                         f"got {short_repr(workspace)}", field="workspace")
+    return box[0], box[1]
+
+
 def workspace_depths(camera: PinholeCamera, workspace) -> tuple[float, float]:
     """The optical depths (metres) at which ``camera`` can see the axis-aligned box ``workspace`` ((2, 3): low and
     high corners, world frame): the range of its 8 corners' depths, at least the camera's nearest valid depth."""
-    lo, hi = np.asarray(workspace, dtype=np.float64)
+    lo, hi = _box(workspace)
     corners = np.array(list(itertools.product(*zip(lo, hi))))
     z = camera.world_to_camera(corners)[:, 2]
     near = max(float(z.min()), camera.depth_range[0], 1e-3)
@@ -105,6 +117,9 @@ class EpipolarBands:
 
     def __init__(self, grids: Sequence[TileGrid], workspace):
         self.grids = tuple(grids)
+        if not self.grids or not all(isinstance(grid, TileGrid) for grid in self.grids):
+            raise InputError("grids must be one or more TileGrid", field="grids")
+        _box(workspace)
         self.bits: dict[tuple[int, int], np.ndarray] = {}
         for a, grid_a in enumerate(self.grids):
             near, far = workspace_depths(grid_a.camera, workspace)

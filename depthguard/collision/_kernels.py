@@ -69,6 +69,19 @@ def _rect_meets_hull(x0, x1, y0, y1, hull_x, hull_y, m):
     return True
 
 
+@kernel(inline=True)
+def _tiles_spanned(edges, lo, hi):
+    """(first, last) tile whose span edges[k] .. edges[k + 1] may meet [lo, hi] (clamped to the grid)."""
+    n = edges.shape[0] - 1
+    first = 0
+    while first < n - 1 and edges[first + 1] < lo:
+        first += 1
+    last = first
+    while last < n - 1 and edges[last + 1] <= hi:
+        last += 1
+    return first, last
+
+
 @kernel(parallel=True)
 def tile_bands(rays, depths, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
     """For every tile of camera A, the tiles of camera B that its frustum between depths[tile, 0] and depths[tile, 1]
@@ -119,18 +132,8 @@ def tile_bands(rays, depths, R, t, fx, fy, cx, cy, col_edges, row_edges, words, 
             hi_x = max(hi_x, xs[i])
             lo_y = min(lo_y, ys[i])
             hi_y = max(hi_y, ys[i])
-        c_lo = 0
-        while c_lo < cols - 1 and col_edges[c_lo + 1] < lo_x:
-            c_lo += 1
-        c_hi = c_lo
-        while c_hi < cols - 1 and col_edges[c_hi + 1] <= hi_x:
-            c_hi += 1
-        r_lo = 0
-        while r_lo < rows - 1 and row_edges[r_lo + 1] < lo_y:
-            r_lo += 1
-        r_hi = r_lo
-        while r_hi < rows - 1 and row_edges[r_hi + 1] <= hi_y:
-            r_hi += 1
+        c_lo, c_hi = _tiles_spanned(col_edges, lo_x, hi_x)
+        r_lo, r_hi = _tiles_spanned(row_edges, lo_y, hi_y)
         for r in range(r_lo, r_hi + 1):
             for c in range(c_lo, c_hi + 1):
                 if _rect_meets_hull(col_edges[c], col_edges[c + 1], row_edges[r], row_edges[r + 1], hull_x, hull_y,

@@ -49,7 +49,14 @@ class ImageCollisionTest:
         self.bands = EpipolarBands(self.grids, workspace)
         verdict([True] * len(self.grids), [True] * len(self.grids), theta)  # checks theta for these cameras
         self.theta = int(theta)
-        self.thresholds = tuple(float(t) for t in thresholds)
+        try:
+            self.thresholds = np.array(thresholds, dtype=np.float64)
+        except (TypeError, ValueError):
+            self.thresholds = None
+        if self.thresholds is None or self.thresholds.shape != (2,) or not np.all(self.thresholds >= 0.0) or \
+                not np.all(np.isfinite(self.thresholds)):
+            raise InputError(f"thresholds must be two finite numbers >= 0 (mean grey levels, balance point in tile "
+                             f"heights), got {thresholds!r}", field="thresholds")
         self.robot = robot
         self.silhouette = RobotSilhouette(robot, geometry=geometry)
         self.reference = None
