@@ -450,3 +450,38 @@ def test_the_whole_test_refuses_what_it_cannot_use(iiwa_scene):
         test.observe({"c0": backgrounds["c0"]}, np.zeros(7))
     with pytest.raises(InputError, match="theta"):
         type(test)(dg.Rig(cameras), robot, [[-1, -1, -0.1], [1, 1, 1.5]], tiles=(8, 8), theta=4)
+
+
+def test_the_configuration_table_gives_every_verdict_the_slow_test_gives(iiwa_scene):
+    """ConfigurationTable: the verdicts of many configurations at once, from bitsets, equal ImageCollisionTest.test
+    on each (the judge: its per-configuration render and tile sets), with and without the box."""
+    from depthguard.collision import ConfigurationTable
+    from depthguard.scenes import Box
+
+    test, robot, cameras, backgrounds = iiwa_scene
+    poses = [np.array([a, 0.5, 0.0, -1.4, 0.0, 0.8, 0.0]) for a in (-1.2, -0.6, 0.0, 0.6, 1.2)]
+    test.set_reference({name: [_draw(test, backgrounds, cameras, q)[name] for q in poses] for name in cameras})
+    rng = np.random.default_rng(8)
+    now = np.array([0.0, 0.4, 0.0, -1.5, 0.0, 0.8, 0.0])
+    configurations = now + rng.uniform(-1.0, 1.0, (24, 7)) * [1.2, 0.5, 0.8, 0.6, 1.0, 0.6, 1.0]
+    table = ConfigurationTable(test, configurations)
+    future = configurations[3]
+    target = robot.control_point_positions(future)[robot.end_effector_index]
+    classes = set()
+    for obstacles in ([], [Box.from_bounds(target - 0.08, target + 0.08)]):
+        test.observe(_draw(test, backgrounds, cameras, now, obstacles), now)
+        collision, klass = table.verdicts()
+        for k, q in enumerate(configurations):
+            v = test.test(q)
+            assert (collision[k], klass[k]) == (v.collision, v.klass), k
+        classes |= set(klass.tolist())
+    assert collision[3] and len(classes) >= 2, classes
+
+
+def test_a_configuration_table_refuses_bad_configurations(iiwa_scene):
+    from depthguard.collision import ConfigurationTable
+
+    test = iiwa_scene[0]
+    for bad in (np.zeros((3, 6)), np.full((2, 7), np.nan), np.zeros(7)):
+        with pytest.raises(InputError, match="configurations"):
+            ConfigurationTable(test, bad)

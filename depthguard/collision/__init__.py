@@ -4,8 +4,9 @@ Built so far: tile grids and the epipolar bands between cameras (step 5's geomet
 features, the difference image and the robot's tile image (steps 1-3, thresholds as the linear classifier); the
 obstacle image (Table I), the revised obstacle image (Table III, C cameras, occlusion threshold theta), the
 intersection image (Table II) and the verdict with its class A-D (Table IV); :class:`ImageCollisionTest` runs them
-together with the robot's tile images rendered from its padded geometry. Not yet: the Bayes classifier, the depth
-variant, swept volumes, pick-and-place, the configuration-space tables and the planner, the command line.
+together with the robot's tile images rendered from its padded geometry; :class:`ConfigurationTable` holds many
+configurations' tile images as bitsets and gives all their verdicts at once. Not yet: the Bayes classifier, the depth
+variant, swept volumes, pick-and-place, the planner, the command line.
 """
 
 from depthguard.collision._difference import (
@@ -16,7 +17,7 @@ from depthguard.collision._difference import (
     tile_features,
 )
 from depthguard.collision._epipolar import EpipolarBands, TileGrid, workspace_depths
-from depthguard.collision._test import ImageCollisionTest
+from depthguard.collision._test import ConfigurationTable, ImageCollisionTest
 from depthguard.collision._tables import (
     BACKGROUND,
     ERROR,
@@ -34,6 +35,7 @@ from depthguard.collision._tables import (
 
 __all__ = [
     "BACKGROUND",
+    "ConfigurationTable",
     "ERROR",
     "EpipolarBands",
     "FOUR_NEIGHBOURS",

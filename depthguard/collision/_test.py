@@ -101,3 +101,56 @@ class ImageCollisionTest:
             raise InputError("observe a set of images first", field="revised")
         flags = [camera_collisions(revised, robot) for revised, robot in zip(self.revised, self.robot_image(joints))]
         return verdict([f[0] for f in flags], [f[1] for f in flags], self.theta)
+
+
+class ConfigurationTable:
+    """Section 3.3's table made cheap (issue 10, item 3): the robot's tile images of many configurations, per camera,
+    as bitsets, so that the verdict for every configuration against one set of revised obstacle images costs a few
+    bitwise operations per configuration.
+
+    Args:
+        test: the :class:`ImageCollisionTest` (its cameras, grids, theta and robot geometry).
+        configurations: (K, n) joint positions, radians, the robot's joint order (e.g. a discretised configuration
+            space; the paper used 8,192).
+
+    ``bits`` is (C, K, words) uint64: camera c's tiles covered by configuration k.
+    """
+
+    def __init__(self, test: ImageCollisionTest, configurations):
+        q = np.asarray(configurations, dtype=np.float64)
+        n = test.robot.n_joints
+        if q.ndim != 2 or q.shape[1] != n or not np.all(np.isfinite(q)):
+            raise InputError(f"configurations must be (K, {n}) finite joint positions, got {q.shape}",
+                             field="configurations")
+        self.test = test
+        self.configurations = q
+        words = max(grid.words for grid in test.grids)
+        self.bits = np.zeros((len(test.grids), len(q), words), dtype=np.uint64)
+        for k, joints in enumerate(q):
+            for c, (grid, tiles) in enumerate(zip(test.grids, test.robot_image(joints))):
+                self.bits[c, k, : grid.words] = grid.pack(tiles)
+
+    def verdicts(self, revised=None) -> tuple[np.ndarray, np.ndarray]:
+        """(collision (K,) bool, class (K,) str "A"-"D") of every configuration against ``revised`` (per camera, the
+        revised obstacle images; default: the test's last observed ones), by the rule of :func:`verdict`."""
+        test = self.test
+        revised = test.revised if revised is None else revised
+        if revised is None:
+            raise InputError("observe a set of images first", field="revised")
+        from depthguard.collision._tables import OBSTACLE, POSSIBLE
+
+        c = len(test.grids)
+        words = self.bits.shape[2]
+        ro = np.empty((c, len(self.configurations)), dtype=bool)
+        rp = np.empty_like(ro)
+        for k, (grid, image) in enumerate(zip(test.grids, revised)):
+            obstacle = np.zeros(words, dtype=np.uint64)
+            possible = np.zeros(words, dtype=np.uint64)
+            obstacle[: grid.words] = grid.pack(np.asarray(image) == OBSTACLE)
+            possible[: grid.words] = grid.pack(np.asarray(image) == POSSIBLE)
+            ro[k] = np.any(self.bits[k] & obstacle, axis=1)
+            rp[k] = np.any(self.bits[k] & possible, axis=1)
+        n_ro = ro.sum(axis=0)
+        every = np.all(ro | rp, axis=0)
+        klass = np.where(~every, "A", np.where(n_ro < c - test.theta, "B", np.where(n_ro < c, "C", "D")))
+        return (klass == "C") | (klass == "D"), klass

@@ -1,0 +1,121 @@
+"""The image-based collision test (issue 10's figures, so far): verdicts for a whole configuration table, and the
+per-set work for four cameras.
+
+1. Verdicts for K configurations (default 8,192, the paper's table) against one set of revised obstacle images,
+   four cameras with 64 x 64 tiles, from :class:`ConfigurationTable`'s bitsets (random robot tiles covering 3 % of
+   each image, obstacles and possible obstacles 5 % each). Goal: <= 20 ms. Baseline in the same run: the same
+   verdicts one configuration at a time through :func:`camera_collisions` and :func:`verdict` on unpacked images
+   (a sample of configurations, scaled up).
+2. Per set of four 704 x 576 images (random grey levels): tile features and difference images, obstacle images and
+   the revised obstacle images with the epipolar bands, plus the robot's tile images rendered at the current
+   configuration (the KUKA iiwa, capsules). Goal for the whole pipeline plus one future test: >= 200 Hz.
+
+    .venv/bin/python benchmarks/bench_collision.py [--configurations 8192] [--repeats 20]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+import depthguard as dg
+from depthguard.collision import (
+    OBSTACLE,
+    POSSIBLE,
+    ConfigurationTable,
+    ImageCollisionTest,
+    camera_collisions,
+    difference_image,
+    obstacle_image,
+    revised_obstacle_images,
+    tile_features,
+    verdict,
+)
+from depthguard.robots import RobotModel
+
+
+def _camera(name, eye, target=(0.2, 0.0, 0.5), width=704, height=576, f=600.0):
+    eye, target = np.asarray(eye, float), np.asarray(target, float)
+    z = (target - eye) / np.linalg.norm(target - eye)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
+    T[:3, 3] = eye
+    return dg.PinholeCamera(name, width, height, f, f, (width - 1) / 2, (height - 1) / 2, T)
+
+
+def _median_ms(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return float(np.median(times)) * 1e3
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--configurations", type=int, default=8192)
+    parser.add_argument("--repeats", type=int, default=20)
+    args = parser.parse_args()
+    eyes = [(2.4, -1.8, 1.8), (2.4, 1.8, 1.8), (-2.0, 2.0, 2.0), (-2.0, -2.0, 1.6)]
+    rig = dg.Rig({f"c{k}": _camera(f"c{k}", eye) for k, eye in enumerate(eyes)})
+    robot = RobotModel.default()
+    workspace = [[-1.0, -1.0, -0.1], [1.2, 1.0, 1.5]]
+    test = ImageCollisionTest(rig, robot, workspace, tiles=(64, 64), theta=1)
+    rng = np.random.default_rng(0)
+
+    # 1. Verdicts for the whole table, from random bitsets (the table's construction renders every configuration).
+    k = args.configurations
+    table = ConfigurationTable(test, np.zeros((0, robot.n_joints)))
+    robot_tiles = rng.random((len(test.grids), k, 64, 64)) < 0.03
+    table.configurations = np.zeros((k, robot.n_joints))
+    table.bits = np.stack([np.stack([grid.pack(robot_tiles[c, j]) for j in range(k)])
+                           for c, grid in enumerate(test.grids)])
+    labels = rng.choice([0, OBSTACLE, POSSIBLE], size=(len(test.grids), 64, 64), p=[0.9, 0.05, 0.05])
+    revised = [label.astype(np.uint8) for label in labels]
+    fast = _median_ms(lambda: table.verdicts(revised), args.repeats)
+    sample = 256
+
+    def one_at_a_time():
+        for j in range(sample):
+            flags = [camera_collisions(revised[c], robot_tiles[c, j]) for c in range(len(test.grids))]
+            verdict([f[0] for f in flags], [f[1] for f in flags], 1)
+
+    slow = _median_ms(one_at_a_time, max(3, args.repeats // 5)) * k / sample
+    collision, klass = table.verdicts(revised)
+    for j in rng.choice(k, 64, replace=False):  # the bitsets give the slow path's verdicts
+        flags = [camera_collisions(revised[c], robot_tiles[c, j]) for c in range(len(test.grids))]
+        v = verdict([f[0] for f in flags], [f[1] for f in flags], 1)
+        assert (collision[j], klass[j]) == (v.collision, v.klass)
+    print(f"verdicts for {k} configurations, 4 cameras, 64 x 64 tiles: {fast:.2f} ms (goal 20 ms); one at a time "
+          f"{slow:.0f} ms ({slow / fast:.0f}x)")
+
+    # 2. Per set of four 704 x 576 images.
+    images = {name: rng.integers(0, 256, cam.shape).astype(np.uint8) for name, cam in rig.cameras.items()}
+    references = [tile_features(images[name], grid) for name, grid in zip(test.names, test.grids)]
+    q = np.array([0.0, 0.5, 0.0, -1.4, 0.0, 0.8, 0.0])
+    steps = {}
+    steps["tile features + difference"] = _median_ms(
+        lambda: [difference_image(tile_features(images[name], grid), ref)
+                 for name, grid, ref in zip(test.names, test.grids, references)], args.repeats)
+    robot_now = test.robot_image(q)
+    steps["robot tile images (render, 4 cameras)"] = _median_ms(lambda: test.robot_image(q), args.repeats)
+    foreground = [rng.random((64, 64)) < 0.05 for _ in test.grids]
+    obstacles = [obstacle_image(f, r) for f, r in zip(foreground, robot_now)]
+    steps["obstacle + revised images (Tables I, III)"] = _median_ms(
+        lambda: revised_obstacle_images(obstacles, test.bands, 1), args.repeats)
+    test.reference = references
+    test.observe(images, q)
+    steps["one future test (render + Table IV)"] = _median_ms(lambda: test.test(q), args.repeats)
+    total = sum(steps.values())
+    print(f"per set of four 704 x 576 images: {total:.1f} ms, {1e3 / total:.0f} Hz (goal 200 Hz)")
+    for name, ms in steps.items():
+        print(f"  {name:44s} {ms:7.2f} ms")
+
+
+if __name__ == "__main__":
+    main()
