@@ -34,17 +34,11 @@ from depthguard.collision import (
     verdict,
 )
 from depthguard.robots import RobotModel
+from depthguard.transforms import look_at
 
 
 def _camera(name, eye, target=(0.2, 0.0, 0.5), width=704, height=576, f=600.0):
-    eye, target = np.asarray(eye, float), np.asarray(target, float)
-    z = (target - eye) / np.linalg.norm(target - eye)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    T = np.eye(4)
-    T[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
-    T[:3, 3] = eye
-    return dg.PinholeCamera(name, width, height, f, f, (width - 1) / 2, (height - 1) / 2, T)
+    return dg.PinholeCamera(name, width, height, f, f, (width - 1) / 2, (height - 1) / 2, look_at(eye, target))
 
 
 def _median_ms(fn, repeats: int) -> float:

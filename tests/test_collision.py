@@ -24,19 +24,12 @@ from depthguard.collision import (
     verdict,
 )
 from depthguard.errors import InputError
+from depthguard.transforms import look_at
 
 
 def _camera(name, eye, target=(0.0, 0.0, 0.5), width=160, height=128, f=140.0):
     """A camera at ``eye`` looking at ``target`` (z up), optical frame REP 103 (x right, y down, z forward)."""
-    eye, target = np.asarray(eye, float), np.asarray(target, float)
-    z = (target - eye) / np.linalg.norm(target - eye)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    T = np.eye(4)
-    T[:3, :3] = np.stack([x, y, z], axis=1)
-    T[:3, 3] = eye
-    return dg.PinholeCamera(name, width, height, f, f, (width - 1) / 2, (height - 1) / 2, T)
+    return dg.PinholeCamera(name, width, height, f, f, (width - 1) / 2, (height - 1) / 2, look_at(eye, target))
 
 
 # ------------------------------------------------------------------------------------------------- Table I
