@@ -388,6 +388,18 @@ def iiwa_scene():
     return test, robot, cameras, backgrounds
 
 
+_SILHOUETTES = {}
+
+
+def _silhouette(robot):
+    """The robot's padded capsules rendered (OpenGL), one renderer per robot for the module."""
+    from depthguard.self_filter import RobotSilhouette
+
+    if id(robot) not in _SILHOUETTES:
+        _SILHOUETTES[id(robot)] = (robot, RobotSilhouette(robot, geometry="capsules"))
+    return _SILHOUETTES[id(robot)][1]
+
+
 def _draw(test, backgrounds, cameras, joints, obstacles=()):
     """Images of the scene: the background, the robot's render at ``joints`` and the obstacles in bright grey."""
     from depthguard.scenes import render_depth
@@ -396,7 +408,7 @@ def _draw(test, backgrounds, cameras, joints, obstacles=()):
     images = {}
     for name, camera in cameras.items():
         image = backgrounds[name].copy()
-        image[test.silhouette.render(camera, q) > 0] = 235
+        image[_silhouette(test.robot).render(camera, q) > 0] = 235
         if obstacles:
             image[render_depth(camera, list(obstacles)) > 0] = 250
         images[name] = image.astype(np.uint8)
@@ -478,3 +490,113 @@ def test_a_configuration_table_refuses_bad_configurations(iiwa_scene):
     for bad in (np.zeros((3, 6)), np.full((2, 7), np.nan), np.zeros(7)):
         with pytest.raises(InputError, match="configurations"):
             ConfigurationTable(test, bad)
+
+
+# ------------------------------------------------------------------------------------ the robot's tile images
+
+def test_projected_capsules_cover_every_tile_their_render_covers(iiwa_scene):
+    """Step 3 without rendering: the analytic projection of the padded capsules sets every tile in which the capsules'
+    render (OpenGL, tests/judge) shows a pixel, and not many more (a projection that set every tile would fail)."""
+    from depthguard.collision import robot_tiles
+
+    test, robot, cameras, _ = iiwa_scene
+    rng = np.random.default_rng(5)
+    covered = extra = 0
+    for _ in range(12):
+        q = rng.uniform(robot.lower, robot.upper)
+        for grid, tiles in zip(test.grids, test.robot_image(q)):
+            rendered = robot_tiles(_silhouette(robot).render(grid.camera, q) > 0.0, grid)
+            assert not np.any(rendered & ~tiles), grid.camera.name
+            covered += rendered.sum()
+            extra += (tiles & ~rendered).sum()
+    assert covered > 500 and extra < 0.5 * covered, (covered, extra)
+
+
+def test_a_balls_projected_bounds_are_its_tangents():
+    """The slopes a/z of the tangents to a ball equal the extremes over densely sampled points of its surface."""
+    from depthguard.collision._kernels import _ball_slopes
+
+    for a, z, rho in [(0.3, 1.5, 0.1), (-0.8, 0.9, 0.4), (0.0, 2.0, 0.05), (1.5, 0.7, 0.6)]:
+        angles = np.linspace(0.0, 2 * np.pi, 200_001)
+        slopes = (a + rho * np.cos(angles)) / (z + rho * np.sin(angles))
+        lo, hi = _ball_slopes(a, z, rho)
+        # Never inside the sampled extremes (the bound holds), and within the samples' spacing of them (exact).
+        assert lo <= slopes.min() + 1e-12 and hi >= slopes.max() - 1e-12
+        assert slopes.min() - lo < 1e-8 * abs(slopes).max() and hi - slopes.max() < 1e-8 * abs(slopes).max()
+
+
+def test_swept_samples_move_no_point_of_the_robot_more_than_x_max(iiwa_scene):
+    """Step 7's sampling: between two consecutive samples no vertex of the robot's collision meshes (nor its capsule
+    ends) moves more than x_max (judge: forward kinematics of the samples); the joint reaches bound what they must."""
+    from depthguard.collision import RobotProjector
+
+    test, robot, _, _ = iiwa_scene
+    projector = RobotProjector(robot, test.grids, x_max=0.03)
+    rng = np.random.default_rng(3)
+    path = rng.uniform(robot.lower * 0.7, robot.upper * 0.7, (3, 7))
+    samples = projector.samples(path)
+    assert len(samples) > 20 and np.allclose(samples[0], path[0]) and np.allclose(samples[-1], path[-1])
+    vertices = {link: mesh.vertices for link, mesh in robot.collision_meshes.items()}
+
+    def points(q):
+        poses = robot.link_poses(q)
+        return np.concatenate([v @ poses[link][:3, :3].T + poses[link][:3, 3] for link, v in vertices.items()])
+
+    worst = 0.0
+    previous = points(samples[0])
+    for q in samples[1:]:
+        now = points(q)
+        worst = max(worst, float(np.linalg.norm(now - previous, axis=1).max()))
+        previous = now
+    assert 0.3 * projector.x_max < worst <= projector.x_max, worst
+
+
+def test_a_swept_volume_holds_every_intermediate_configuration(iiwa_scene):
+    """The swept volume's tiles hold the tiles of configurations sampled 20 times more densely than its own samples
+    (each at its unwidened capsules), in every camera."""
+    test, robot, _, _ = iiwa_scene
+    rng = np.random.default_rng(4)
+    path = rng.uniform(robot.lower * 0.6, robot.upper * 0.6, (2, 7))
+    swept = test.projector.swept_images(path)
+    samples = test.projector.samples(path)
+    s = np.linspace(0.0, 1.0, 20 * len(samples))[:, None]
+    dense = test.projector.bits(path[0] + s * (path[1] - path[0]))
+    for c, grid in enumerate(test.grids):
+        union = np.bitwise_or.reduce(dense[c], axis=0)
+        held = grid.pack(swept[c])
+        assert not np.any(union & ~held), grid.camera.name
+    assert all(image.sum() < image.size for image in swept)
+
+
+def test_a_motion_between_two_free_configurations_collides_with_a_box_between_them(iiwa_scene):
+    """test_motion: both ends of a motion are clear of a box that the end-effector passes through on the way; the
+    swept volume finds it, the two end configurations do not."""
+    from depthguard.scenes import Box
+
+    test, robot, cameras, backgrounds = iiwa_scene
+    poses = [np.array([a, 0.5, 0.0, -1.4, 0.0, 0.8, 0.0]) for a in (-1.2, -0.6, 0.0, 0.6, 1.2)]
+    test.set_reference({name: [_draw(test, backgrounds, cameras, q)[name] for q in poses] for name in cameras})
+    start = np.array([-1.8, 0.7, 0.0, -1.2, 0.0, 0.8, 0.0])
+    end = np.array([1.8, 0.7, 0.0, -1.2, 0.0, 0.8, 0.0])
+    middle = robot.control_point_positions((start + end) / 2)[robot.end_effector_index]
+    box = Box.from_bounds(middle - 0.06, middle + 0.06)
+    test.observe(_draw(test, backgrounds, cameras, start, [box]), start)
+    assert not test.test(start).collision and not test.test(end).collision
+    assert test.test_motion([start, end]).collision
+    assert test.test_motion([start]).collision == test.test(start).collision
+
+
+@pytest.mark.parametrize("x_max", [0.0, -0.01, np.nan, np.inf, True, "2 cm", 0.9])
+def test_bad_x_max_is_refused(iiwa_scene, x_max):
+    from depthguard.collision import RobotProjector
+
+    test, robot = iiwa_scene[:2]
+    with pytest.raises(InputError, match="x_max"):
+        RobotProjector(robot, test.grids, x_max=x_max)
+
+
+def test_bad_motions_are_refused(iiwa_scene):
+    test, robot = iiwa_scene[:2]
+    for bad in (np.zeros((2, 6)), np.full((2, 7), np.nan), np.full((2, 7), 9.0), "path"):
+        with pytest.raises(InputError):
+            test.projector.swept_images(bad)

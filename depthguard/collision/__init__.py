@@ -17,6 +17,7 @@ from depthguard.collision._difference import (
     tile_features,
 )
 from depthguard.collision._epipolar import EpipolarBands, TileGrid, workspace_depths
+from depthguard.collision._robot_image import RobotProjector
 from depthguard.collision._test import ConfigurationTable, ImageCollisionTest
 from depthguard.collision._tables import (
     BACKGROUND,
@@ -43,6 +44,7 @@ __all__ = [
     "LABELS",
     "OBSTACLE",
     "POSSIBLE",
+    "RobotProjector",
     "TileGrid",
     "UNKNOWN",
     "Verdict",

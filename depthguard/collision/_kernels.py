@@ -140,3 +140,87 @@ def tile_bands(rays, depths, R, t, fx, fy, cx, cy, col_edges, row_edges, words, 
                                     m):
                     tile = r * cols + c
                     out[a, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
+
+
+@kernel(inline=True)
+def _ball_slopes(a, z, rho):
+    """(lowest, highest) a' / z' over the ball of radius rho around (a, z) in a plane through the camera centre
+    (z > rho): the slopes of the two tangents from the centre, exact."""
+    d = z * z - rho * rho
+    root = rho * np.sqrt(a * a + d)
+    return (a * z - root) / d, (a * z + root) / d
+
+
+@kernel(parallel=True)
+def capsule_tile_bits(ends, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
+    """For each of K sets of m capsules, the tiles of one camera that any capsule's projection can meet, as bits in
+    out (K, words) uint64 (written, tile index r * cols + c; tile footprints as in :func:`tile_bands`).
+
+    ends: (K, m, 2, 3) the capsules' core segments, world frame, metres; radii: (m,) metres; R, t: world -> the
+    camera's optical frame; fx, fy, cx, cy: its intrinsics. A capsule is the convex hull of its two end balls, so its
+    projection is the convex hull of theirs; each ball's projection lies in the pixel rectangle bounded by its
+    tangent planes through the camera's x and y axes (exact slopes). A tile is set when its footprint meets the
+    convex hull of the two rectangles, a superset of the capsule's projection. A capsule that reaches within 1 mm of
+    the camera's plane (or behind it) sets every tile."""
+    n_sets = ends.shape[0]
+    m = ends.shape[1]
+    cols = col_edges.shape[0] - 1
+    rows = row_edges.shape[0] - 1
+    for k in prange(n_sets):
+        xs = np.empty(8)
+        ys = np.empty(8)
+        hull_x = np.empty(16)
+        hull_y = np.empty(16)
+        for w in range(words):
+            out[k, w] = np.uint64(0)
+        for j in range(m):
+            rho = radii[j]
+            behind = False
+            for e in range(2):
+                px = ends[k, j, e, 0]
+                py = ends[k, j, e, 1]
+                pz = ends[k, j, e, 2]
+                x = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz + t[0]
+                y = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + t[1]
+                z = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + t[2]
+                if not z - rho > 1e-3:
+                    behind = True
+                    break
+                u0, u1 = _ball_slopes(x, z, rho)
+                v0, v1 = _ball_slopes(y, z, rho)
+                u0 = fx * u0 + cx
+                u1 = fx * u1 + cx
+                v0 = fy * v0 + cy
+                v1 = fy * v1 + cy
+                xs[4 * e] = u0
+                ys[4 * e] = v0
+                xs[4 * e + 1] = u1
+                ys[4 * e + 1] = v0
+                xs[4 * e + 2] = u0
+                ys[4 * e + 2] = v1
+                xs[4 * e + 3] = u1
+                ys[4 * e + 3] = v1
+            if behind:
+                for tile in range(rows * cols):
+                    out[k, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
+                break
+            hm = convex_hull(xs, ys, hull_x, hull_y)
+            lo_x = np.inf
+            hi_x = -np.inf
+            lo_y = np.inf
+            hi_y = -np.inf
+            for i in range(8):
+                lo_x = min(lo_x, xs[i])
+                hi_x = max(hi_x, xs[i])
+                lo_y = min(lo_y, ys[i])
+                hi_y = max(hi_y, ys[i])
+            if hi_x < col_edges[0] or lo_x > col_edges[cols] or hi_y < row_edges[0] or lo_y > row_edges[rows]:
+                continue
+            c_lo, c_hi = _tiles_spanned(col_edges, lo_x, hi_x)
+            r_lo, r_hi = _tiles_spanned(row_edges, lo_y, hi_y)
+            for r in range(r_lo, r_hi + 1):
+                for c in range(c_lo, c_hi + 1):
+                    if _rect_meets_hull(col_edges[c], col_edges[c + 1], row_edges[r], row_edges[r + 1], hull_x,
+                                        hull_y, hm):
+                        tile = r * cols + c
+                        out[k, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)

@@ -11,6 +11,7 @@ import numpy as np
 from depthguard.cameras import Rig
 from depthguard.collision._difference import difference_image, reference_image, robot_tiles, tile_features
 from depthguard.collision._epipolar import EpipolarBands, TileGrid
+from depthguard.collision._robot_image import RobotProjector
 from depthguard.collision._tables import Verdict, camera_collisions, obstacle_image, revised_obstacle_images, verdict
 from depthguard.errors import InputError
 
@@ -26,18 +27,19 @@ class ImageCollisionTest:
         theta: the occlusion threshold, the most cameras in which the robot may hide an obstacle at once.
         thresholds: per tile feature (mean grey value, balance point row in tile heights), the change that makes a
             tile foreground (:func:`difference_image`).
-        geometry: the robot geometry projected into the cameras (:class:`depthguard.self_filter.RobotSilhouette`:
-            "capsules", "hulls" or "meshes"; padded, so that the robot's own tiles are covered).
+        geometry: the robot geometry projected into the cameras: "capsules" (default; the padded capsules projected
+            analytically, :class:`RobotProjector`), or "hulls" or "meshes" (rendered by
+            :class:`depthguard.self_filter.RobotSilhouette`, padded, far slower).
+        x_max: metres, the most a point of the robot travels between two samples of a swept volume
+            (:meth:`test_motion`; :class:`RobotProjector`).
 
     Use: :meth:`set_reference` once (images of the workspace with the robot in several configurations and no
     obstacle), :meth:`observe` per set of images with the robot's joints at their capture, then :meth:`test` for any
-    configuration (the current one, future ones).
+    configuration (the current one, future ones) and :meth:`test_motion` for a whole motion.
     """
 
     def __init__(self, rig: Rig, robot, workspace, tiles=(64, 64), theta: int = 1, thresholds=(12.0, 0.1),
-                 geometry: str = "capsules"):
-        from depthguard.self_filter import RobotSilhouette  # OpenGL: only when used
-
+                 geometry: str = "capsules", x_max: float = 0.02):
         if not isinstance(rig, Rig):
             raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}", field="rig")
         try:
@@ -58,7 +60,13 @@ class ImageCollisionTest:
             raise InputError(f"thresholds must be two finite numbers >= 0 (mean grey levels, balance point in tile "
                              f"heights), got {thresholds!r}", field="thresholds")
         self.robot = robot
-        self.silhouette = RobotSilhouette(robot, geometry=geometry)
+        self.projector = RobotProjector(robot, self.grids, x_max)
+        if geometry == "capsules":
+            self.silhouette = None
+        else:
+            from depthguard.self_filter import RobotSilhouette  # OpenGL: only when used
+
+            self.silhouette = RobotSilhouette(robot, geometry=geometry)
         self.reference = None
         self.revised = None
 
@@ -72,7 +80,25 @@ class ImageCollisionTest:
     def robot_image(self, joints) -> list[np.ndarray]:
         """Step 3 at ``joints``: per camera, (rows, cols) bool tiles that the robot's padded geometry covers."""
         q = self.robot.joint_vector(joints)
+        if self.silhouette is None:
+            return self.projector.images(q)
         return [robot_tiles(self.silhouette.render(grid.camera, q) > 0.0, grid) for grid in self.grids]
+
+    def robot_bits(self, configurations) -> np.ndarray:
+        """(C, K, words) uint64: per camera, the tiles covered by each of the (K, n) configurations."""
+        if self.silhouette is None:
+            return self.projector.bits(configurations)
+        q = np.asarray(configurations, dtype=np.float64)
+        n = self.robot.n_joints
+        if q.ndim != 2 or q.shape[1] != n or not np.all(np.isfinite(q)):
+            raise InputError(f"configurations must be (K, {n}) finite joint positions, got {q.shape}",
+                             field="configurations")
+        words = max(grid.words for grid in self.grids)
+        bits = np.zeros((len(self.grids), len(q), words), dtype=np.uint64)
+        for k, joints in enumerate(q):
+            for c, (grid, tiles) in enumerate(zip(self.grids, self.robot_image(joints))):
+                bits[c, k, : grid.words] = grid.pack(tiles)
+        return bits
 
     def set_reference(self, images: Mapping[str, Sequence[np.ndarray]]) -> None:
         """Step 1: per camera name, several images of the workspace without obstacles, the robot in different
@@ -97,9 +123,18 @@ class ImageCollisionTest:
 
     def test(self, joints) -> Verdict:
         """Step 6 for the configuration ``joints`` against the last observed images."""
+        return self._verdict(self.robot_image(joints))
+
+    def test_motion(self, path) -> Verdict:
+        """Steps 6-7 for a whole motion: ``path`` (P, n) configurations joined by straight lines in joint space; the
+        future robot image is the swept volume's (:meth:`RobotProjector.swept_images`, always the padded capsules,
+        widened by x_max / 2)."""
+        return self._verdict(self.projector.swept_images(path))
+
+    def _verdict(self, robot_images) -> Verdict:
         if self.revised is None:
             raise InputError("observe a set of images first", field="revised")
-        flags = [camera_collisions(revised, robot) for revised, robot in zip(self.revised, self.robot_image(joints))]
+        flags = [camera_collisions(revised, robot) for revised, robot in zip(self.revised, robot_images)]
         return verdict([f[0] for f in flags], [f[1] for f in flags], self.theta)
 
 
@@ -117,18 +152,9 @@ class ConfigurationTable:
     """
 
     def __init__(self, test: ImageCollisionTest, configurations):
-        q = np.asarray(configurations, dtype=np.float64)
-        n = test.robot.n_joints
-        if q.ndim != 2 or q.shape[1] != n or not np.all(np.isfinite(q)):
-            raise InputError(f"configurations must be (K, {n}) finite joint positions, got {q.shape}",
-                             field="configurations")
         self.test = test
-        self.configurations = q
-        words = max(grid.words for grid in test.grids)
-        self.bits = np.zeros((len(test.grids), len(q), words), dtype=np.uint64)
-        for k, joints in enumerate(q):
-            for c, (grid, tiles) in enumerate(zip(test.grids, test.robot_image(joints))):
-                self.bits[c, k, : grid.words] = grid.pack(tiles)
+        self.bits = test.robot_bits(configurations)
+        self.configurations = np.asarray(configurations, dtype=np.float64)
 
     def verdicts(self, revised=None) -> tuple[np.ndarray, np.ndarray]:
         """(collision (K,) bool, class (K,) str "A"-"D") of every configuration against ``revised`` (per camera, the

@@ -484,6 +484,43 @@ class RobotModel:
         return [Capsule(tuple(ends[2 * i]), tuple(ends[2 * i + 1]), capsule.radius)
                 for i, capsule in enumerate(self.capsules)]
 
+    def capsule_segments(self, q, *, check: bool = True) -> np.ndarray:
+        """The core segments of the link capsules at ``q``: (m, 2, 3) float64, metres, world frame, rows in
+        :attr:`link_names` order (radii: ``capsule.radius`` of :attr:`capsules`, padding included)."""
+        data = self._forward(q, check)
+        return self._capsule_anchors.positions(data, self.T_world_base).reshape(-1, 2, 3)
+
+    def joint_reaches(self) -> np.ndarray:
+        """(n,) float64, for every joint (:attr:`joint_names` order) a bound, valid at every configuration, on how
+        fast any point of the padded capsules moves per unit of that joint's velocity: metres per radian for a
+        revolute joint (the point's distance from the joint's axis), 1 for a prismatic one.
+
+        The bound for a revolute joint is the longest chain of rigid offsets from the joint's origin to a point of a
+        capsule it moves (the joint placements' translations on the way, plus the capsule end's offset and radius),
+        plus the travel of any prismatic joint on the way (its largest absolute limit)."""
+        kin = self._kinematics
+        model = kin.model
+        ends = self._capsule_anchors
+        radii = np.repeat([capsule.radius for capsule in self.capsules], 2)
+        reaches = np.zeros(self.n_joints)
+        for i, name in enumerate(self.joint_names):
+            joint = model.getJointId(name)
+            if "P" in model.joints[joint].shortname().replace("JointModel", ""):
+                reaches[i] = 1.0
+                continue
+            for parent, p_joint, radius in zip(ends.joints, ends.p_joint, radii):
+                chain, k = 0.0, parent
+                while k > joint:  # pinocchio numbers every joint after its parent
+                    chain += float(np.linalg.norm(model.jointPlacements[k].translation))
+                    travel = model.joints[k].shortname().replace("JointModel", "")
+                    if "P" in travel:
+                        index = self.joint_names.index(model.names[k])
+                        chain += float(max(abs(self.lower[index]), abs(self.upper[index])))
+                    k = model.parents[k]
+                if k == joint:
+                    reaches[i] = max(reaches[i], chain + float(np.linalg.norm(p_joint)) + float(radius))
+        return reaches
+
     def __repr__(self) -> str:
         return (f"RobotModel(name={self.name!r}, joints={len(self.joint_names)}, links with geometry="
                 f"{len(self.link_names)}, control points={len(self.control_points)}, padding={self.padding:g})")
