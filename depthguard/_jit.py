@@ -31,6 +31,7 @@ KERNEL_MODULES = (
     "depthguard._frustum_kernels",
     "depthguard.baselines",
     "depthguard.collision._kernels",
+    "depthguard.collision._plan_kernels",
     "depthguard.depth._kernels",
     "depthguard.depthgrid._kernels",
     "depthguard.depthspace._frustum",

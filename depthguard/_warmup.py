@@ -160,7 +160,23 @@ def _run_workloads() -> None:
     # The collision test's epipolar bands (SPEC 10), between the small rig's two cameras.
     from depthguard.collision import EpipolarBands, TileGrid
 
-    EpipolarBands([TileGrid(camera, 6, 8) for camera in rig.cameras.values()], [box.lo, box.hi])
+    grids = [TileGrid(camera, 6, 8) for camera in rig.cameras.values()]
+    EpipolarBands(grids, [box.lo, box.hi])
+    # ... and a capsule projected onto a tile grid (the robot's tile images).
+    from depthguard.collision import _kernels as collision_kernels
+
+    T = grids[0].camera.T_camera_world
+    cam = grids[0].camera
+    collision_kernels.capsule_tile_bits(np.array([[[box.lo, box.hi]]], dtype=np.float64), np.array([0.05]),
+                                        np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]), cam.fx,
+                                        cam.fy, cam.cx, cam.cy, grids[0].col_edges, grids[0].row_edges,
+                                        grids[0].words, np.zeros((1, grids[0].words), dtype=np.uint64))
+    # The wave-propagation planner over a small configuration grid, around a wall.
+    from depthguard.collision._plan import ConfigurationGrid, plan_path
+
+    free = np.ones((4, 3), dtype=bool)
+    free[1, :2] = False
+    plan_path(ConfigurationGrid([-1.0, -1.0], [1.0, 1.0], [4, 3]), free, [-1.0, -1.0], [1.0, -1.0])
     rng = np.random.default_rng(0)
     fit_capsule(rng.normal(size=(40, 3)) * [0.05, 0.05, 0.2], link="warmup", padding=0.01)
     enclosing_circle(rng.normal(size=(20, 2)))

@@ -66,6 +66,8 @@ SELF_FILTER_TOLERANCE = 0.02
 #: Franka Emika Panda. Paths are relative to ``pybullet_data.getDataPath()``, resolved only when asked for.
 DEFAULT_ROBOT_URDF = "kuka_iiwa/model.urdf"
 PANDA_URDF = "franka_panda/panda.urdf"
+#: UFACTORY xArm 6 in pybullet_data: a 6-joint arm like Henrich & Gecks' industrial robot (scenario C).
+XARM6_URDF = "xarm/xarm6_robot.urdf"
 
 #: Padding added to every link capsule's radius, metres: the capsules contain the collision meshes plus this much.
 DEFAULT_ROBOT_PADDING = 0.02
@@ -384,3 +386,7 @@ SSM_UNIT_TOLERANCE = 1e-6
 SSM_MAXIMA = {"human_speed": 10.0, "human_speed_near": 10.0, "near_separation": 10.0, "stopping_time": 60.0,
               "stopping_distance_extra": 10.0, "detection_capability": 1.0, "sensing_uncertainty": 10.0,
               "robot_uncertainty": 10.0}
+
+#: Image-based collision test (SPEC 10): the range of the room light's gain (an image's brightness relative to the
+#: reference images) that the difference images follow; outside it a camera sees every tile as foreground.
+LIGHT_GAIN_RANGE = (0.5, 2.0)

@@ -154,17 +154,19 @@ TABLE_IV = [
 
 @pytest.mark.parametrize("o1, p1, o2, p2, klass", TABLE_IV)
 def test_table_4_row(o1, p1, o2, p2, klass):
-    v = verdict([o1, o2], [p1, p2], theta=1)
+    v = verdict([o1, o2], [p1, p2], theta=1, unseen="free")
     assert v.klass == klass
     # Section 3.5's condition: at least C - theta cameras see an obstacle and every camera sees (a possible) one.
     assert v.collision == ((o1 + o2 >= 1) and (o1 or p1) and (o2 or p2)) == (klass in "CD")
+    # Fail-safe (the default): class B, a collision with possible obstacles only, collides too.
+    assert verdict([o1, o2], [p1, p2], theta=1).collision == ((o1 or p1) and (o2 or p2)) == (klass in "BCD")
 
 
 def test_classes_for_four_cameras_follow_section_3_5():
     for flags in itertools.product([False, True], repeat=8):
         ro, rp = flags[:4], flags[4:]
         for theta in range(4):
-            v = verdict(ro, rp, theta)
+            v = verdict(ro, rp, theta, unseen="free")
             n = sum(ro)
             if not all(a or b for a, b in zip(ro, rp)):
                 assert v.klass == "A"
@@ -173,6 +175,9 @@ def test_classes_for_four_cameras_follow_section_3_5():
             else:
                 assert v.klass == ("D" if n == 4 else "C")
             assert v.collision == (n >= 4 - theta and all(a or b for a, b in zip(ro, rp)))
+            assert verdict(ro, rp, theta).collision == all(a or b for a, b in zip(ro, rp))
+    with pytest.raises(InputError, match="unseen"):
+        verdict([True], [True], 0, unseen="maybe")
 
 
 def test_camera_collisions_are_the_two_predicates():
@@ -448,7 +453,7 @@ def test_bad_workspaces_are_refused(workspace):
 
 def test_the_whole_test_refuses_what_it_cannot_use(iiwa_scene):
     test, robot, cameras, backgrounds = iiwa_scene
-    for thresholds in [(1.0,), (1.0, np.nan), (1.0, -1.0), ("a", 1.0), None]:
+    for thresholds in [(1.0,), (1.0, np.nan), (1.0, -1.0), ("a", 1.0), "12"]:
         with pytest.raises(InputError, match="thresholds"):
             type(test)(dg.Rig(cameras), robot, [[-1, -1, -0.1], [1, 1, 1.5]], tiles=(8, 8), thresholds=thresholds)
     with pytest.raises(InputError, match="every camera"):
@@ -570,10 +575,14 @@ def test_a_swept_volume_holds_every_intermediate_configuration(iiwa_scene):
 
 def test_a_motion_between_two_free_configurations_collides_with_a_box_between_them(iiwa_scene):
     """test_motion: both ends of a motion are clear of a box that the end-effector passes through on the way; the
-    swept volume finds it, the two end configurations do not."""
+    swept volume finds it, the two end configurations do not (the paper's rule: with the default, fail-safe one the
+    ends meet possible obstacles in every camera, class B, and collide too)."""
+    from depthguard.collision import ImageCollisionTest
     from depthguard.scenes import Box
 
-    test, robot, cameras, backgrounds = iiwa_scene
+    shared, robot, cameras, backgrounds = iiwa_scene
+    test = ImageCollisionTest(dg.Rig(cameras), robot, [[-1.0, -1.0, -0.1], [1.2, 1.0, 1.5]], tiles=(32, 32), theta=1,
+                              unseen="free")
     poses = [np.array([a, 0.5, 0.0, -1.4, 0.0, 0.8, 0.0]) for a in (-1.2, -0.6, 0.0, 0.6, 1.2)]
     test.set_reference({name: [_draw(test, backgrounds, cameras, q)[name] for q in poses] for name in cameras})
     start = np.array([-1.8, 0.7, 0.0, -1.2, 0.0, 0.8, 0.0])
@@ -584,6 +593,9 @@ def test_a_motion_between_two_free_configurations_collides_with_a_box_between_th
     assert not test.test(start).collision and not test.test(end).collision
     assert test.test_motion([start, end]).collision
     assert test.test_motion([start]).collision == test.test(start).collision
+    shared.set_reference({name: [_draw(shared, backgrounds, cameras, q)[name] for q in poses] for name in cameras})
+    shared.observe(_draw(shared, backgrounds, cameras, start, [box]), start)
+    assert shared.test_motion([start, end]).collision and shared.test(start).klass == "B"
 
 
 @pytest.mark.parametrize("x_max", [0.0, -0.01, np.nan, np.inf, True, "2 cm", 0.9])

@@ -11,12 +11,16 @@ variant, swept volumes, pick-and-place, the planner, the command line.
 
 from depthguard.collision._difference import (
     FOUR_NEIGHBOURS,
+    depth_metres,
+    depth_tile_features,
     difference_image,
+    light_gain,
     reference_image,
     robot_tiles,
     tile_features,
 )
 from depthguard.collision._epipolar import EpipolarBands, TileGrid, workspace_depths
+from depthguard.collision._plan import MAX_GRID_CELLS, ConfigurationGrid, plan_path, wave_propagation
 from depthguard.collision._robot_image import RobotProjector
 from depthguard.collision._test import ConfigurationTable, ImageCollisionTest
 from depthguard.collision._tables import (
@@ -36,12 +40,14 @@ from depthguard.collision._tables import (
 
 __all__ = [
     "BACKGROUND",
+    "ConfigurationGrid",
     "ConfigurationTable",
     "ERROR",
     "EpipolarBands",
     "FOUR_NEIGHBOURS",
     "ImageCollisionTest",
     "LABELS",
+    "MAX_GRID_CELLS",
     "OBSTACLE",
     "POSSIBLE",
     "RobotProjector",
@@ -49,13 +55,18 @@ __all__ = [
     "UNKNOWN",
     "Verdict",
     "camera_collisions",
+    "depth_metres",
+    "depth_tile_features",
     "difference_image",
+    "light_gain",
     "intersection_image",
     "obstacle_image",
+    "plan_path",
     "reference_image",
     "revised_obstacle_images",
     "robot_tiles",
     "tile_features",
     "verdict",
+    "wave_propagation",
     "workspace_depths",
 ]

@@ -6,11 +6,13 @@ Images are (height, width) arrays of one camera; tile images are (rows, cols) ar
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
 from scipy import ndimage
 
+from depthguard.collision import _kernels
 from depthguard.collision._epipolar import TileGrid
 from depthguard.errors import InputError
 
@@ -48,26 +50,80 @@ def tile_features(image, grid: TileGrid) -> np.ndarray:
     """Step 2's features of every tile, (rows, cols, 2) float64: the mean grey value, and the y coordinate of the
     grey-value balance point within the tile (0 at its first pixel row's centre, 1 at its last; 0.5 for a tile
     whose values are all 0)."""
-    image = _image(image, grid, "image").astype(np.float64)
+    image = _image(image, grid, "image")
+    if image.dtype not in (np.uint8, np.uint16, np.float32, np.float64):
+        image = image.astype(np.float64)
     cam = grid.camera
     tile_row, _ = grid.tile_of_pixels()
     counts = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
-    total = _tile_sums(image, grid)
     # Each pixel row's position within its tile, 0 .. 1.
     first = grid.first_row[tile_row]
     last = grid.first_row[tile_row + 1] - 1
     y = np.where(last > first, (np.arange(cam.height) - first) / np.maximum(last - first, 1), 0.5)
-    moment = _tile_sums(image * y[:, None], grid)
+    moments = np.empty((grid.rows, grid.cols, 2))
+    _kernels.tile_moments(np.ascontiguousarray(image), grid.first_row, grid.first_col, y, moments)
+    total, moment = moments[..., 0], moments[..., 1]
     with np.errstate(invalid="ignore", divide="ignore"):
         balance = np.where(total > 0.0, moment / np.where(total > 0.0, total, 1.0), 0.5)
     return np.stack([total / counts, balance], axis=-1)
 
 
-def difference_image(features, reference_features, thresholds=(12.0, 0.1)) -> np.ndarray:
+def depth_metres(image, grid: TileGrid, name: str = "image") -> np.ndarray:
+    """A depth image as (height, width) float64 metres, 0 where there is no measurement: ``uint16`` in units of the
+    camera's depth_scale (ROS 16UC1), or floats in metres (ROS 32FC1; NaN and inf read as no measurement)."""
+    array = np.asarray(image)
+    cam = grid.camera
+    if array.shape != cam.shape or array.dtype.kind not in "uif":
+        raise InputError(f"{name} must be a {cam.shape} depth image (uint16 in depth_scale units or float metres), "
+                         f"got {array.dtype} {array.shape}", camera=cam.name, field=name)
+    if array.dtype.kind == "f":
+        metres = np.where(np.isfinite(array) & (array > 0.0), array, 0.0).astype(np.float64)
+    else:
+        if array.min(initial=0) < 0:
+            raise InputError(f"{name}: negative depth values", camera=cam.name, field=name)
+        metres = array.astype(np.float64) * cam.depth_scale
+    return metres
+
+
+def depth_tile_features(image, grid: TileGrid) -> np.ndarray:
+    """The depth variant's features of every tile (beyond the paper), (rows, cols, 2) float64: the mean of the
+    measured depths in metres (0 when none), and the fraction of pixels without a measurement (0 .. 1).
+    ``image``: as :func:`depth_metres` takes it."""
+    metres = depth_metres(image, grid)
+    valid = (metres > 0.0).astype(np.float64)
+    counts = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
+    ones = np.ones(grid.camera.height)
+    sums = np.empty((grid.rows, grid.cols, 2))
+    measured = np.empty((grid.rows, grid.cols, 2))
+    _kernels.tile_moments(metres, grid.first_row, grid.first_col, ones, sums)
+    _kernels.tile_moments(valid, grid.first_row, grid.first_col, ones, measured)
+    n = measured[..., 0]
+    mean = np.where(n > 0.0, sums[..., 0] / np.maximum(n, 1.0), 0.0)
+    return np.stack([mean, 1.0 - n / counts], axis=-1)
+
+
+def light_gain(features, reference_features, darkest: float = 10.0) -> float:
+    """How much brighter the whole image is than the reference (a change of the room's light): the median, over the
+    tiles whose reference mean is at least ``darkest`` grey levels, of the ratio of their mean grey values. NaN when
+    fewer than a quarter of the tiles are that bright (no estimate). A median: it holds while fewer than half of the
+    bright tiles show something new (an obstacle, the robot)."""
+    mean = np.asarray(features, dtype=np.float64)[..., 0]
+    reference = np.asarray(reference_features, dtype=np.float64)[..., 0]
+    bright = reference >= darkest
+    if bright.sum() < 0.25 * bright.size:
+        return math.nan
+    return float(np.median(mean[bright] / reference[bright]))
+
+
+def difference_image(features, reference_features, thresholds=(12.0, 0.1), gain: float = 1.0) -> np.ndarray:
     """Step 2's difference image, (rows, cols) bool: a tile is foreground when any feature differs from the
     reference's by more than its threshold (mean grey levels, balance point in tile heights), then the
     morphological closing in the 4-neighbourhood fills one-tile gaps. The closing only adds: a foreground tile never
-    becomes background (scipy's erosion would clear foreground on the image border)."""
+    becomes background (scipy's erosion would clear foreground on the image border).
+
+    ``gain``: the image's brightness relative to the reference's (:func:`light_gain`); the mean grey values are
+    divided by it before the comparison (the balance point does not change with it). Not a finite positive number
+    (no estimate): every tile is foreground."""
     features = np.asarray(features, dtype=np.float64)
     reference_features = np.asarray(reference_features, dtype=np.float64)
     thresholds = np.asarray(thresholds, dtype=np.float64)
@@ -75,6 +131,10 @@ def difference_image(features, reference_features, thresholds=(12.0, 0.1)) -> np
             thresholds.shape != (features.shape[2],) or not np.all(thresholds >= 0.0):
         raise InputError(f"features {features.shape} and reference {reference_features.shape} must match, with one "
                          f"threshold >= 0 per feature (got {thresholds.tolist()})", field="thresholds")
+    if not (isinstance(gain, (int, float, np.floating)) and math.isfinite(gain) and gain > 0.0):
+        return np.ones(features.shape[:2], dtype=bool)
+    features = features.copy()
+    features[..., 0] /= gain
     changed = np.any(np.abs(features - reference_features) > thresholds, axis=-1)
     return changed | ndimage.binary_closing(changed, structure=FOUR_NEIGHBOURS)
 

@@ -224,3 +224,24 @@ def capsule_tile_bits(ends, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, w
                                         hull_y, hm):
                         tile = r * cols + c
                         out[k, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
+
+
+@kernel()
+def tile_moments(image, first_row, first_col, row_weight, out):
+    """Per tile, the sum of the pixel values and of the values times their row's weight: out (rows, cols, 2) float64
+    (written). image: (height, width) numbers; first_row (rows + 1,), first_col (cols + 1,) each tile's first pixel
+    (and the image's size); row_weight: (height,) float64."""
+    rows = first_row.shape[0] - 1
+    cols = first_col.shape[0] - 1
+    for r in range(rows):
+        for c in range(cols):
+            out[r, c, 0] = 0.0
+            out[r, c, 1] = 0.0
+        for v in range(first_row[r], first_row[r + 1]):
+            weight = row_weight[v]
+            for c in range(cols):
+                total = 0.0
+                for u in range(first_col[c], first_col[c + 1]):
+                    total += image[v, u]
+                out[r, c, 0] += total
+                out[r, c, 1] += total * weight

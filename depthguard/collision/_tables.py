@@ -93,9 +93,12 @@ class Verdict:
     """The collision test of one robot configuration (or swept volume) over C cameras.
 
     Attributes:
-        collision: True iff at least C - theta cameras report Coll_RO and every camera reports Coll_RO or Coll_RP.
-        klass: "A" (some camera sees no intersection at all: free), "B" (fewer than C - theta cameras see an
-            obstacle: free), "C" (at least C - theta but not all do: a collision is assumed), "D" (all C do).
+        collision: with ``unseen="occupied"`` (the default): True iff every camera reports Coll_RO or Coll_RP
+            (classes B, C, D); with ``unseen="free"`` (the paper's section 3.5): iff, besides, at least C - theta
+            cameras report Coll_RO (classes C, D).
+        klass: the paper's class: "A" (some camera sees no intersection at all: free), "B" (fewer than C - theta
+            cameras see an obstacle: free only if every obstacle is seen by C - theta cameras), "C" (at least
+            C - theta but not all do: a collision is assumed), "D" (all C do).
         obstacle: (C,) Coll_RO per camera; possible: (C,) Coll_RP per camera.
     """
 
@@ -105,8 +108,14 @@ class Verdict:
     possible: tuple
 
 
-def verdict(obstacle: Sequence[bool], possible: Sequence[bool], theta: int) -> Verdict:
-    """The classes of Table IV generalised to C cameras (section 3.5) from each camera's (Coll_RO, Coll_RP)."""
+def verdict(obstacle: Sequence[bool], possible: Sequence[bool], theta: int, unseen: str = "occupied") -> Verdict:
+    """The classes of Table IV generalised to C cameras (section 3.5) from each camera's (Coll_RO, Coll_RP).
+
+    ``unseen``: what a configuration that meets possible obstacles (space the current robot hides from a camera)
+    but fewer than C - theta cameras' obstacles is: "occupied" (fail-safe, SPEC section 11: class B collides) or
+    "free" (the paper's rule: class B is collision-free because "any obstacle is visible in at least C - theta
+    cameras"; false for a hand held next to the robot, which the robot's tiles cover in most cameras: scenario C's
+    probe finds such misses, benchmarks/probe_collision_scenario_c.py)."""
     ro = tuple(bool(x) for x in obstacle)
     rp = tuple(bool(x) for x in possible)
     c = len(ro)
@@ -114,6 +123,7 @@ def verdict(obstacle: Sequence[bool], possible: Sequence[bool], theta: int) -> V
         raise InputError(f"obstacle and possible must hold one flag per camera (got {len(ro)} and {len(rp)})",
                          field="obstacle")
     theta = _theta(theta, c)
+    unseen = check_unseen(unseen)
     n_ro = sum(ro)
     if not all(a or b for a, b in zip(ro, rp)):
         klass = "A"
@@ -123,7 +133,16 @@ def verdict(obstacle: Sequence[bool], possible: Sequence[bool], theta: int) -> V
         klass = "C"
     else:
         klass = "D"
-    return Verdict(collision=klass in ("C", "D"), klass=klass, obstacle=ro, possible=rp)
+    collides = ("B", "C", "D") if unseen == "occupied" else ("C", "D")
+    return Verdict(collision=klass in collides, klass=klass, obstacle=ro, possible=rp)
+
+
+def check_unseen(unseen) -> str:
+    """The ``unseen`` policy of :func:`verdict`: "occupied" or "free", else InputError."""
+    if unseen not in ("occupied", "free"):
+        raise InputError(f"unseen must be 'occupied' (fail-safe) or 'free' (the paper's class B rule), got "
+                         f"{unseen!r}", field="unseen")
+    return unseen
 
 
 def _theta(theta, c: int) -> int:

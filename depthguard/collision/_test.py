@@ -4,12 +4,22 @@ tested against them."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from depthguard import config
 from depthguard.cameras import Rig
-from depthguard.collision._difference import difference_image, reference_image, robot_tiles, tile_features
+from depthguard.collision._difference import (
+    depth_metres,
+    depth_tile_features,
+    difference_image,
+    light_gain,
+    reference_image,
+    robot_tiles,
+    tile_features,
+)
 from depthguard.collision._epipolar import EpipolarBands, TileGrid
 from depthguard.collision._robot_image import RobotProjector
 from depthguard.collision._tables import Verdict, camera_collisions, obstacle_image, revised_obstacle_images, verdict
@@ -24,22 +34,36 @@ class ImageCollisionTest:
         robot: the :class:`~depthguard.robots.RobotModel` seen by them.
         workspace: (2, 3) world-frame box, metres, holding the robot and the obstacles (bounds the epipolar bands).
         tiles: (rows, cols) of each camera's difference image (the paper: 64 x 64).
-        theta: the occlusion threshold, the most cameras in which the robot may hide an obstacle at once.
-        thresholds: per tile feature (mean grey value, balance point row in tile heights), the change that makes a
-            tile foreground (:func:`difference_image`).
+        theta: the occlusion threshold, the most cameras in which the robot may hide an obstacle at once; default
+            C - 1 (no assumption: an unknown tile is a possible obstacle when any other camera sees an obstacle in
+            its epipolar band). The paper used 1 with two cameras.
+        unseen: "occupied" (default, fail-safe): a configuration that meets obstacles or possible obstacles in every
+            camera collides (classes B, C and D); "free": the paper's section 3.5, class B is collision-free
+            (assumes every obstacle is seen by at least C - theta cameras: not so for a hand next to the robot).
+            Either way an obstacle that the current robot hides from every camera is not seen (its blind spot).
+        thresholds: per tile feature, the change that makes a tile foreground (:func:`difference_image`): for
+            intensity images (mean grey value, balance point row in tile heights), default (12, 0.1); for depth
+            images (mean measured depth in metres, fraction of pixels without a measurement), default (0.05, 0.2).
+        images: "intensity" (the paper: 8-bit grey images) or "depth" (beyond the paper: depth images, uint16 in
+            the cameras' depth_scale units or float metres; :func:`depth_tile_features`).
         geometry: the robot geometry projected into the cameras: "capsules" (default; the padded capsules projected
             analytically, :class:`RobotProjector`), or "hulls" or "meshes" (rendered by
             :class:`depthguard.self_filter.RobotSilhouette`, padded, far slower).
         x_max: metres, the most a point of the robot travels between two samples of a swept volume
             (:meth:`test_motion`; :class:`RobotProjector`).
+        lighting: follow changes of the room's light (beyond the paper): per image, its brightness relative to the
+            reference (:func:`light_gain`, the median ratio over the tiles) divides its mean grey values before they
+            are compared. A camera whose gain cannot be estimated or lies outside ``config.LIGHT_GAIN_RANGE`` sees
+            every tile as foreground (the conservative answer); :attr:`gains` holds the last estimates (NaN there).
 
     Use: :meth:`set_reference` once (images of the workspace with the robot in several configurations and no
     obstacle), :meth:`observe` per set of images with the robot's joints at their capture, then :meth:`test` for any
     configuration (the current one, future ones) and :meth:`test_motion` for a whole motion.
     """
 
-    def __init__(self, rig: Rig, robot, workspace, tiles=(64, 64), theta: int = 1, thresholds=(12.0, 0.1),
-                 geometry: str = "capsules", x_max: float = 0.02):
+    def __init__(self, rig: Rig, robot, workspace, tiles=(64, 64), theta: int | None = None, thresholds=None,
+                 geometry: str = "capsules", x_max: float = 0.02, lighting: bool = True, images: str = "intensity",
+                 unseen: str = "occupied"):
         if not isinstance(rig, Rig):
             raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}", field="rig")
         try:
@@ -49,16 +73,25 @@ class ImageCollisionTest:
         self.names = tuple(rig.cameras)
         self.grids = [TileGrid(camera, rows, cols) for camera in rig.cameras.values()]
         self.bands = EpipolarBands(self.grids, workspace)
-        verdict([True] * len(self.grids), [True] * len(self.grids), theta)  # checks theta for these cameras
+        theta = len(self.grids) - 1 if theta is None else theta
+        verdict([True] * len(self.grids), [True] * len(self.grids), theta, unseen)  # checks theta and unseen
         self.theta = int(theta)
+        self.unseen = unseen
+        if images not in ("intensity", "depth"):
+            raise InputError(f"images must be 'intensity' or 'depth', got {images!r}", field="images")
+        self.images = images
+        if thresholds is None:
+            thresholds = (12.0, 0.1) if images == "intensity" else (0.05, 0.2)
         try:
             self.thresholds = np.array(thresholds, dtype=np.float64)
         except (TypeError, ValueError):
             self.thresholds = None
         if self.thresholds is None or self.thresholds.shape != (2,) or not np.all(self.thresholds >= 0.0) or \
                 not np.all(np.isfinite(self.thresholds)):
-            raise InputError(f"thresholds must be two finite numbers >= 0 (mean grey levels, balance point in tile "
-                             f"heights), got {thresholds!r}", field="thresholds")
+            raise InputError(f"thresholds must be two finite numbers >= 0 (the two tile features' changes), got "
+                             f"{thresholds!r}", field="thresholds")
+        self.lighting = bool(lighting) and images == "intensity"
+        self.gains = []
         self.robot = robot
         self.projector = RobotProjector(robot, self.grids, x_max)
         if geometry == "capsules":
@@ -76,6 +109,9 @@ class ImageCollisionTest:
             raise InputError(f"{field} must map every camera ({', '.join(self.names)}) to its images, got {got}",
                              field=field)
         return [images[name] for name in self.names]
+
+    def _features(self, image, grid) -> np.ndarray:
+        return tile_features(image, grid) if self.images == "intensity" else depth_tile_features(image, grid)
 
     def robot_image(self, joints) -> list[np.ndarray]:
         """Step 3 at ``joints``: per camera, (rows, cols) bool tiles that the robot's padded geometry covers."""
@@ -104,7 +140,10 @@ class ImageCollisionTest:
         """Step 1: per camera name, several images of the workspace without obstacles, the robot in different
         configurations (their per-pixel median is the reference)."""
         stacks = self._per_camera(images, "images")
-        self.reference = [tile_features(reference_image(stack, grid), grid) for stack, grid in zip(stacks, self.grids)]
+        if self.images == "depth":  # each image in metres first (uint16 units differ per camera)
+            stacks = [[depth_metres(image, grid, f"images[{k}]") for k, image in enumerate(stack)]
+                      for stack, grid in zip(stacks, self.grids)]
+        self.reference = [self._features(reference_image(stack, grid), grid) for stack, grid in zip(stacks, self.grids)]
         self.revised = None
 
     def observe(self, images: Mapping[str, np.ndarray], joints) -> list[np.ndarray]:
@@ -115,8 +154,14 @@ class ImageCollisionTest:
         frames = self._per_camera(images, "images")
         robot_now = self.robot_image(joints)
         obstacles = []
+        self.gains = []
         for frame, grid, reference, robot in zip(frames, self.grids, self.reference, robot_now):
-            foreground = difference_image(tile_features(frame, grid), reference, self.thresholds)
+            features = self._features(frame, grid)
+            gain = light_gain(features, reference) if self.lighting else 1.0
+            if not (math.isfinite(gain) and config.LIGHT_GAIN_RANGE[0] <= gain <= config.LIGHT_GAIN_RANGE[1]):
+                gain = math.nan  # no trustworthy estimate: every tile of this camera is foreground
+            self.gains.append(gain)
+            foreground = difference_image(features, reference, self.thresholds, gain)
             obstacles.append(obstacle_image(foreground, robot))
         self.revised = revised_obstacle_images(obstacles, self.bands, self.theta)
         return self.revised
@@ -135,7 +180,7 @@ class ImageCollisionTest:
         if self.revised is None:
             raise InputError("observe a set of images first", field="revised")
         flags = [camera_collisions(revised, robot) for revised, robot in zip(self.revised, robot_images)]
-        return verdict([f[0] for f in flags], [f[1] for f in flags], self.theta)
+        return verdict([f[0] for f in flags], [f[1] for f in flags], self.theta, self.unseen)
 
 
 class ConfigurationTable:
@@ -179,4 +224,5 @@ class ConfigurationTable:
         n_ro = ro.sum(axis=0)
         every = np.all(ro | rp, axis=0)
         klass = np.where(~every, "A", np.where(n_ro < c - test.theta, "B", np.where(n_ro < c, "C", "D")))
-        return (klass == "C") | (klass == "D"), klass
+        collision = every if test.unseen == "occupied" else (klass == "C") | (klass == "D")
+        return collision, klass

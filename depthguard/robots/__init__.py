@@ -10,7 +10,7 @@ Typical use::
 """
 
 from depthguard.robots._capsules import LinkCapsule, fit_capsule, segment_distances
-from depthguard.robots._model import ControlPoint, RobotModel, default_robot_path, panda_robot_path
+from depthguard.robots._model import ControlPoint, RobotModel, default_robot_path, panda_robot_path, xarm6_robot_path
 
 __all__ = [
     "ControlPoint",
@@ -19,5 +19,6 @@ __all__ = [
     "default_robot_path",
     "fit_capsule",
     "panda_robot_path",
+    "xarm6_robot_path",
     "segment_distances",
 ]

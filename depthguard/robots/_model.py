@@ -50,6 +50,11 @@ def panda_robot_path() -> Path:
     return _pybullet_data_path(config.PANDA_URDF)
 
 
+def xarm6_robot_path() -> Path:
+    """The UFACTORY xArm 6's URDF in ``pybullet_data`` (``config.XARM6_URDF``); needs pybullet, as above."""
+    return _pybullet_data_path(config.XARM6_URDF)
+
+
 @dataclass(frozen=True)
 class ControlPoint:
     """A point fixed to a robot link whose distance to obstacles is monitored (the papers' control points).
@@ -304,6 +309,21 @@ class RobotModel:
         with ``config.PANDA_CONTROL_POINTS``. Keyword arguments go to :meth:`from_urdf`. Needs pybullet."""
         kwargs.setdefault("control_points", config.PANDA_CONTROL_POINTS)
         return cls.from_urdf(panda_robot_path(), **kwargs)
+
+    @classmethod
+    def xarm6(cls, **kwargs) -> "RobotModel":
+        """pybullet_data's UFACTORY xArm 6: 6 revolute joints (a 6-joint arm as in Henrich & Gecks' scenario C),
+        with the default control points (one per moving link, then the end-effector). Keyword arguments go to
+        :meth:`from_urdf`. Needs pybullet."""
+        return cls.from_urdf(xarm6_robot_path(), **kwargs)
+
+    @classmethod
+    def builtin(cls, name: str) -> "RobotModel":
+        """A built-in robot by name: "iiwa" (:meth:`default`), "panda" or "xarm6"."""
+        makers = {"iiwa": cls.default, "panda": cls.panda, "xarm6": cls.xarm6}
+        if name not in makers:
+            raise RobotError(f"unknown built-in robot {name!r}; choose one of {', '.join(makers)}", field="robot")
+        return makers[name]()
 
     def with_base(self, T_world_base) -> "RobotModel":
         """The same robot mounted at ``T_world_base`` ((4, 4), pose of the root link in the world)."""

@@ -181,6 +181,7 @@ def sense(workcell: Workcell, scene: SceneRenderer, truth: TruthComputer, part_n
     obstacles = workcell.obstacles_at(t)
     instances = scene.instances(robot.link_poses(q, check=False), obstacles)
     rng = np.random.default_rng([int(seed), int(index)])
+    gain = workcell.light_gain(t)
     depth, exact, intensity, labels = {}, {}, {}, {}
     for camera in workcell.all_cameras():
         result = scene.render(camera, instances)
@@ -189,7 +190,8 @@ def sense(workcell: Workcell, scene: SceneRenderer, truth: TruthComputer, part_n
             exact[camera.name] = result.depth
             data = simulate_depth(result.depth, scene.cosine(result), camera, workcell.sensors[camera.name], rng)
             depth[camera.name] = depth_image(data, camera, timestamp=t)
-        intensity[camera.name] = simulate_intensity(result.intensity, workcell.intensity_noise[camera.name], rng)
+        lit = result.intensity * np.float32(gain) if gain != 1.0 else result.intensity
+        intensity[camera.name] = simulate_intensity(lit, workcell.intensity_noise[camera.name], rng)
     return SimFrame(index=index, time=t, joints=q, depth=depth, depth_exact=exact, intensity=intensity,
                     label=labels, truth=truth(q, obstacles, part_names))
 

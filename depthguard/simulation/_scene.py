@@ -19,6 +19,8 @@ Top-level keys::
     workspace: [[x, y, z], [x, y, z]]   # optional rig key: the box watched (depth grid range, free-space memory)
     cameras: [...]            # depth cameras (at least one)
     intensity_cameras: [...]  # optional intensity (grey-level) cameras
+    lighting: [[0.0, 1.0], [4.0, 1.0], [4.5, 0.8]]   # optional: (time s, gain) of the room's light, joined linearly;
+                              # every intensity image is the rendered one times the gain at its time (default 1)
     robot: {...}
     static_objects: [...]     # optional
     carried_objects: [...]    # optional
@@ -32,7 +34,7 @@ as ``look_at: {eye: [x, y, z], target: [x, y, z], up: [0, 0, 1]}``, plus an opti
 ``noise_sigma``, the grey-level noise of its intensity (infrared-like) image (default 2). An intensity camera has
 the same intrinsics and pose keys plus ``noise_sigma``.
 
-``robot``: ``model: iiwa`` or ``model: panda`` (pybullet_data's URDFs) or ``urdf: path/to/robot.urdf`` (relative to
+``robot``: ``model: iiwa``, ``model: panda`` or ``model: xarm6`` (pybullet_data's URDFs) or ``urdf: path/to/robot.urdf`` (relative to
 the scene file; then optionally ``control_points: [[name, link, [x, y, z]], ...]`` and ``end_effector: name``); the
 base pose as ``T_world_base`` (4x4) or ``base: {position: [x, y, z], yaw: 0.0}``; ``albedo``; and a ``trajectory``:
 
@@ -159,6 +161,15 @@ class Workcell:
     people: tuple
     scene: dict = field(repr=False)
     base_dir: Path = field(default=Path("."), repr=False)
+    lighting: tuple = ()  # ((time s, gain), ...) increasing times; () is a constant gain of 1
+
+    def light_gain(self, t: float) -> float:
+        """The room light's gain at time ``t`` (seconds): linear between the ``lighting`` points, constant beyond
+        them; 1 without any."""
+        if not self.lighting:
+            return 1.0
+        times, gains = zip(*self.lighting)
+        return float(np.interp(t, times, gains))
 
     # ------------------------------------------------------------------------------------------------ time
 
@@ -337,6 +348,7 @@ def workcell_from_dict(data, base_dir=".") -> Workcell:
     depth_scale = top.number("depth_scale", default=config.DEFAULT_DEPTH_SCALE, positive=True)
     principal = top.get("principal", default=None)
     workspace = top.get("workspace", default=None)
+    lighting = _lighting(top.get("lighting", default=[]), top.field("lighting"))
     base_dir = Path(base_dir)
 
     rig, sensors, noise_d = _depth_cameras(top, depth_scale, principal, base_dir, workspace)
@@ -368,7 +380,22 @@ def workcell_from_dict(data, base_dir=".") -> Workcell:
     return Workcell(rig=rig, intensity_rig=intensity_rig, sensors=sensors, intensity_noise=intensity_noise,
                     robot=robot, robot_albedo=albedo, trajectory=trajectory, duration=duration, rate=rate, seed=seed,
                     floor=floor, render_segments=segments, static_objects=static, carried_objects=carried,
-                    people=tuple(people), scene=scene, base_dir=base_dir)
+                    people=tuple(people), scene=scene, base_dir=base_dir, lighting=lighting)
+
+
+def _lighting(value, field: str) -> tuple:
+    """``lighting``: a list of [time, gain] pairs, times >= 0 and increasing, gains in (0, 4]."""
+    if not isinstance(value, list):
+        raise SceneError(f"lighting must be a list of [time, gain] pairs, got {type(value).__name__}", field=field)
+    points = []
+    for k, pair in enumerate(value):
+        ok = isinstance(pair, list) and len(pair) == 2 and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in pair)
+        if not ok or pair[0] < 0 or not 0 < pair[1] <= 4 or (points and pair[0] <= points[-1][0]):
+            raise SceneError(f"lighting[{k}] must be [time >= 0 s, increasing; gain in (0, 4]], got {pair!r}",
+                             field=f"{field}[{k}]")
+        points.append((float(pair[0]), float(pair[1])))
+    return tuple(points)
 
 
 # ------------------------------------------------------------------------------------------------- cameras
@@ -479,10 +506,10 @@ def _robot(section: Section, sample_times: np.ndarray, base_dir: Path):
         kwargs["T_world_base"] = T
     has_model, has_urdf = section.has("model"), section.has("urdf")
     if has_model == has_urdf:
-        raise SceneError("give exactly one of model (iiwa or panda) or urdf (a path)", field=section.field("model"))
+        raise SceneError("give exactly one of model (iiwa, panda or xarm6) or urdf (a path)", field=section.field("model"))
     try:
         if has_model:
-            robot = _builtin_robot(section.string("model", choices=("iiwa", "panda")))
+            robot = _builtin_robot(section.string("model", choices=("iiwa", "panda", "xarm6")))
             if "T_world_base" in kwargs:
                 robot = robot.with_base(kwargs["T_world_base"])
         else:
@@ -504,7 +531,7 @@ def _robot(section: Section, sample_times: np.ndarray, base_dir: Path):
 @functools.lru_cache(maxsize=None)
 def _builtin_robot(model: str) -> RobotModel:
     """The built-in robots, read once per process (a RobotModel holds no state, so sharing it is safe)."""
-    return RobotModel.default() if model == "iiwa" else RobotModel.panda()
+    return RobotModel.builtin(model)
 
 
 def _joint_values(robot: RobotModel, value, field: str) -> np.ndarray:
