@@ -10,6 +10,10 @@
     depthguard coverage --rig RIG.yaml [--robot URDF|iiwa|panda] [--trajectory joint_states.csv] [--rho 0.4] ...
     depthguard scenario-a [--out DIR]
     depthguard real-room [--out DIR] [--data FOLDER]
+    depthguard collide --rig RIG.yaml --reference NAME=GLOB ... --image NAME=PATH ... --robot URDF|iiwa|panda|xarm6
+                       --current VALUES --future VALUES [...] [--motion "VALUES;VALUES"] [--theta N] [--json]
+    depthguard plan --rig RIG.yaml --reference NAME=GLOB ... --image NAME=PATH ... --robot URDF --current VALUES
+                    --goal VALUES [--counts N,N,...] [--json]
     depthguard warmup
 
 Bad input ends with exit status 2 and one line on standard error that says what is wrong (exit status 3 means a bug).
@@ -224,13 +228,43 @@ def _build_parser() -> argparse.ArgumentParser:
     scenario_a.add_argument("--repeats", type=_whole(1, config.MAX_REPEATS), default=20,
                             help="timing repetitions per control point position")
 
+    from depthguard import _collision_command as _command
+
+    collide = commands.add_parser("collide", help="the image-based collision test (Henrich & Gecks, SPEC section 10): "
+                                                  "would these configurations or this motion collide with what the "
+                                                  "cameras see?")
+    _command.add_arguments(collide, plan=False)
+    plan = commands.add_parser("plan", help="a collision-free path through the configuration space by wave "
+                                            "propagation, every configuration judged by the image-based test")
+    _command.add_arguments(plan, plan=True)
+
     commands.add_parser("warmup", help="compile every numba kernel that is not cached yet (after an install or an "
                                        "upgrade), so that no query has to")
     return parser
 
 
+#: Options whose values may start with a minus sign (joint values, coordinates): "--current -0.3,0.2" is read as
+#: "--current=-0.3,0.2" (argparse would take "-0.3,0.2" for an option).
+_NUMBER_LIST_OPTIONS = ("--current", "--future", "--goal", "--motion", "--lower", "--upper", "--joints", "--base",
+                        "--workspace", "--reference-joints")
+
+
+def _attach_number_lists(argv: list[str]) -> list[str]:
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] in _NUMBER_LIST_OPTIONS and i + 1 < len(argv) and argv[i + 1][:1] == "-" and \
+                argv[i + 1][1:2] in tuple("0123456789.") and len(argv[i + 1]) > 1:
+            out.append(f"{argv[i]}={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
+
+
 def main(argv=None) -> int:
-    args = _build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = _build_parser().parse_args(_attach_number_lists(argv))
     try:
         if args.command == "distance":
             return _distance(args)
@@ -261,6 +295,10 @@ def main(argv=None) -> int:
             from depthguard.experiments import coverage
 
             return coverage.main(args.rig, robot=args.robot, trajectory=args.trajectory, rho=args.rho, out=args.out)
+        if args.command in ("collide", "plan"):
+            from depthguard import _collision_command as _command
+
+            return _command.collide(args) if args.command == "collide" else _command.plan(args)
         if args.command == "fusion-workcell":
             from depthguard.experiments import fusion_workcell
 
@@ -480,29 +518,30 @@ def _robot_and_joints(args):
     return robot, robot.joint_vector(parse_joints(args.joints))
 
 
-def parse_joints(text: str):
-    """``"a=0.1,b=0.2"`` -> {"a": 0.1, "b": 0.2}; ``"0.1,0.2"`` -> [0.1, 0.2]. InputError if malformed."""
+def parse_joints(text: str, option: str = "--joints"):
+    """``"a=0.1,b=0.2"`` -> {"a": 0.1, "b": 0.2}; ``"0.1,0.2"`` -> [0.1, 0.2]. InputError naming ``option`` if
+    malformed."""
     from depthguard.errors import InputError
 
     items = [item.strip() for item in text.split(",") if item.strip()]
     if not items:
-        raise InputError(f"--joints: no values in {text!r}")
+        raise InputError(f"{option}: no values in {text!r}")
     named = ["=" in item for item in items]
     if any(named) and not all(named):
-        raise InputError(f"--joints mixes name=value and plain values: {text!r}")
+        raise InputError(f"{option} mixes name=value and plain values: {text!r}")
     pairs = [item.split("=", 1) if "=" in item else (None, item) for item in items]
     try:
         values = [float(value) for _, value in pairs]
     except ValueError:
-        raise InputError(f"--joints: not numbers: {text!r}") from None
+        raise InputError(f"{option}: not numbers: {text!r}") from None
     if not all(math.isfinite(value) for value in values):
-        raise InputError(f"--joints: values must be finite numbers (radians, or metres for prismatic joints): "
+        raise InputError(f"{option}: values must be finite numbers (radians, or metres for prismatic joints): "
                          f"{text!r}")
     if not all(named):
         return values
     names = [name.strip() for name, _ in pairs]
     if len(set(names)) != len(names):
-        raise InputError(f"--joints names a joint twice: {text!r}")
+        raise InputError(f"{option} names a joint twice: {text!r}")
     return dict(zip(names, values))
 
 

@@ -12,7 +12,7 @@ variant, swept volumes, pick-and-place, the planner, the command line.
 from depthguard.collision._difference import (
     FOUR_NEIGHBOURS,
     depth_metres,
-    depth_tile_features,
+    depth_difference_image,
     difference_image,
     light_gain,
     reference_image,
@@ -56,7 +56,7 @@ __all__ = [
     "Verdict",
     "camera_collisions",
     "depth_metres",
-    "depth_tile_features",
+    "depth_difference_image",
     "difference_image",
     "light_gain",
     "intersection_image",

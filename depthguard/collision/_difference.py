@@ -30,14 +30,29 @@ def _image(image, grid: TileGrid, name: str) -> np.ndarray:
     return array
 
 
-def reference_image(images: Sequence[np.ndarray], grid: TileGrid) -> np.ndarray:
+def reference_image(images: Sequence[np.ndarray], grid: TileGrid, robot=None) -> np.ndarray:
     """Step 1: the per-pixel median of ``images`` (each (height, width), intensity or depth) taken with the robot in
     different configurations, so that its mobile parts, seen in fewer than half of them at any pixel, disappear.
-    Returns (height, width) float64."""
+    Returns (height, width) float64.
+
+    ``robot``: optionally, per image, the (rows, cols) bool tiles the robot covers in it (:class:`RobotProjector`).
+    Then each pixel's median is taken over the images whose robot does not cover its tile, so that the robot
+    disappears wherever at least one image shows the room behind it (however the configurations overlap); where
+    every image's robot covers the tile (the base, which never moves), over all of them."""
     stack = [_image(image, grid, f"images[{k}]") for k, image in enumerate(images)]
     if not stack:
         raise InputError("the reference needs at least one image", camera=grid.camera.name, field="images")
-    return np.median(np.stack(stack).astype(np.float64), axis=0)
+    values = np.stack(stack).astype(np.float64)
+    if robot is None:
+        return np.median(values, axis=0)
+    if len(robot) != len(stack):
+        raise InputError(f"{len(robot)} robot tile images for {len(stack)} images", camera=grid.camera.name,
+                         field="robot")
+    rows, cols = grid.tile_of_pixels()
+    covered = np.stack([np.asarray(tiles, dtype=bool)[rows][:, cols] for tiles in robot])
+    covered &= ~np.all(covered, axis=0)  # a pixel covered in every image: its median over all of them
+    values[covered] = np.nan
+    return np.nanmedian(values, axis=0)
 
 
 def _tile_sums(values: np.ndarray, grid: TileGrid) -> np.ndarray:
@@ -85,21 +100,29 @@ def depth_metres(image, grid: TileGrid, name: str = "image") -> np.ndarray:
     return metres
 
 
-def depth_tile_features(image, grid: TileGrid) -> np.ndarray:
-    """The depth variant's features of every tile (beyond the paper), (rows, cols, 2) float64: the mean of the
-    measured depths in metres (0 when none), and the fraction of pixels without a measurement (0 .. 1).
-    ``image``: as :func:`depth_metres` takes it."""
-    metres = depth_metres(image, grid)
-    valid = (metres > 0.0).astype(np.float64)
+def depth_difference_image(image, reference, grid: TileGrid, thresholds=(0.05, 0.1)) -> np.ndarray:
+    """The depth variant's difference image (beyond the paper), (rows, cols) bool: a pixel changed when it has a
+    measurement in one of ``image`` and ``reference`` but not the other, or when both measure and differ by more than
+    max(thresholds[0] metres, the camera's noise margin m(d) at the reference's depth); a tile is foreground when more
+    than thresholds[1] of its pixels changed; then the closing of :func:`difference_image`.
+
+    ``image``: as :func:`depth_metres` takes it; ``reference``: (height, width) float metres, 0 = no measurement
+    (the median of reference images in metres, :func:`reference_image`). Comparing pixel by pixel, not tile means,
+    keeps a tile whose measured pixels change (an edge's dropouts, a hole) from reading as a depth change."""
+    now = depth_metres(image, grid)
+    ref = depth_metres(reference, grid, "reference")
+    thresholds = np.asarray(thresholds, dtype=np.float64)
+    if thresholds.shape != (2,) or not np.all(np.isfinite(thresholds)) or not np.all(thresholds >= 0.0):
+        raise InputError(f"thresholds must be two finite numbers >= 0 (metres, fraction of a tile), got "
+                         f"{thresholds.tolist()}", camera=grid.camera.name, field="thresholds")
+    measured_now, measured_ref = now > 0.0, ref > 0.0
+    tolerance = np.maximum(thresholds[0], grid.camera.noise.margin(ref))
+    changed = (measured_now != measured_ref) | (measured_now & measured_ref & (np.abs(now - ref) > tolerance))
     counts = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
-    ones = np.ones(grid.camera.height)
     sums = np.empty((grid.rows, grid.cols, 2))
-    measured = np.empty((grid.rows, grid.cols, 2))
-    _kernels.tile_moments(metres, grid.first_row, grid.first_col, ones, sums)
-    _kernels.tile_moments(valid, grid.first_row, grid.first_col, ones, measured)
-    n = measured[..., 0]
-    mean = np.where(n > 0.0, sums[..., 0] / np.maximum(n, 1.0), 0.0)
-    return np.stack([mean, 1.0 - n / counts], axis=-1)
+    _kernels.tile_moments(changed.astype(np.float64), grid.first_row, grid.first_col, np.ones(grid.camera.height),
+                          sums)
+    return _closed(sums[..., 0] / counts > thresholds[1])
 
 
 def light_gain(features, reference_features, darkest: float = 10.0) -> float:
@@ -135,7 +158,11 @@ def difference_image(features, reference_features, thresholds=(12.0, 0.1), gain:
         return np.ones(features.shape[:2], dtype=bool)
     features = features.copy()
     features[..., 0] /= gain
-    changed = np.any(np.abs(features - reference_features) > thresholds, axis=-1)
+    return _closed(np.any(np.abs(features - reference_features) > thresholds, axis=-1))
+
+
+def _closed(changed: np.ndarray) -> np.ndarray:
+    """The morphological closing in the 4-neighbourhood, keeping every tile that was set."""
     return changed | ndimage.binary_closing(changed, structure=FOUR_NEIGHBOURS)
 
 

@@ -13,7 +13,7 @@ from depthguard import config
 from depthguard.cameras import Rig
 from depthguard.collision._difference import (
     depth_metres,
-    depth_tile_features,
+    depth_difference_image,
     difference_image,
     light_gain,
     reference_image,
@@ -43,9 +43,10 @@ class ImageCollisionTest:
             Either way an obstacle that the current robot hides from every camera is not seen (its blind spot).
         thresholds: per tile feature, the change that makes a tile foreground (:func:`difference_image`): for
             intensity images (mean grey value, balance point row in tile heights), default (12, 0.1); for depth
-            images (mean measured depth in metres, fraction of pixels without a measurement), default (0.05, 0.2).
+            images (the change in metres that makes a pixel changed, at least the camera's noise margin; the
+            fraction of changed pixels that makes a tile foreground), default (0.05, 0.1).
         images: "intensity" (the paper: 8-bit grey images) or "depth" (beyond the paper: depth images, uint16 in
-            the cameras' depth_scale units or float metres; :func:`depth_tile_features`).
+            the cameras' depth_scale units or float metres; :func:`depth_difference_image`).
         geometry: the robot geometry projected into the cameras: "capsules" (default; the padded capsules projected
             analytically, :class:`RobotProjector`), or "hulls" or "meshes" (rendered by
             :class:`depthguard.self_filter.RobotSilhouette`, padded, far slower).
@@ -81,7 +82,7 @@ class ImageCollisionTest:
             raise InputError(f"images must be 'intensity' or 'depth', got {images!r}", field="images")
         self.images = images
         if thresholds is None:
-            thresholds = (12.0, 0.1) if images == "intensity" else (0.05, 0.2)
+            thresholds = (12.0, 0.1) if images == "intensity" else (0.05, 0.1)
         try:
             self.thresholds = np.array(thresholds, dtype=np.float64)
         except (TypeError, ValueError):
@@ -110,9 +111,6 @@ class ImageCollisionTest:
                              field=field)
         return [images[name] for name in self.names]
 
-    def _features(self, image, grid) -> np.ndarray:
-        return tile_features(image, grid) if self.images == "intensity" else depth_tile_features(image, grid)
-
     def robot_image(self, joints) -> list[np.ndarray]:
         """Step 3 at ``joints``: per camera, (rows, cols) bool tiles that the robot's padded geometry covers."""
         q = self.robot.joint_vector(joints)
@@ -136,14 +134,31 @@ class ImageCollisionTest:
                 bits[c, k, : grid.words] = grid.pack(tiles)
         return bits
 
-    def set_reference(self, images: Mapping[str, Sequence[np.ndarray]]) -> None:
+    def set_reference(self, images: Mapping[str, Sequence[np.ndarray]], joints=None) -> None:
         """Step 1: per camera name, several images of the workspace without obstacles, the robot in different
-        configurations (their per-pixel median is the reference)."""
+        configurations (their per-pixel median is the reference).
+
+        ``joints``: optionally the robot's configuration in each of them, (K, n) radians, the k-th image of every
+        camera taken at joints[k]; then each pixel's median leaves out the images in which the robot covers its
+        tile (:func:`reference_image`), and the robot vanishes from the reference even where the configurations
+        overlap (without them, a pixel the robot covers in half of the images or more keeps the robot)."""
         stacks = self._per_camera(images, "images")
         if self.images == "depth":  # each image in metres first (uint16 units differ per camera)
             stacks = [[depth_metres(image, grid, f"images[{k}]") for k, image in enumerate(stack)]
                       for stack, grid in zip(stacks, self.grids)]
-        self.reference = [self._features(reference_image(stack, grid), grid) for stack, grid in zip(stacks, self.grids)]
+        robots = [None] * len(self.grids)
+        if joints is not None:
+            q = np.asarray(joints, dtype=np.float64)
+            if q.ndim != 2 or any(len(stack) != len(q) for stack in stacks):
+                raise InputError(f"joints must be (K, n), one configuration per reference image (K = "
+                                 f"{[len(stack) for stack in stacks]}), got shape {q.shape}", field="joints")
+            bits = self.projector.bits(q)
+            unpacked = [self.projector.unpack(bits[:, k]) for k in range(len(q))]
+            robots = [[images[c] for images in unpacked] for c in range(len(self.grids))]
+        references = [reference_image(stack, grid, robot) for stack, grid, robot in zip(stacks, self.grids, robots)]
+        # intensity: the reference's tile features; depth: the reference depth image itself (metres)
+        self.reference = [tile_features(image, grid) if self.images == "intensity" else image
+                          for image, grid in zip(references, self.grids)]
         self.revised = None
 
     def observe(self, images: Mapping[str, np.ndarray], joints) -> list[np.ndarray]:
@@ -156,12 +171,16 @@ class ImageCollisionTest:
         obstacles = []
         self.gains = []
         for frame, grid, reference, robot in zip(frames, self.grids, self.reference, robot_now):
-            features = self._features(frame, grid)
-            gain = light_gain(features, reference) if self.lighting else 1.0
-            if not (math.isfinite(gain) and config.LIGHT_GAIN_RANGE[0] <= gain <= config.LIGHT_GAIN_RANGE[1]):
-                gain = math.nan  # no trustworthy estimate: every tile of this camera is foreground
-            self.gains.append(gain)
-            foreground = difference_image(features, reference, self.thresholds, gain)
+            if self.images == "depth":
+                self.gains.append(1.0)
+                foreground = depth_difference_image(frame, reference, grid, self.thresholds)
+            else:
+                features = tile_features(frame, grid)
+                gain = light_gain(features, reference) if self.lighting else 1.0
+                if not (math.isfinite(gain) and config.LIGHT_GAIN_RANGE[0] <= gain <= config.LIGHT_GAIN_RANGE[1]):
+                    gain = math.nan  # no trustworthy estimate: every tile of this camera is foreground
+                self.gains.append(gain)
+                foreground = difference_image(features, reference, self.thresholds, gain)
             obstacles.append(obstacle_image(foreground, robot))
         self.revised = revised_obstacle_images(obstacles, self.bands, self.theta)
         return self.revised
@@ -170,11 +189,29 @@ class ImageCollisionTest:
         """Step 6 for the configuration ``joints`` against the last observed images."""
         return self._verdict(self.robot_image(joints))
 
-    def test_motion(self, path) -> Verdict:
-        """Steps 6-7 for a whole motion: ``path`` (P, n) configurations joined by straight lines in joint space; the
-        future robot image is the swept volume's (:meth:`RobotProjector.swept_images`, always the padded capsules,
-        widened by x_max / 2)."""
-        return self._verdict(self.projector.swept_images(path))
+    def test_motion(self, path, chunk: int = 8) -> Verdict:
+        """Steps 6-7 for a whole motion: ``path`` (P, n) configurations joined by straight lines in joint space. The
+        motion is sampled (:meth:`RobotProjector.samples`: no point travels more than x_max between samples) and cut
+        into pieces of ``chunk`` steps; each piece's swept volume (the padded capsules widened by x_max / 2) is the
+        future robot image of one test. The motion collides iff a piece does; the verdict returned is the first
+        colliding piece's, else the one of highest class.
+
+        Why pieces: the test compares images camera by camera, so one swept image of a long motion meets an obstacle's
+        tiles in one camera at one part of the motion and in another camera at another part, and reads as a
+        collision where no part of the motion meets it. Every piece together covers the whole motion, so cutting
+        it loses nothing."""
+        if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
+            raise InputError(f"chunk must be a whole number of steps >= 1, got {chunk!r}", field="chunk")
+        samples = self.projector.samples(path)
+        if len(samples) == 1:
+            return self._verdict(self.projector.swept_images(samples))
+        best = None
+        for start in range(0, len(samples) - 1, chunk):
+            v = self._verdict(self.projector.swept_images(samples[start: start + chunk + 1]))
+            if v.collision:
+                return v
+            best = v if best is None or v.klass > best.klass else best
+        return best
 
     def _verdict(self, robot_images) -> Verdict:
         if self.revised is None:

@@ -86,6 +86,49 @@ def read_depth_file(path, camera=None) -> np.ndarray:
         raise exc.with_source(str(path)) from None
 
 
+def read_intensity_png(path, camera=None) -> np.ndarray:
+    """Read an 8-bit grayscale PNG (ROS ``mono8``) into a (height, width) ``uint8`` array, through the same checks
+    as :func:`read_depth_file` (a regular file of at most ``config.MAX_DEPTH_FILE_BYTES``, only Pillow's PNG plugin
+    sees the bytes, the size from the header checked against ``camera`` before decoding). Another mode than ``L``
+    (colour, 16-bit, palette) is refused: a grey level must not depend on a conversion the caller did not choose.
+
+    Raises :class:`DepthImageError` naming the file (and the camera, when given)."""
+    path = Path(path)
+    context = {} if camera is None else {"camera": camera.name}
+    if path.suffix.lower() != ".png":
+        raise DepthImageError(f"intensity images are 8-bit grayscale .png files, got {path.suffix!r}",
+                              source=str(path), **context)
+    data = read_bytes(path, what="intensity image", max_bytes=config.MAX_DEPTH_FILE_BYTES, error=DepthImageError,
+                      **context)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            try:
+                image = PngImagePlugin.PngImageFile(io.BytesIO(data))
+            except Exception as exc:  # noqa: BLE001 - Pillow reports corrupt files in many exception types
+                raise DepthImageError(f"not a readable PNG file ({_reason(exc)})") from None
+            with image:
+                width, height = image.size
+                _check_size(width, height, camera)
+                limit = Image.MAX_IMAGE_PIXELS
+                if limit is not None and width * height > limit:
+                    raise DepthImageError(f"image of {width}x{height} pixels is larger than Pillow's "
+                                          f"decompression-bomb limit of {limit} pixels", field="width/height")
+                if image.mode != "L":
+                    raise DepthImageError(f"image mode {image.mode!r} is not 8-bit grayscale ('L')", field="dtype")
+                try:
+                    image.load()
+                    array = np.array(image)
+                except Exception as exc:  # noqa: BLE001 - truncated or corrupt pixel data
+                    raise DepthImageError(f"corrupt PNG file ({_reason(exc)})") from None
+    except DepthImageError as exc:
+        raise DepthImageError(exc.message, source=str(path), field=exc.field, **context) from None
+    if array.shape != (height, width) or array.dtype != np.uint8:
+        raise DepthImageError(f"corrupt PNG file (decoded {array.dtype} {array.shape}, header says {height}x{width})",
+                              source=str(path), **context)
+    return array
+
+
 def write_depth_png(path, depth_u16: np.ndarray) -> None:
     """Write a (height, width) ``uint16`` depth image as a 16-bit grayscale PNG (ROS ``16UC1``)."""
     depth_u16 = np.asarray(depth_u16)

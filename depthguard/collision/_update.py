@@ -1,0 +1,428 @@
+"""Pick-and-place (SPEC section 10, step 8; Henrich & Gecks section 4.1): the reference image update loop (U, R, E, O)
+and the gripped work piece as part of the robot.
+
+When the robot picks a work piece up or puts it down, the cameras see a change where it lay or now lies: foreground
+against the reference, a virtual obstacle. The update replaces those tiles' reference features with the current
+ones, tile by tile, once nothing hides them: neither the robot (R) nor anything that may be an obstacle in front of
+them (O). Tile images are (rows, cols) bool arrays of a camera's :class:`TileGrid`.
+
+Boxes are :class:`depthguard.scenes.Box`: ``center`` (3,) metres, ``half_extents`` (3,) metres (>= 0) along the box's
+own axes, ``R_world_box`` (3, 3) its rotation, all in the frame the function names (the world frame, or the
+end-effector link's frame for a gripped piece, where ``R_world_box`` is then the box's rotation in that link frame).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping
+
+import numpy as np
+from scipy import ndimage
+
+from depthguard import config
+from depthguard.collision import _update_kernels
+from depthguard.collision._difference import FOUR_NEIGHBOURS, depth_metres, tile_features
+from depthguard.collision._epipolar import TileGrid
+from depthguard.collision._tables import (
+    BACKGROUND,
+    OBSTACLE,
+    POSSIBLE,
+    UNKNOWN,
+    Verdict,
+    camera_collisions,
+    obstacle_image,
+    revised_obstacle_images,
+    verdict,
+)
+from depthguard.errors import InputError, real_vector
+from depthguard.scenes import Box
+from depthguard.transforms import invert
+
+#: metres, optical depth: a box with a corner this near the camera's plane (or behind it) may be seen in every tile
+#: (the value the capsule and band kernels of ``_kernels.py`` use).
+NEAR_PLANE = 1e-3
+
+#: (8, 3) the corners of the unit cube [-1, 1]^3, scaled by a box's half extents.
+_SIGNS = np.array(list(itertools.product((-1.0, 1.0), repeat=3)))
+
+
+# ------------------------------------------------------------------------------------------------------ boxes
+
+def _checked_box(box, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(center (3,), half_extents (3,), rotation (3, 3)) of ``box``, checked: a Box of finite numbers, half extents
+    >= 0, a rotation (orthonormal, det +1 within ``config.ROTATION_TOLERANCE``); else InputError naming ``name``."""
+    if not isinstance(box, Box):
+        raise InputError(f"{name} must be a depthguard.scenes.Box, got {type(box).__name__}", field=name)
+    center = real_vector(box.center, 3, f"{name}.center", "metres")
+    half = real_vector(box.half_extents, 3, f"{name}.half_extents", "metres")
+    for field, value in ((f"{name}.center", center), (f"{name}.half_extents", half)):
+        if value.shape != (3,) or not np.all(np.isfinite(value)):
+            raise InputError(f"{field} must be 3 finite numbers (metres), got shape {value.shape}", field=field)
+    if not np.all(half >= 0.0):
+        raise InputError(f"{name}.half_extents must be >= 0 metres, got {half.tolist()}", field=f"{name}.half_extents")
+    try:
+        R = np.array(box.R_world_box, dtype=np.float64)
+    except (TypeError, ValueError):
+        R = None
+    if R is None or R.shape != (3, 3) or not np.all(np.isfinite(R)) or \
+            np.abs(R.T @ R - np.eye(3)).max() > config.ROTATION_TOLERANCE or \
+            abs(np.linalg.det(R) - 1.0) > config.ROTATION_TOLERANCE:
+        raise InputError(f"{name}.R_world_box must be a (3, 3) rotation (orthonormal, determinant +1), got "
+                         f"{np.shape(box.R_world_box)}", field=f"{name}.R_world_box")
+    return center, half, R
+
+
+def box_corners(box, name: str = "box") -> np.ndarray:
+    """(8, 3) float64, metres: the corners of ``box``, in its frame (InputError naming ``name`` when it is not a
+    well-formed Box)."""
+    center, half, R = _checked_box(box, name)
+    return center + (_SIGNS * half) @ R.T
+
+
+def moved_box(box: Box, T_a_b: np.ndarray) -> Box:
+    """``box`` given in frame b, expressed in frame a: ``T_a_b`` (4, 4) float64 maps b to a."""
+    R = np.asarray(T_a_b)[:3, :3]
+    center = R @ np.asarray(box.center, dtype=np.float64) + np.asarray(T_a_b)[:3, 3]
+    return Box(tuple(center), tuple(np.asarray(box.half_extents, dtype=np.float64)),
+               R @ np.asarray(box.R_world_box, dtype=np.float64))
+
+
+def _grid_bits(grid: TileGrid, corners: np.ndarray) -> np.ndarray:
+    """(K, words) uint64: the tiles of ``grid`` that each of the (K, 8, 3) world-frame boxes' corners' hull meets."""
+    cam = grid.camera
+    T = cam.T_camera_world
+    out = np.zeros((corners.shape[0], grid.words), dtype=np.uint64)
+    _update_kernels.box_tile_bits(np.ascontiguousarray(corners, dtype=np.float64), np.ascontiguousarray(T[:3, :3]),
+                                  np.ascontiguousarray(T[:3, 3]), float(cam.fx), float(cam.fy), float(cam.cx),
+                                  float(cam.cy), NEAR_PLANE, grid.col_edges, grid.row_edges, grid.words, out)
+    return out
+
+
+def _unpack(grid: TileGrid, words: np.ndarray) -> np.ndarray:
+    """(words,) uint64 bitset -> (rows, cols) bool (:meth:`TileGrid.pack`'s inverse)."""
+    flat = np.unpackbits(np.ascontiguousarray(words, dtype="<u8").view(np.uint8), bitorder="little")
+    return flat[: grid.n_tiles].astype(bool).reshape(grid.rows, grid.cols)
+
+
+def box_tiles(grid: TileGrid, box: Box) -> np.ndarray:
+    """The tiles of ``grid``'s camera that ``box`` (world frame, metres) may be seen in: (rows, cols) bool.
+
+    A tile is set when its footprint (its pixels' footprints, :class:`TileGrid`) meets the convex hull of the box's 8
+    projected corners, the box's exact projection: a superset of the tiles any pixel of a rendering of the box falls
+    in (conservative; tests/test_pick_and_place.py compares it with a ray-cast rendering). A box with a corner within
+    1 mm of the camera's plane (``NEAR_PLANE``) or behind it may be seen anywhere: every tile is set. Nothing decides
+    what lies in front of the box: these are the tiles where it may show, not where it does.
+
+    Raises InputError naming ``grid`` or ``box`` (its ``center``, ``half_extents`` or ``R_world_box``).
+    """
+    if not isinstance(grid, TileGrid):
+        raise InputError(f"grid must be a TileGrid, got {type(grid).__name__}", field="grid")
+    return _unpack(grid, _grid_bits(grid, box_corners(box, "box")[None])[0])
+
+
+# ------------------------------------------------------------------------------------------------ the update
+
+class ReferenceUpdate:
+    """The paper's reference image update for pick-and-place (section 4.1) over an :class:`ImageCollisionTest`, and
+    the gripped work piece as part of the robot.
+
+    Args:
+        test: the :class:`~depthguard.collision.ImageCollisionTest` whose reference it updates; its reference set
+            (:meth:`~depthguard.collision.ImageCollisionTest.set_reference`) before :meth:`step`. At least two
+            cameras: with one, nothing tells a hand in front of the update area from the moved work piece.
+
+    Use, per pick or place:
+
+    - :meth:`start` (``piece`` world frame, ``joints_t0``) when the robot picks a work piece up or puts it down: its
+      tiles become part of the update area U (the paper's U; :attr:`pending`). At a pick, :meth:`gripped` with the
+      piece in the end-effector link's frame (:meth:`start` returns it); at a place, :meth:`released`.
+    - :meth:`step` per set of images, **instead of** ``test.observe``: it calls ``test.observe`` itself, revises
+      the obstacle images again with the gripped piece as part of the robot's image (:meth:`robot_image`; else the
+      piece is an obstacle glued to the gripper, for the test and for O) and leaves them in ``test.revised``; then
+      one pass of the loop; it returns True once U is empty. Calling it after ``test.observe`` would observe twice.
+    - Future configurations with the piece in the gripper: :meth:`test` and :meth:`test_motion` (the robot's tile
+      images with the piece's ORed in, against the revised obstacle images of the last :meth:`step`).
+      ``test.test(joints)`` still tests the bare robot (e.g. after the place).
+
+    One pass of the loop (:meth:`step`), per camera a:
+
+    - R: the robot's tiles now, with the gripped piece's (:meth:`robot_image`).
+    - E = U \\ R.
+    - O (:meth:`possible_obstacles`): the tiles of U that may show something other than the work piece's change
+      and the static background: see there for the rule and why it is fail-safe.
+    - E = E \\ O; E's tiles of the reference become the current image's: for intensity images their features (the
+      mean grey value divided by the camera's light gain, so the reference keeps its brightness; a camera whose
+      gain cannot be estimated updates nothing), for depth images their pixels (metres); U = U \\ E.
+
+    The revised obstacle images this step leaves in ``test.revised`` are computed against the reference before its
+    update: the tiles absorbed now read as background from the next set of images on.
+
+    Attributes:
+        pending: per camera, (rows, cols) bool: U, the tiles still to update.
+        absorbed: per camera, (rows, cols) bool: E of the last :meth:`step`, the tiles it updated.
+        blocked: per camera, (rows, cols) bool: O of the last :meth:`step`, the tiles of U it held back.
+        piece_in_gripper: the gripped :class:`Box` in the end-effector link's frame, or None.
+        link: the end-effector link (the link of the robot's end-effector control point), whose pose
+            ``test.robot.link_poses(q)[link]`` (``T_world_link``) carries the gripped piece.
+        joints_t0: (n,) float64, radians: the joints given to the last :meth:`start`, or None.
+    """
+
+    def __init__(self, test):
+        from depthguard.collision._test import ImageCollisionTest
+
+        if not isinstance(test, ImageCollisionTest):
+            raise InputError(f"test must be an ImageCollisionTest, got {type(test).__name__}", field="test")
+        if len(test.grids) < 2:
+            raise InputError("the reference update needs at least two cameras: with one, nothing tells an obstacle "
+                             "in front of the update area from the moved work piece", field="test")
+        self.collision_test = test
+        robot = test.robot
+        self.link = robot.control_points[robot.end_effector_index].link
+        self.pending = self._empty()
+        self.absorbed = self._empty()
+        self.blocked = self._empty()
+        self.piece_in_gripper: Box | None = None
+        self.joints_t0: np.ndarray | None = None
+
+    def _empty(self) -> list[np.ndarray]:
+        return [np.zeros((grid.rows, grid.cols), dtype=bool) for grid in self.collision_test.grids]
+
+    @property
+    def done(self) -> bool:
+        """True when the update area U is empty in every camera."""
+        return not any(u.any() for u in self.pending)
+
+    # ----------------------------------------------------------------------------------------- pick and place
+
+    def start(self, piece: Box, joints_t0) -> Box:
+        """The robot picks ``piece`` up or puts it down (time t0): its tiles (:func:`box_tiles`, per camera) join the
+        update area U (a union: an earlier update still running keeps its tiles).
+
+        Args:
+            piece: the work piece where it lies (a pick) or now lies (a place), world frame, metres.
+            joints_t0: (n,) radians, the robot's joints at t0 (its joint order, or a mapping by name).
+
+        Returns the piece in the end-effector link's frame at ``joints_t0`` (what :meth:`gripped` takes at a pick).
+        """
+        corners = box_corners(piece, "piece")
+        robot = self.collision_test.robot
+        q = robot.joint_vector(joints_t0)
+        for c, grid in enumerate(self.collision_test.grids):
+            self.pending[c] |= _unpack(grid, _grid_bits(grid, corners[None])[0])
+        self.joints_t0 = q
+        return moved_box(piece, invert(robot.link_poses(q)[self.link]))
+
+    def gripped(self, piece_in_gripper: Box) -> None:
+        """The robot holds ``piece_in_gripper`` (end-effector link frame, metres; :meth:`start` gives it at a pick):
+        from now on it is part of the robot (:meth:`robot_image`) until :meth:`released`."""
+        box_corners(piece_in_gripper, "piece_in_gripper")
+        self.piece_in_gripper = piece_in_gripper
+
+    def released(self) -> None:
+        """The robot let go of its work piece (call :meth:`start` with it where it now lies)."""
+        self.piece_in_gripper = None
+
+    def piece_at(self, joints) -> Box | None:
+        """The gripped piece at ``joints`` ((n,) radians), world frame; None when nothing is gripped."""
+        if self.piece_in_gripper is None:
+            return None
+        q = self.collision_test.robot.joint_vector(joints)
+        return moved_box(self.piece_in_gripper, self.collision_test.robot.link_poses(q)[self.link])
+
+    def robot_image(self, joints) -> list[np.ndarray]:
+        """Per camera, (rows, cols) bool: the robot's tiles at ``joints`` ((n,) radians; ``test.robot_image``) ORed
+        with the gripped piece's tiles at the end-effector link's pose there (:func:`box_tiles`)."""
+        test = self.collision_test
+        q = test.robot.joint_vector(joints)
+        images = test.robot_image(q)
+        piece = self.piece_at(q)
+        if piece is None:
+            return images
+        corners = box_corners(piece)[None]
+        return [image | _unpack(grid, _grid_bits(grid, corners)[0]) for image, grid in zip(images, test.grids)]
+
+    # -------------------------------------------------------------------------------------------- the loop
+
+    def step(self, images: Mapping[str, np.ndarray], joints) -> bool:
+        """One set of images (camera name -> (height, width) image, as ``test.observe`` takes them) captured at
+        ``joints`` ((n,) radians): observe them, then one pass of the update loop. Returns True when the update area U
+        is empty (nothing left to update).
+
+        Observing: ``test.observe(images, joints)`` (steps 2-5, which check the images and need the reference), then
+        the revised obstacle images again with the gripped piece part of the robot (:meth:`robot_image`): outside
+        the bare robot's tiles ``observe``'s obstacle labels are the difference image, and Table III treats unknown
+        and error tiles alike, so nothing is lost. ``test.revised`` holds the result, ``test.gains`` ``observe``'s."""
+        test = self.collision_test
+        q = test.robot.joint_vector(joints)
+        test.observe(images, q)
+        robot_now = self.robot_image(q)
+        seen = [revised == OBSTACLE for revised in test.revised]  # foreground outside the bare robot's tiles
+        obstacles = [np.where(robot, UNKNOWN, np.where(fg, OBSTACLE, BACKGROUND)).astype(np.uint8)
+                     for fg, robot in zip(seen, robot_now)]
+        test.revised = revised_obstacle_images(obstacles, test.bands, test.theta)
+        self.blocked = self.possible_obstacles(seen, robot_now)
+        references = []
+        for c, (grid, name) in enumerate(zip(test.grids, test.names)):
+            absorb = self.pending[c] & ~robot_now[c] & ~self.blocked[c]
+            gain = test.gains[c]
+            if not math.isfinite(gain):  # no trustworthy light estimate: the camera updates nothing
+                absorb[:] = False
+            reference = np.array(test.reference[c], dtype=np.float64, copy=True)
+            if absorb.any():
+                if test.images == "intensity":  # the reference: (rows, cols, 2) tile features
+                    new = tile_features(images[name], grid)[absorb]
+                    new[:, 0] /= gain  # back to the reference's brightness
+                    reference[absorb] = new
+                else:  # the reference: (height, width) depth image, metres
+                    rows, cols = grid.tile_of_pixels()
+                    pixels = absorb[rows[:, None], cols[None, :]]
+                    reference[pixels] = depth_metres(images[name], grid)[pixels]
+            references.append(reference)
+            self.absorbed[c] = absorb
+            self.pending[c] = self.pending[c] & ~absorb
+        test.reference = references
+        return self.done
+
+    def possible_obstacles(self, foreground, robot_now) -> list[np.ndarray]:
+        """O: per camera, (rows, cols) bool, the tiles of the update area U that may show an obstacle rather than
+        the work piece's change, and so must not be absorbed now.
+
+        Args:
+            foreground: per camera, (rows, cols) bool, the difference images against the current reference (only
+                their tiles outside ``robot_now`` are read).
+            robot_now: per camera, (rows, cols) bool, the robot's tiles now with the gripped piece (R).
+
+        The rule. Inside U a difference tells nothing: the moved piece makes U foreground, and so does a hand next
+        to it. Outside U, and outside the robot, it does: there a foreground tile is an obstacle the piece does not
+        explain. So, per camera b:
+
+        - the *unexplained* obstacle image: Table I of (foreground \\ U_b) and R_b, so that U_b's foreground is taken
+          for the piece and the robot's tiles are unknown;
+        - revised by Table III with theta = C - 1 (one other camera suffices, whatever the test's theta): a robot
+          tile whose epipolar band meets an unexplained obstacle in any other camera is a possible obstacle;
+        - S_b: its obstacle and possible-obstacle tiles.
+
+        A tile t of camera a's U is in O when (1) for any other camera b, t's epipolar band in b meets S_b (one
+        camera suffices, not C - theta); or (2) t is 4-connected, through tiles of U_a that are foreground or the robot's, to a
+        tile of S_a (an obstacle of camera a's own image that reaches into the update area).
+
+        Why it is fail-safe. Absorbing a tile that shows an obstacle would hide that obstacle from this camera for
+        good; keeping a tile in U costs only time (it stays foreground: a virtual obstacle, on the safe side). Any
+        point of an obstacle in the part of t's viewing frustum within the workspace projects into t's band in every
+        other camera b (the bands are conservative, :class:`EpipolarBands`). There b either sees it outside U_b and
+        the robot (an unexplained obstacle: (1) blocks t), or sees the robot in front of it (unknown; possible when
+        another camera sees it: (1) blocks t through S_b), or sees it inside U_b. So a tile is absorbed while it
+        shows an obstacle only if every other camera sees each of the obstacle's points in that frustum inside its
+        own update area or behind the robot, and camera a sees the obstacle's image wholly inside U_a (else (2)).
+        With the robot away, that is an obstacle wholly inside the work piece's tile-rounded visual hull: a thing
+        lying on the piece that the cameras cannot tell from it (as the difference image cannot tell an obstacle
+        that looks like the background). A hand reaches in on an arm, which some camera sees outside its U.
+        The price: while an obstacle is seen anywhere along a tile's bands, that tile waits.
+        """
+        test = self.collision_test
+        grids, bands = test.grids, test.bands
+        c = len(grids)
+        foreground = self._masks(foreground, "foreground")
+        robot_now = self._masks(robot_now, "robot_now")
+        unexplained = [obstacle_image(fg & ~u, robot) for fg, u, robot in zip(foreground, self.pending, robot_now)]
+        revised = revised_obstacle_images(unexplained, bands, c - 1)
+        suspect = [(image == OBSTACLE) | (image == POSSIBLE) for image in revised]
+        packed = [grid.pack(s) for grid, s in zip(grids, suspect)]
+        out = []
+        for a, grid in enumerate(grids):
+            pending = self.pending[a]
+            blocked = np.zeros_like(pending)
+            tiles = np.flatnonzero(pending)
+            if len(tiles):
+                hit = np.zeros(len(tiles), dtype=bool)
+                for b in range(c):
+                    if b != a and suspect[b].any():
+                        hit |= np.any(bands.bits[(a, b)][tiles] & packed[b], axis=1)
+                blocked.reshape(-1)[tiles[hit]] = True
+                if suspect[a].any():
+                    path = (pending & (foreground[a] | robot_now[a])) | suspect[a]
+                    labels, _ = ndimage.label(path, structure=FOUR_NEIGHBOURS)
+                    touched = np.unique(labels[suspect[a]])
+                    blocked |= pending & np.isin(labels, touched[touched > 0])
+            out.append(blocked)
+        return out
+
+    def _masks(self, images, name: str) -> list[np.ndarray]:
+        grids = self.collision_test.grids
+        if isinstance(images, np.ndarray) or len(images) != len(grids):
+            raise InputError(f"{name} must hold one tile image per camera ({len(grids)})", field=name)
+        out = []
+        for image, grid in zip(images, grids):
+            image = np.asarray(image)
+            if image.dtype != np.bool_ or image.shape != (grid.rows, grid.cols):
+                raise InputError(f"{name} must be ({grid.rows}, {grid.cols}) bool tile images, got {image.dtype} "
+                                 f"{image.shape}", camera=grid.camera.name, field=name)
+            out.append(image)
+        return out
+
+    # ------------------------------------------------------------------------------------ future configurations
+
+    def _verdict(self, robot_images) -> Verdict:
+        test = self.collision_test
+        if test.revised is None:
+            raise InputError("observe a set of images first (step)", field="revised")
+        flags = [camera_collisions(revised, robot) for revised, robot in zip(test.revised, robot_images)]
+        return verdict([f[0] for f in flags], [f[1] for f in flags], test.theta, test.unseen)
+
+    def test(self, joints) -> Verdict:
+        """Step 6 for the configuration ``joints`` ((n,) radians) with the gripped piece (:meth:`robot_image`),
+        against the revised obstacle images of the last :meth:`step` (the test's theta and unseen rule)."""
+        return self._verdict(self.robot_image(joints))
+
+    def test_motion(self, path, chunk: int = 8) -> Verdict:
+        """Steps 6-7 for a whole motion ``path`` ((P, n) radians, straight lines in joint space) with the gripped
+        piece, cut into pieces of ``chunk`` samples as ``test.test_motion`` cuts it: per piece, the robot's swept
+        tiles (``test.projector.swept_images``) ORed with the piece's at each sample, widened by x_max / 2 along its
+        axes (a box holding every point within x_max / 2 of it). The motion collides iff a piece does; the verdict is
+        the first colliding piece's, else the one of highest class.
+
+        The samples are spaced so that no point of the piece travels more than x_max between two: joint i's speed
+        bound is the robot's ``joint_reaches`` plus the piece's farthest corner's distance from an end of the
+        end-effector link's capsule (a point of the link whose distance from the joint's axis the reach bounds).
+        Without a gripped piece, ``test.test_motion(path, chunk)``."""
+        test = self.collision_test
+        if self.piece_in_gripper is None:
+            return test.test_motion(path, chunk)
+        if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
+            raise InputError(f"chunk must be a whole number of steps >= 1, got {chunk!r}", field="chunk")
+        projector = test.projector
+        projector.samples(path)  # checks the path (shape, finite, limits)
+        q = np.asarray(path, dtype=np.float64)
+        q = q[None] if q.ndim == 1 else q
+        robot = test.robot
+        capsule = next((cap for cap in robot.capsules if cap.link == self.link), None)
+        if capsule is None:
+            raise InputError(f"the end-effector link {self.link!r} carries no capsule: no bound on the gripped "
+                             "piece's speed", field="piece_in_gripper")
+        local = box_corners(self.piece_in_gripper, "piece_in_gripper")
+        reaches = projector.reaches + float(np.linalg.norm(local - capsule.p0, axis=1).max())
+        samples = [q[:1]]
+        for a, b in zip(q[:-1], q[1:]):
+            steps = max(1, int(np.sum(np.ceil(np.abs(b - a) * reaches / projector.x_max - 1e-12))))
+            samples.append(a + np.arange(1, steps + 1)[:, None] / steps * (b - a))
+        samples = np.concatenate(samples)
+        widen = projector.x_max / 2.0 if len(samples) > 1 else 0.0
+        piece = Box(self.piece_in_gripper.center, tuple(np.asarray(self.piece_in_gripper.half_extents) + widen),
+                    self.piece_in_gripper.R_world_box)
+        local = box_corners(piece)
+        world = np.empty((len(samples), 8, 3))
+        for k, joints in enumerate(samples):
+            T = robot.link_poses(joints, check=False)[self.link]
+            world[k] = local @ T[:3, :3].T + T[:3, 3]
+        best = None
+        for first in range(0, max(len(samples) - 1, 1), chunk):
+            part = slice(first, first + chunk + 1)
+            images = []
+            for image, grid in zip(projector.swept_images(samples[part]), test.grids):
+                images.append(image | _unpack(grid, np.bitwise_or.reduce(_grid_bits(grid, world[part]), axis=0)))
+            v = self._verdict(images)
+            if v.collision:
+                return v
+            best = v if best is None or v.klass > best.klass else best
+        return best
