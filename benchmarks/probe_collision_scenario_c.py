@@ -3,7 +3,8 @@
 20 %), for intensity and depth images, judged by the exact ground truth (coal: the robot's collision meshes against
 the person's capsules).
 
-The reference images are the median of the first 3 s (the robot moving, nobody in view). Every third frame after
+The reference images are the median of the first 3 s (the robot moving, nobody in view), each pixel's median over
+the images whose robot does not cover its tile (``set_reference(..., joints=...)``). Every third frame after
 that is observed; at each, future configurations are tested: the trajectory's configuration 0.2 - 1.0 s ahead,
 random configurations around one of them (+-0.6 rad per joint), as many anywhere within the joint limits (at most
 +-pi), and a quarter as many chosen as the nearest to the person among 300 random ones (so that some touch it). A configuration that truly touches the person (clearance
@@ -72,7 +73,8 @@ def main() -> None:
             test = ImageCollisionTest(workcell.rig, robot, workcell.rig.workspace, tiles=(64, 64), theta=theta,
                                       images=kind, unseen=unseen)
             test.set_reference({name: [source(frames[i])[name] for i in reference_frames]
-                                for name in workcell.rig.cameras})
+                                for name in workcell.rig.cameras},
+                               joints=[frames[i].joints for i in reference_frames])
             touching = missed = free = alarms = 0
             gains, times = [], []
             for i in observed:

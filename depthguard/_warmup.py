@@ -167,10 +167,10 @@ def _run_workloads() -> None:
 
     T = grids[0].camera.T_camera_world
     cam = grids[0].camera
-    collision_kernels.capsule_tile_bits(np.array([[[box.lo, box.hi]]], dtype=np.float64), np.array([0.05]),
-                                        np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]), cam.fx,
-                                        cam.fy, cam.cx, cam.cy, grids[0].col_edges, grids[0].row_edges,
-                                        grids[0].words, np.zeros((1, grids[0].words), dtype=np.uint64))
+    for project in (collision_kernels.capsule_tile_bits, collision_kernels.capsule_tile_bits_parallel):
+        project(np.array([[[box.lo, box.hi]]], dtype=np.float64), np.array([0.05]), np.ascontiguousarray(T[:3, :3]),
+                np.ascontiguousarray(T[:3, 3]), cam.fx, cam.fy, cam.cx, cam.cy, grids[0].col_edges,
+                grids[0].row_edges, grids[0].words, np.zeros((1, grids[0].words), dtype=np.uint64))
     # The wave-propagation planner over a small configuration grid, around a wall.
     from depthguard.collision._plan import ConfigurationGrid, plan_path
 

@@ -612,3 +612,36 @@ def test_bad_motions_are_refused(iiwa_scene):
     for bad in (np.zeros((2, 6)), np.full((2, 7), np.nan), np.full((2, 7), 9.0), "path"):
         with pytest.raises(InputError):
             test.projector.swept_images(bad)
+
+
+# ------------------------------------------------------------------------------------------- the depth variant
+
+@pytest.mark.parametrize("rows, cols", [(16, 20), (12, 15)])
+def test_depth_difference_image_equals_a_pixel_by_pixel_judge(rows, cols):
+    """The depth variant's changed pixels per tile (a numba kernel) against numpy, pixel by pixel: measured in one
+    image only, or beyond max(threshold, the noise margin) apart; uint16 in depth_scale units and float metres."""
+    from depthguard.collision import depth_difference_image
+
+    camera = dg.PinholeCamera("d", 160, 128, 140.0, 140.0, 79.5, 63.5, np.eye(4), depth_scale=0.001)
+    grid = TileGrid(camera, rows, cols)
+    rng = np.random.default_rng(6)
+    reference = rng.uniform(0.5, 4.0, camera.shape) * (rng.random(camera.shape) > 0.1)
+    now_m = np.where(reference > 0, reference + rng.normal(0.0, 0.01, camera.shape), 0.0)  # noise, mostly within
+    now_m[40:70, 30:90] = np.maximum(reference[40:70, 30:90] - rng.uniform(0.0, 0.4, (30, 60)), 0.3)  # an object
+    now_m = np.where(rng.random(camera.shape) < 0.03, 0.0, now_m)  # dropouts
+    now_units = np.rint(now_m * 1000.0).astype(np.uint16)
+    for image, metres in ((now_units, now_units * 0.001), (now_m.astype(np.float32), now_m.astype(np.float32))):
+        for thresholds in ((0.05, 0.1), (0.02, 0.3)):
+            margin = np.maximum(thresholds[0], camera.noise.margin(reference))
+            seen, ref_seen = metres > 0, reference > 0
+            changed = (seen != ref_seen) | (seen & ref_seen & (np.abs(metres.astype(np.float64) - reference) > margin))
+            fraction = np.array([[changed[grid.first_row[r]:grid.first_row[r + 1],
+                                          grid.first_col[c]:grid.first_col[c + 1]].mean() for c in range(cols)]
+                                 for r in range(rows)])
+            expected = fraction > thresholds[1]
+            from scipy import ndimage
+            expected = expected | ndimage.binary_closing(expected, structure=np.array([[0, 1, 0], [1, 1, 1],
+                                                                                          [0, 1, 0]], dtype=bool))
+            got = depth_difference_image(image, reference, grid, thresholds)
+            assert np.array_equal(got, expected), (image.dtype, thresholds)
+            assert 0 < got.sum() < got.size

@@ -100,29 +100,33 @@ def depth_metres(image, grid: TileGrid, name: str = "image") -> np.ndarray:
     return metres
 
 
-def depth_difference_image(image, reference, grid: TileGrid, thresholds=(0.05, 0.1)) -> np.ndarray:
+def depth_difference_image(image, reference, grid: TileGrid, thresholds=(0.05, 0.25)) -> np.ndarray:
     """The depth variant's difference image (beyond the paper), (rows, cols) bool: a pixel changed when it has a
     measurement in one of ``image`` and ``reference`` but not the other, or when both measure and differ by more than
     max(thresholds[0] metres, the camera's noise margin m(d) at the reference's depth); a tile is foreground when more
     than thresholds[1] of its pixels changed; then the closing of :func:`difference_image`.
 
-    ``image``: as :func:`depth_metres` takes it; ``reference``: (height, width) float metres, 0 = no measurement
-    (the median of reference images in metres, :func:`reference_image`). Comparing pixel by pixel, not tile means,
+    ``image``: as :func:`depth_metres` takes it; ``reference``: (height, width) float metres, 0 (or NaN) = no
+    measurement (the median of reference images in metres, :func:`reference_image`). Comparing pixel by pixel, not tile means,
     keeps a tile whose measured pixels change (an edge's dropouts, a hole) from reading as a depth change."""
-    now = depth_metres(image, grid)
-    ref = depth_metres(reference, grid, "reference")
+    cam = grid.camera
+    now = np.asarray(image)
+    if now.shape != cam.shape or now.dtype not in (np.uint16, np.float32, np.float64):
+        now = depth_metres(image, grid)  # checks it (naming the camera); other integer types as depth_scale units
+    ref = np.asarray(reference)
+    if ref.shape != cam.shape or ref.dtype != np.float64:  # the reference_image median is used as it is
+        ref = depth_metres(reference, grid, "reference")
     thresholds = np.asarray(thresholds, dtype=np.float64)
     if thresholds.shape != (2,) or not np.all(np.isfinite(thresholds)) or not np.all(thresholds >= 0.0):
         raise InputError(f"thresholds must be two finite numbers >= 0 (metres, fraction of a tile), got "
-                         f"{thresholds.tolist()}", camera=grid.camera.name, field="thresholds")
-    measured_now, measured_ref = now > 0.0, ref > 0.0
-    tolerance = np.maximum(thresholds[0], grid.camera.noise.margin(ref))
-    changed = (measured_now != measured_ref) | (measured_now & measured_ref & (np.abs(now - ref) > tolerance))
+                         f"{thresholds.tolist()}", camera=cam.name, field="thresholds")
+    scale = cam.depth_scale if now.dtype == np.uint16 else 1.0
+    changed = np.empty((grid.rows, grid.cols))
+    k0, k1, k2 = cam.noise.coefficients()
+    _kernels.depth_changes(np.ascontiguousarray(now), scale, np.ascontiguousarray(ref), thresholds[0], k0, k1, k2,
+                           grid.first_row, grid.first_col, changed)
     counts = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
-    sums = np.empty((grid.rows, grid.cols, 2))
-    _kernels.tile_moments(changed.astype(np.float64), grid.first_row, grid.first_col, np.ones(grid.camera.height),
-                          sums)
-    return _closed(sums[..., 0] / counts > thresholds[1])
+    return _closed(changed / counts > thresholds[1])
 
 
 def light_gain(features, reference_features, darkest: float = 10.0) -> float:

@@ -151,10 +151,77 @@ def _ball_slopes(a, z, rho):
     return (a * z - root) / d, (a * z + root) / d
 
 
-@kernel(parallel=True)
+@kernel(inline=True)
+def _capsule_set_bits(ends, k, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
+    """Set k of :func:`capsule_tile_bits` (the work of one configuration)."""
+    m = ends.shape[1]
+    cols = col_edges.shape[0] - 1
+    rows = row_edges.shape[0] - 1
+    xs = np.empty(8)
+    ys = np.empty(8)
+    hull_x = np.empty(16)
+    hull_y = np.empty(16)
+    for w in range(words):
+        out[k, w] = np.uint64(0)
+    for j in range(m):
+        rho = radii[j]
+        behind = False
+        for e in range(2):
+            px = ends[k, j, e, 0]
+            py = ends[k, j, e, 1]
+            pz = ends[k, j, e, 2]
+            x = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz + t[0]
+            y = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + t[1]
+            z = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + t[2]
+            if not z - rho > 1e-3:
+                behind = True
+                break
+            u0, u1 = _ball_slopes(x, z, rho)
+            v0, v1 = _ball_slopes(y, z, rho)
+            u0 = fx * u0 + cx
+            u1 = fx * u1 + cx
+            v0 = fy * v0 + cy
+            v1 = fy * v1 + cy
+            xs[4 * e] = u0
+            ys[4 * e] = v0
+            xs[4 * e + 1] = u1
+            ys[4 * e + 1] = v0
+            xs[4 * e + 2] = u0
+            ys[4 * e + 2] = v1
+            xs[4 * e + 3] = u1
+            ys[4 * e + 3] = v1
+        if behind:
+            for tile in range(rows * cols):
+                out[k, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
+            return
+        hm = convex_hull(xs, ys, hull_x, hull_y)
+        lo_x = np.inf
+        hi_x = -np.inf
+        lo_y = np.inf
+        hi_y = -np.inf
+        for i in range(8):
+            lo_x = min(lo_x, xs[i])
+            hi_x = max(hi_x, xs[i])
+            lo_y = min(lo_y, ys[i])
+            hi_y = max(hi_y, ys[i])
+        if hi_x < col_edges[0] or lo_x > col_edges[cols] or hi_y < row_edges[0] or lo_y > row_edges[rows]:
+            continue
+        c_lo, c_hi = _tiles_spanned(col_edges, lo_x, hi_x)
+        r_lo, r_hi = _tiles_spanned(row_edges, lo_y, hi_y)
+        for r in range(r_lo, r_hi + 1):
+            for c in range(c_lo, c_hi + 1):
+                if _rect_meets_hull(col_edges[c], col_edges[c + 1], row_edges[r], row_edges[r + 1], hull_x, hull_y,
+                                    hm):
+                    tile = r * cols + c
+                    out[k, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
+
+
+@kernel()
 def capsule_tile_bits(ends, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
     """For each of K sets of m capsules, the tiles of one camera that any capsule's projection can meet, as bits in
-    out (K, words) uint64 (written, tile index r * cols + c; tile footprints as in :func:`tile_bands`).
+    out (K, words) uint64 (written, tile index r * cols + c; tile footprints as in :func:`tile_bands`). One thread:
+    for one or a few sets (a parallel region costs more than the work, and stalls when the other core is busy);
+    :func:`capsule_tile_bits_parallel` for many.
 
     ends: (K, m, 2, 3) the capsules' core segments, world frame, metres; radii: (m,) metres; R, t: world -> the
     camera's optical frame; fx, fy, cx, cy: its intrinsics. A capsule is the convex hull of its two end balls, so its
@@ -162,68 +229,15 @@ def capsule_tile_bits(ends, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, w
     tangent planes through the camera's x and y axes (exact slopes). A tile is set when its footprint meets the
     convex hull of the two rectangles, a superset of the capsule's projection. A capsule that reaches within 1 mm of
     the camera's plane (or behind it) sets every tile."""
-    n_sets = ends.shape[0]
-    m = ends.shape[1]
-    cols = col_edges.shape[0] - 1
-    rows = row_edges.shape[0] - 1
-    for k in prange(n_sets):
-        xs = np.empty(8)
-        ys = np.empty(8)
-        hull_x = np.empty(16)
-        hull_y = np.empty(16)
-        for w in range(words):
-            out[k, w] = np.uint64(0)
-        for j in range(m):
-            rho = radii[j]
-            behind = False
-            for e in range(2):
-                px = ends[k, j, e, 0]
-                py = ends[k, j, e, 1]
-                pz = ends[k, j, e, 2]
-                x = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz + t[0]
-                y = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + t[1]
-                z = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + t[2]
-                if not z - rho > 1e-3:
-                    behind = True
-                    break
-                u0, u1 = _ball_slopes(x, z, rho)
-                v0, v1 = _ball_slopes(y, z, rho)
-                u0 = fx * u0 + cx
-                u1 = fx * u1 + cx
-                v0 = fy * v0 + cy
-                v1 = fy * v1 + cy
-                xs[4 * e] = u0
-                ys[4 * e] = v0
-                xs[4 * e + 1] = u1
-                ys[4 * e + 1] = v0
-                xs[4 * e + 2] = u0
-                ys[4 * e + 2] = v1
-                xs[4 * e + 3] = u1
-                ys[4 * e + 3] = v1
-            if behind:
-                for tile in range(rows * cols):
-                    out[k, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
-                break
-            hm = convex_hull(xs, ys, hull_x, hull_y)
-            lo_x = np.inf
-            hi_x = -np.inf
-            lo_y = np.inf
-            hi_y = -np.inf
-            for i in range(8):
-                lo_x = min(lo_x, xs[i])
-                hi_x = max(hi_x, xs[i])
-                lo_y = min(lo_y, ys[i])
-                hi_y = max(hi_y, ys[i])
-            if hi_x < col_edges[0] or lo_x > col_edges[cols] or hi_y < row_edges[0] or lo_y > row_edges[rows]:
-                continue
-            c_lo, c_hi = _tiles_spanned(col_edges, lo_x, hi_x)
-            r_lo, r_hi = _tiles_spanned(row_edges, lo_y, hi_y)
-            for r in range(r_lo, r_hi + 1):
-                for c in range(c_lo, c_hi + 1):
-                    if _rect_meets_hull(col_edges[c], col_edges[c + 1], row_edges[r], row_edges[r + 1], hull_x,
-                                        hull_y, hm):
-                        tile = r * cols + c
-                        out[k, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
+    for k in range(ends.shape[0]):
+        _capsule_set_bits(ends, k, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out)
+
+
+@kernel(parallel=True)
+def capsule_tile_bits_parallel(ends, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
+    """:func:`capsule_tile_bits` with the sets spread over the threads."""
+    for k in prange(ends.shape[0]):
+        _capsule_set_bits(ends, k, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out)
 
 
 @kernel()
@@ -245,3 +259,31 @@ def tile_moments(image, first_row, first_col, row_weight, out):
                     total += image[v, u]
                 out[r, c, 0] += total
                 out[r, c, 1] += total * weight
+
+
+@kernel()
+def depth_changes(now, scale, reference, threshold, k0, k1, k2, first_row, first_col, out):
+    """Per tile, the number of pixels whose depth changed: out (rows, cols) float64 (written). now: (height, width)
+    depth in units of ``scale`` metres (uint16 with the camera's depth_scale, or float metres with scale 1; not
+    finite or <= 0: no measurement); reference: (height, width) float64 metres, 0 = no measurement. A pixel changed
+    when exactly one of the two measures, or both do and differ by more than max(threshold, k0 + k1 d + k2 d^2) at
+    the reference's depth d (the camera's noise margin)."""
+    rows = first_row.shape[0] - 1
+    cols = first_col.shape[0] - 1
+    for r in range(rows):
+        for c in range(cols):
+            out[r, c] = 0.0
+        for v in range(first_row[r], first_row[r + 1]):
+            for c in range(cols):
+                changed = 0
+                for u in range(first_col[c], first_col[c + 1]):
+                    d = now[v, u] * scale
+                    ref = reference[v, u]
+                    seen = d > 0.0 and d < np.inf
+                    if seen != (ref > 0.0):
+                        changed += 1
+                    elif seen:
+                        tolerance = max(threshold, k0 + k1 * ref + k2 * ref * ref)
+                        if abs(d - ref) > tolerance:
+                            changed += 1
+                out[r, c] += changed

@@ -75,9 +75,10 @@ class RobotProjector:
     def _bits(self, ends: np.ndarray, radii: np.ndarray) -> np.ndarray:
         words = max(grid.words for grid in self.grids)
         out = np.zeros((len(self.grids), ends.shape[0], words), dtype=np.uint64)
+        project = _kernels.capsule_tile_bits_parallel if len(ends) >= 64 else _kernels.capsule_tile_bits
         for c, (grid, (R, t, fx, fy, cx, cy)) in enumerate(zip(self.grids, self._poses)):
-            _kernels.capsule_tile_bits(ends, radii, R, t, fx, fy, cx, cy, grid.col_edges, grid.row_edges,
-                                       grid.words, out[c, :, : grid.words])
+            project(ends, radii, R, t, fx, fy, cx, cy, grid.col_edges, grid.row_edges, grid.words,
+                    out[c, :, : grid.words])
         return out
 
     def bits(self, configurations) -> np.ndarray:

@@ -294,31 +294,37 @@ class ReferenceUpdate:
             robot_now: per camera, (rows, cols) bool, the robot's tiles now with the gripped piece (R).
 
         The rule. Inside U a difference tells nothing: the moved piece makes U foreground, and so does a hand next
-        to it. Outside U, and outside the robot, it does: there a foreground tile is an obstacle the piece does not
+        to it. Outside U and outside the robot it does: there a foreground tile is something the piece does not
         explain. So, per camera b:
 
-        - the *unexplained* obstacle image: Table I of (foreground \\ U_b) and R_b, so that U_b's foreground is taken
-          for the piece and the robot's tiles are unknown;
-        - revised by Table III with theta = C - 1 (one other camera suffices, whatever the test's theta): a robot
-          tile whose epipolar band meets an unexplained obstacle in any other camera is a possible obstacle;
-        - S_b: its obstacle and possible-obstacle tiles.
+        - X_b, the *unexplained* obstacles: foreground tiles outside U_b and R_b;
+        - P_b, the robot tiles that may hide one: R_b's tiles whose epipolar band meets X_c in any other camera c
+          (Table III on the unexplained obstacle images with theta = C - 1: one camera suffices, whatever the
+          test's theta).
 
-        A tile t of camera a's U is in O when (1) for any other camera b, t's epipolar band in b meets S_b (one
-        camera suffices, not C - theta); or (2) t is 4-connected, through tiles of U_a that are foreground or the robot's, to a
-        tile of S_a (an obstacle of camera a's own image that reaches into the update area).
+        A tile t of camera a's U is in O when
+
+        1. for any other camera b, t's epipolar band in b meets X_b (one camera suffices, not C - theta); or
+        2. t is 4-connected, through tiles of U_a that are foreground or the robot's, to a tile of X_a or P_a: an
+           obstacle of camera a's own image, seen or possibly behind the robot, that reaches into the update area.
 
         Why it is fail-safe. Absorbing a tile that shows an obstacle would hide that obstacle from this camera for
         good; keeping a tile in U costs only time (it stays foreground: a virtual obstacle, on the safe side). Any
-        point of an obstacle in the part of t's viewing frustum within the workspace projects into t's band in every
-        other camera b (the bands are conservative, :class:`EpipolarBands`). There b either sees it outside U_b and
-        the robot (an unexplained obstacle: (1) blocks t), or sees the robot in front of it (unknown; possible when
-        another camera sees it: (1) blocks t through S_b), or sees it inside U_b. So a tile is absorbed while it
-        shows an obstacle only if every other camera sees each of the obstacle's points in that frustum inside its
-        own update area or behind the robot, and camera a sees the obstacle's image wholly inside U_a (else (2)).
-        With the robot away, that is an obstacle wholly inside the work piece's tile-rounded visual hull: a thing
-        lying on the piece that the cameras cannot tell from it (as the difference image cannot tell an obstacle
-        that looks like the background). A hand reaches in on an arm, which some camera sees outside its U.
-        The price: while an obstacle is seen anywhere along a tile's bands, that tile waits.
+        point of an obstacle in t's viewing frustum, within the workspace, projects into t's band in every other
+        camera b (the bands are conservative, :class:`EpipolarBands`). If one of them sees that point outside its
+        U_b and its robot, the point's tile is in X_b and (1) blocks t. So a tile is absorbed while it shows an
+        obstacle only if every other camera sees each of the obstacle's points in t's frustum inside its own update
+        area or behind its robot, and camera a's image of the obstacle touches no unexplained or possible obstacle
+        outside U_a (else (2)). With the robot away, that is an obstacle wholly inside the work piece's tile-rounded
+        visual hull and seen by no camera outside it: a thing lying on the piece that the cameras cannot tell from
+        it, as the difference image cannot tell an obstacle that looks like the background. A hand comes on an arm.
+
+        Why (1) needs no possible obstacles of the other cameras: a point of t's frustum that the robot hides from b
+        is either seen unexplained by another camera c, and (1) blocks t through c, or by none, and then it makes no
+        possible obstacle anywhere. Adding them would hold tiles back for obstacles elsewhere along the bands.
+
+        The price: while anything unexplained is seen along a tile's bands (a person anywhere on them, a tile the
+        difference image's closing adds between the robot's image and the update area's), that tile waits.
         """
         test = self.collision_test
         grids, bands = test.grids, test.bands
@@ -326,9 +332,9 @@ class ReferenceUpdate:
         foreground = self._masks(foreground, "foreground")
         robot_now = self._masks(robot_now, "robot_now")
         unexplained = [obstacle_image(fg & ~u, robot) for fg, u, robot in zip(foreground, self.pending, robot_now)]
-        revised = revised_obstacle_images(unexplained, bands, c - 1)
-        suspect = [(image == OBSTACLE) | (image == POSSIBLE) for image in revised]
-        packed = [grid.pack(s) for grid, s in zip(grids, suspect)]
+        seen = [image == OBSTACLE for image in unexplained]
+        possible = [image == POSSIBLE for image in revised_obstacle_images(unexplained, bands, c - 1)]
+        packed = [grid.pack(x) for grid, x in zip(grids, seen)]
         out = []
         for a, grid in enumerate(grids):
             pending = self.pending[a]
@@ -336,14 +342,15 @@ class ReferenceUpdate:
             tiles = np.flatnonzero(pending)
             if len(tiles):
                 hit = np.zeros(len(tiles), dtype=bool)
-                for b in range(c):
-                    if b != a and suspect[b].any():
+                for b in range(c):  # (1)
+                    if b != a and seen[b].any():
                         hit |= np.any(bands.bits[(a, b)][tiles] & packed[b], axis=1)
                 blocked.reshape(-1)[tiles[hit]] = True
-                if suspect[a].any():
-                    path = (pending & (foreground[a] | robot_now[a])) | suspect[a]
-                    labels, _ = ndimage.label(path, structure=FOUR_NEIGHBOURS)
-                    touched = np.unique(labels[suspect[a]])
+                seeds = seen[a] | possible[a]
+                if seeds.any():  # (2)
+                    labels, _ = ndimage.label((pending & (foreground[a] | robot_now[a])) | seeds,
+                                              structure=FOUR_NEIGHBOURS)
+                    touched = np.unique(labels[seeds])
                     blocked |= pending & np.isin(labels, touched[touched > 0])
             out.append(blocked)
         return out
