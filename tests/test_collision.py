@@ -645,3 +645,94 @@ def test_depth_difference_image_equals_a_pixel_by_pixel_judge(rows, cols):
             got = depth_difference_image(image, reference, grid, thresholds)
             assert np.array_equal(got, expected), (image.dtype, thresholds)
             assert 0 < got.sum() < got.size
+
+
+# ------------------------------------------------------------------------------------ the Bayes tile classifier
+
+def test_the_bayes_classifier_learns_two_classes_and_leans_towards_foreground_below_one_half():
+    from depthguard.collision import BayesTileClassifier
+
+    rng = np.random.default_rng(9)
+    background = np.abs(rng.normal([0.5, 0.01], [0.4, 0.01], (4000, 2)))
+    foreground = np.abs(rng.normal([25.0, 0.15], [12.0, 0.1], (400, 2)))
+    x = np.concatenate([background, foreground])
+    y = np.concatenate([np.zeros(len(background), bool), np.ones(len(foreground), bool)])
+    classifier = BayesTileClassifier(0.5).fit(x[::2], y[::2])
+    got = classifier.foreground(x[1::2])
+    assert np.mean(got == y[1::2]) > 0.97 and got[y[1::2]].mean() > 0.95
+    leaning = BayesTileClassifier(0.05).fit(x[::2], y[::2]).foreground(x[1::2])
+    assert np.all(leaning >= got) and leaning.sum() > got.sum()  # a lower threshold only adds foreground
+    assert classifier.foreground(x.reshape(2, -1, 2)).shape == (2, len(x) // 2)
+
+
+def test_labelled_tiles_label_by_a_tenth_of_the_pixels_and_leave_out_mixed_and_excluded_tiles():
+    from depthguard.collision import labelled_tiles
+
+    camera = dg.PinholeCamera("c", 40, 30, 40.0, 40.0, 19.5, 14.5, np.eye(4))
+    grid = TileGrid(camera, 3, 4)  # 10 x 10 pixel tiles
+    truth = np.zeros(camera.shape, dtype=bool)
+    truth[0:10, 0:10] = True          # tile (0, 0): all
+    truth[10:12, 10:15] = True        # tile (1, 1): 10 of 100 pixels
+    truth[20, 30] = True              # tile (2, 3): 1 pixel (mixed: left out)
+    features = np.zeros((3, 4, 2))
+    features[..., 0] = np.arange(12).reshape(3, 4)
+    exclude = np.zeros((3, 4), dtype=bool)
+    exclude[0, 3] = True
+    x, y = labelled_tiles(features, np.zeros((3, 4, 2)), truth, grid, exclude=exclude)
+    assert len(x) == 10 and y.sum() == 2
+    assert sorted(x[y, 0].tolist()) == [0.0, 5.0] and 11.0 not in x[:, 0] and 3.0 not in x[:, 0]
+
+
+def test_the_whole_test_with_a_bayes_classifier_finds_the_box(iiwa_scene):
+    from depthguard.collision import BayesTileClassifier, ImageCollisionTest, labelled_tiles, light_gain, tile_features
+    from depthguard.scenes import Box, render_depth
+
+    shared, robot, cameras, backgrounds = iiwa_scene
+    poses = [np.array([a, 0.5, 0.0, -1.4, 0.0, 0.8, 0.0]) for a in (-1.2, -0.6, 0.0, 0.6, 1.2)]
+    now = np.array([0.0, 0.4, 0.0, -1.5, 0.0, 0.8, 0.0])
+    future = np.array([0.9, 0.7, 0.0, -1.2, 0.0, 0.8, 0.0])
+    target = robot.control_point_positions(future)[robot.end_effector_index]
+    box = Box.from_bounds(target - 0.08, target + 0.08)
+    training_box = Box.from_bounds(target + [-0.5, 0.3, -0.08], target + [-0.34, 0.46, 0.08])
+    references = {name: [_draw(shared, backgrounds, cameras, q)[name] for q in poses] for name in cameras}
+    shared.set_reference(references, joints=poses)
+    # training: a frame with another box, labelled by its exact render
+    frame = _draw(shared, backgrounds, cameras, now, [training_box])
+    x, y = [], []
+    for c, (name, grid) in enumerate(zip(shared.names, shared.grids)):
+        features = tile_features(frame[name], grid)
+        truth = render_depth(cameras[name], [training_box]) > 0
+        xs, ys = labelled_tiles(features, shared.reference[c], truth, grid, light_gain(features, shared.reference[c]),
+                                shared.robot_image(now)[c])
+        x.append(xs)
+        y.append(ys)
+    classifier = BayesTileClassifier().fit(np.concatenate(x), np.concatenate(y))
+    test = ImageCollisionTest(dg.Rig(cameras), robot, [[-1.0, -1.0, -0.1], [1.2, 1.0, 1.5]], tiles=(32, 32),
+                              theta=1, unseen="free", classifier=classifier)
+    test.set_reference(references, joints=poses)
+    test.observe(_draw(test, backgrounds, cameras, now), now)
+    assert not test.test(future).collision
+    test.observe(_draw(test, backgrounds, cameras, now, [box]), now)
+    assert test.test(future).collision
+
+
+@pytest.mark.parametrize("threshold", [0.0, 1.0, -0.1, True, "0.2", np.nan])
+def test_a_bayes_classifier_refuses_bad_thresholds(threshold):
+    from depthguard.collision import BayesTileClassifier
+
+    with pytest.raises(InputError, match="threshold"):
+        BayesTileClassifier(threshold)
+
+
+def test_a_bayes_classifier_refuses_what_it_cannot_learn_from():
+    from depthguard.collision import BayesTileClassifier
+
+    classifier = BayesTileClassifier()
+    with pytest.raises(InputError, match="fit"):
+        classifier.foreground(np.zeros((3, 2)))
+    with pytest.raises(InputError, match="at least 3"):
+        classifier.fit(np.zeros((10, 2)), np.array([True, True] + [False] * 8))
+    for x, y in ((np.zeros((10, 3)), np.zeros(10, bool)), (np.zeros((10, 2)), np.zeros(10)),
+                 (np.full((10, 2), np.nan), np.zeros(10, bool))):
+        with pytest.raises(InputError, match="distances"):
+            classifier.fit(x, y)

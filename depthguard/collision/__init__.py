@@ -11,9 +11,12 @@ variant, swept volumes, pick-and-place, the planner, the command line.
 
 from depthguard.collision._difference import (
     FOUR_NEIGHBOURS,
+    BayesTileClassifier,
     depth_metres,
     depth_difference_image,
     difference_image,
+    feature_distances,
+    labelled_tiles,
     light_gain,
     reference_image,
     robot_tiles,
@@ -40,6 +43,7 @@ from depthguard.collision._tables import (
 
 __all__ = [
     "BACKGROUND",
+    "BayesTileClassifier",
     "ConfigurationGrid",
     "ConfigurationTable",
     "ERROR",
@@ -58,6 +62,8 @@ __all__ = [
     "depth_metres",
     "depth_difference_image",
     "difference_image",
+    "feature_distances",
+    "labelled_tiles",
     "light_gain",
     "intersection_image",
     "obstacle_image",

@@ -142,7 +142,80 @@ def light_gain(features, reference_features, darkest: float = 10.0) -> float:
     return float(np.median(mean[bright] / reference[bright]))
 
 
-def difference_image(features, reference_features, thresholds=(12.0, 0.1), gain: float = 1.0) -> np.ndarray:
+class BayesTileClassifier:
+    """Step 2's statistical classifier (the paper's section 3.2 and its reference [3]): a tile is foreground when the
+    posterior probability of "foreground" given its feature distances to the reference reaches ``threshold``.
+
+    Each class (background, foreground) is a 2-D Gaussian over the distances (|change of the mean grey value| in
+    grey levels, |change of the balance point| in tile heights) with its own mean and covariance, and a prior from
+    the training set's share; :meth:`fit` learns them from labelled tiles (e.g. a simulation's exact labels:
+    :func:`labelled_tiles`). ``threshold`` below 0.5 leans towards foreground (a missed obstacle tile costs more than a
+    false one); default 0.2.
+    """
+
+    def __init__(self, threshold: float = 0.2):
+        if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or not 0.0 < threshold < 1.0:
+            raise InputError(f"threshold must be a probability in (0, 1), got {threshold!r}", field="threshold")
+        self.threshold = float(threshold)
+        self.means = self.covariances = self.priors = None
+
+    def fit(self, distances, foreground) -> "BayesTileClassifier":
+        """Learn from ``distances`` (N, 2) (as :meth:`foreground` takes them) and ``foreground`` (N,) bool labels;
+        each class needs at least 3 tiles. Returns self."""
+        x = np.asarray(distances, dtype=np.float64)
+        y = np.asarray(foreground)
+        if x.ndim != 2 or x.shape[1] != 2 or y.shape != (len(x),) or y.dtype != np.bool_ or \
+                not np.all(np.isfinite(x)):
+            raise InputError(f"distances must be (N, 2) finite and foreground (N,) bool, got {x.shape} and "
+                             f"{y.dtype} {y.shape}", field="distances")
+        if min(y.sum(), (~y).sum()) < 3:
+            raise InputError(f"each class needs at least 3 labelled tiles, got {int(y.sum())} foreground and "
+                             f"{int((~y).sum())} background", field="foreground")
+        self.means = np.array([x[~y].mean(axis=0), x[y].mean(axis=0)])
+        # a small ridge keeps a class whose tiles barely vary (noise-free simulation) invertible
+        self.covariances = np.array([np.cov(x[~y].T) + np.eye(2) * 1e-6, np.cov(x[y].T) + np.eye(2) * 1e-6])
+        self.priors = np.array([(~y).mean(), y.mean()])
+        return self
+
+    def foreground(self, distances) -> np.ndarray:
+        """(...) bool from (..., 2) feature distances: P(foreground | distances) >= threshold."""
+        if self.means is None:
+            raise InputError("fit the classifier first", field="classifier")
+        x = np.asarray(distances, dtype=np.float64)
+        log_p = []
+        for mean, cov, prior in zip(self.means, self.covariances, self.priors):
+            d = x - mean
+            inverse = np.linalg.inv(cov)
+            mahalanobis = np.einsum("...i,ij,...j->...", d, inverse, d)
+            log_p.append(math.log(prior) - 0.5 * (mahalanobis + math.log(np.linalg.det(cov))))
+        # P(fg) >= t  <=>  log p_fg - log p_bg >= log(t / (1 - t))
+        return log_p[1] - log_p[0] >= math.log(self.threshold / (1.0 - self.threshold))
+
+
+def labelled_tiles(features, reference_features, truth, grid: TileGrid, gain: float = 1.0, exclude=None):
+    """A training set for :class:`BayesTileClassifier` from one image: ((N, 2) feature distances, (N,) bool labels)
+    of every tile, labelled foreground when ``truth`` ((height, width) bool, e.g. a simulation's exact labels of
+    the obstacles) marks at least a tenth of its pixels, background when it marks none; tiles in between are left
+    out (mixed), and so are the tiles of ``exclude`` ((rows, cols) bool, e.g. the robot's). ``gain``: the image's
+    light gain (:func:`light_gain`)."""
+    distances = feature_distances(features, reference_features, gain)
+    truth = np.asarray(truth, dtype=bool)
+    share = _tile_sums(truth.astype(np.int64), grid) / np.outer(np.diff(grid.first_row), np.diff(grid.first_col))
+    keep = (share >= 0.1) | (share == 0.0)
+    if exclude is not None:
+        keep &= ~np.asarray(exclude, dtype=bool)
+    return distances[keep], (share >= 0.1)[keep]
+
+
+def feature_distances(features, reference_features, gain: float = 1.0) -> np.ndarray:
+    """(rows, cols, 2) |feature - reference feature| per tile, the mean grey value first divided by ``gain``."""
+    features = np.array(features, dtype=np.float64)
+    features[..., 0] /= gain
+    return np.abs(features - np.asarray(reference_features, dtype=np.float64))
+
+
+def difference_image(features, reference_features, thresholds=(6.0, 0.05), gain: float = 1.0,
+                     classifier: BayesTileClassifier | None = None) -> np.ndarray:
     """Step 2's difference image, (rows, cols) bool: a tile is foreground when any feature differs from the
     reference's by more than its threshold (mean grey levels, balance point in tile heights), then the
     morphological closing in the 4-neighbourhood fills one-tile gaps. The closing only adds: a foreground tile never
@@ -150,7 +223,8 @@ def difference_image(features, reference_features, thresholds=(12.0, 0.1), gain:
 
     ``gain``: the image's brightness relative to the reference's (:func:`light_gain`); the mean grey values are
     divided by it before the comparison (the balance point does not change with it). Not a finite positive number
-    (no estimate): every tile is foreground."""
+    (no estimate): every tile is foreground. ``classifier``: a fitted :class:`BayesTileClassifier` decides instead
+    of the thresholds."""
     features = np.asarray(features, dtype=np.float64)
     reference_features = np.asarray(reference_features, dtype=np.float64)
     thresholds = np.asarray(thresholds, dtype=np.float64)
@@ -160,9 +234,10 @@ def difference_image(features, reference_features, thresholds=(12.0, 0.1), gain:
                          f"threshold >= 0 per feature (got {thresholds.tolist()})", field="thresholds")
     if not (isinstance(gain, (int, float, np.floating)) and math.isfinite(gain) and gain > 0.0):
         return np.ones(features.shape[:2], dtype=bool)
-    features = features.copy()
-    features[..., 0] /= gain
-    return _closed(np.any(np.abs(features - reference_features) > thresholds, axis=-1))
+    distances = feature_distances(features, reference_features, gain)
+    if classifier is not None:
+        return _closed(classifier.foreground(distances))
+    return _closed(np.any(distances > thresholds, axis=-1))
 
 
 def _closed(changed: np.ndarray) -> np.ndarray:

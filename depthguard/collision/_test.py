@@ -41,8 +41,12 @@ class ImageCollisionTest:
             camera collides (classes B, C and D); "free": the paper's section 3.5, class B is collision-free
             (assumes every obstacle is seen by at least C - theta cameras: not so for a hand next to the robot).
             Either way an obstacle that the current robot hides from every camera is not seen (its blind spot).
+        classifier: a fitted :class:`BayesTileClassifier` that decides which intensity tiles are foreground instead
+            of the thresholds.
         thresholds: per tile feature, the change that makes a tile foreground (:func:`difference_image`): for
-            intensity images (mean grey value, balance point row in tile heights), default (12, 0.1); for depth
+            intensity images (mean grey value, balance point row in tile heights), default (6, 0.05) (scenario C:
+            88 % of the tiles a person covers by a tenth, 0.1 % of the room; (12, 0.1) found 76 %,
+            benchmarks/probe_tile_classifier.py; a trained BayesTileClassifier 98 %); for depth
             images (the change in metres that makes a pixel changed, at least the camera's noise margin; the
             fraction of changed pixels that makes a tile foreground), default (0.05, 0.25): a quarter, above
             the few pixels a depth camera drops at random near edges and at grazing angles.
@@ -65,7 +69,7 @@ class ImageCollisionTest:
 
     def __init__(self, rig: Rig, robot, workspace, tiles=(64, 64), theta: int | None = None, thresholds=None,
                  geometry: str = "capsules", x_max: float = 0.02, lighting: bool = True, images: str = "intensity",
-                 unseen: str = "occupied"):
+                 unseen: str = "occupied", classifier=None):
         if not isinstance(rig, Rig):
             raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}", field="rig")
         try:
@@ -83,7 +87,7 @@ class ImageCollisionTest:
             raise InputError(f"images must be 'intensity' or 'depth', got {images!r}", field="images")
         self.images = images
         if thresholds is None:
-            thresholds = (12.0, 0.1) if images == "intensity" else (0.05, 0.25)
+            thresholds = (6.0, 0.05) if images == "intensity" else (0.05, 0.25)
         try:
             self.thresholds = np.array(thresholds, dtype=np.float64)
         except (TypeError, ValueError):
@@ -93,6 +97,7 @@ class ImageCollisionTest:
             raise InputError(f"thresholds must be two finite numbers >= 0 (the two tile features' changes), got "
                              f"{thresholds!r}", field="thresholds")
         self.lighting = bool(lighting) and images == "intensity"
+        self.classifier = classifier
         self.gains = []
         self.robot = robot
         self.projector = RobotProjector(robot, self.grids, x_max)
@@ -181,7 +186,7 @@ class ImageCollisionTest:
                 if not (math.isfinite(gain) and config.LIGHT_GAIN_RANGE[0] <= gain <= config.LIGHT_GAIN_RANGE[1]):
                     gain = math.nan  # no trustworthy estimate: every tile of this camera is foreground
                 self.gains.append(gain)
-                foreground = difference_image(features, reference, self.thresholds, gain)
+                foreground = difference_image(features, reference, self.thresholds, gain, self.classifier)
             obstacles.append(obstacle_image(foreground, robot))
         self.revised = revised_obstacle_images(obstacles, self.bands, self.theta)
         return self.revised
