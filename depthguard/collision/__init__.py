@@ -1,12 +1,20 @@
-"""The image-based multi-camera collision test of Henrich & Gecks (SPEC section 10; issue 10, in progress).
+"""The image-based multi-camera collision test of Henrich & Gecks (SPEC section 10; issue 10).
 
-Built so far: tile grids and the epipolar bands between cameras (step 5's geometry); the reference image, the tiles'
-features, the difference image and the robot's tile image (steps 1-3, thresholds as the linear classifier); the
-obstacle image (Table I), the revised obstacle image (Table III, C cameras, occlusion threshold theta), the
-intersection image (Table II) and the verdict with its class A-D (Table IV); :class:`ImageCollisionTest` runs them
-together with the robot's tile images rendered from its padded geometry; :class:`ConfigurationTable` holds many
-configurations' tile images as bitsets and gives all their verdicts at once. Not yet: the Bayes classifier, the depth
-variant, swept volumes, pick-and-place, the planner, the command line.
+- Tile grids and the epipolar bands between cameras (:class:`TileGrid`, :class:`EpipolarBands`).
+- Steps 1-2: the reference image (:func:`reference_image`, optionally leaving the robot out where the joints say it
+  stood), the tiles' features and the difference image (:func:`tile_features`, :func:`difference_image` with the
+  thresholds or a :class:`BayesTileClassifier`, following the room's light: :func:`light_gain`); the depth
+  variant (:func:`depth_difference_image`).
+- Step 3 and 7: the robot's tile images from its padded capsules, projected without rendering, and swept volumes
+  (:class:`RobotProjector`).
+- Steps 4-6: Tables I-IV (:func:`obstacle_image`, :func:`revised_obstacle_images`, :func:`intersection_image`,
+  :func:`verdict`); fail-safe by default (theta = C - 1, class B collides).
+- :class:`ImageCollisionTest` runs them over a rig; :class:`ConfigurationTable` gives many configurations' verdicts
+  by bitwise operations.
+- Step 9: :class:`ConfigurationGrid`, :func:`wave_propagation`, :func:`plan_path`.
+- Step 8, pick-and-place: :mod:`depthguard.collision._update` (:class:`ReferenceUpdate`).
+
+The command line (``depthguard collide``, ``depthguard plan``) lives in :mod:`depthguard._collision_command`.
 """
 
 from depthguard.collision._difference import (

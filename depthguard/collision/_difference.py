@@ -91,7 +91,7 @@ def depth_metres(image, grid: TileGrid, name: str = "image") -> np.ndarray:
     if array.shape != cam.shape or array.dtype.kind not in "uif":
         raise InputError(f"{name} must be a {cam.shape} depth image (uint16 in depth_scale units or float metres), "
                          f"got {array.dtype} {array.shape}", camera=cam.name, field=name)
-    if array.dtype.kind == "f":
+    if array.dtype.kind == "f":  # NaN, +-inf, 0 and negative values: no measurement (ROS 32FC1 conventions)
         metres = np.where(np.isfinite(array) & (array > 0.0), array, 0.0).astype(np.float64)
     else:
         if array.min(initial=0) < 0:
@@ -207,11 +207,21 @@ def labelled_tiles(features, reference_features, truth, grid: TileGrid, gain: fl
     return distances[keep], (share >= 0.1)[keep]
 
 
+#: Grey levels: below this mean (in the image, after the gain, or in the reference) a tile's balance point is noise
+#: (a near-black tile's few grey levels put it anywhere), and only its mean is compared.
+BALANCE_MIN_MEAN = 8.0
+
+
 def feature_distances(features, reference_features, gain: float = 1.0) -> np.ndarray:
-    """(rows, cols, 2) |feature - reference feature| per tile, the mean grey value first divided by ``gain``."""
+    """(rows, cols, 2) |feature - reference feature| per tile, the mean grey value first divided by ``gain``; the
+    balance point's distance is 0 where either mean is below :data:`BALANCE_MIN_MEAN`."""
     features = np.array(features, dtype=np.float64)
+    reference_features = np.asarray(reference_features, dtype=np.float64)
     features[..., 0] /= gain
-    return np.abs(features - np.asarray(reference_features, dtype=np.float64))
+    distances = np.abs(features - reference_features)
+    dark = np.minimum(features[..., 0], reference_features[..., 0]) < BALANCE_MIN_MEAN
+    distances[..., 1] = np.where(dark, 0.0, distances[..., 1])
+    return distances
 
 
 def difference_image(features, reference_features, thresholds=(6.0, 0.05), gain: float = 1.0,

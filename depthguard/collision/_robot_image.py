@@ -46,6 +46,8 @@ class RobotProjector:
         self.radii = np.array([capsule.radius for capsule in robot.capsules], dtype=np.float64)
         #: (n,) metres per radian: how fast a point of the robot can move per unit of each joint's velocity.
         self.reaches = robot.joint_reaches()
+        #: (m,) bool: the capsules a joint moves (the base and what is fixed to it never do).
+        self.moving = robot.moving_links()
         self._poses = []
         for grid in self.grids:
             T = grid.camera.T_camera_world
@@ -81,13 +83,21 @@ class RobotProjector:
                     out[c, :, : grid.words])
         return out
 
-    def bits(self, configurations) -> np.ndarray:
-        """(C, K, words) uint64: per camera, the tiles covered by each of the (K, n) configurations."""
-        return self._bits(self._segments(configurations), self.radii)
+    def bits(self, configurations, moving_only: bool = False) -> np.ndarray:
+        """(C, K, words) uint64: per camera, the tiles covered by each of the (K, n) configurations (with
+        ``moving_only``, by the links a joint moves: see :meth:`images`)."""
+        ends = self._segments(configurations)
+        if moving_only:
+            return self._bits(np.ascontiguousarray(ends[:, self.moving]), self.radii[self.moving])
+        return self._bits(ends, self.radii)
 
-    def images(self, joints) -> list[np.ndarray]:
-        """Step 3 at ``joints`` ((n,) radians): per camera, (rows, cols) bool tiles covered by the robot."""
-        return self.unpack(self.bits(np.asarray(joints, dtype=np.float64)[None])[:, 0])
+    def images(self, joints, moving_only: bool = False) -> list[np.ndarray]:
+        """Step 3 at ``joints`` ((n,) radians): per camera, (rows, cols) bool tiles covered by the robot; with
+        ``moving_only``, by the links a joint moves only. A future configuration is tested with those: its base is
+        where the current base is, inside the robot's own volume, where no obstacle can be (the paper's "the robot is
+        collision-free within its very own volume"), and the tiles it shares with everything else would otherwise
+        meet every possible obstacle the base's tiles hold."""
+        return self.unpack(self.bits(np.asarray(joints, dtype=np.float64)[None], moving_only)[:, 0])
 
     def samples(self, path) -> np.ndarray:
         """(N, n) configurations along the piecewise-linear joint-space ``path`` ((P, n), P >= 1): each segment
@@ -110,18 +120,20 @@ class RobotProjector:
             out.append(a + s * (b - a))
         return np.concatenate(out)
 
-    def swept_bits(self, path) -> np.ndarray:
+    def swept_bits(self, path, moving_only: bool = False) -> np.ndarray:
         """Step 7: (C, words) uint64, per camera, the tiles covered by the volume the robot sweeps along ``path``
         ((P, n) configurations, joint-space straight lines between them): the union of the :meth:`samples`'
-        capsules, each widened by x_max / 2 (a single configuration is not widened)."""
+        capsules, each widened by x_max / 2 (a single configuration is not widened). ``moving_only``: as
+        :meth:`images`."""
         q = self.samples(path)
-        ends = self._segments(q).reshape(1, -1, 2, 3)
+        keep = self.moving if moving_only else np.ones(len(self.radii), dtype=bool)
+        ends = np.ascontiguousarray(self._segments(q)[:, keep]).reshape(1, -1, 2, 3)
         widen = self.x_max / 2.0 if len(q) > 1 else 0.0
-        return self._bits(ends, np.tile(self.radii + widen, len(q)))[:, 0]
+        return self._bits(ends, np.tile(self.radii[keep] + widen, len(q)))[:, 0]
 
-    def swept_images(self, path) -> list[np.ndarray]:
+    def swept_images(self, path, moving_only: bool = False) -> list[np.ndarray]:
         """:meth:`swept_bits` as per camera (rows, cols) bool images."""
-        return self.unpack(self.swept_bits(path))
+        return self.unpack(self.swept_bits(path, moving_only))
 
     def unpack(self, bits: np.ndarray) -> list[np.ndarray]:
         """(C, words) bitsets -> per camera (rows, cols) bool."""

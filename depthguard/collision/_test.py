@@ -117,17 +117,20 @@ class ImageCollisionTest:
                              field=field)
         return [images[name] for name in self.names]
 
-    def robot_image(self, joints) -> list[np.ndarray]:
-        """Step 3 at ``joints``: per camera, (rows, cols) bool tiles that the robot's padded geometry covers."""
+    def robot_image(self, joints, future: bool = False) -> list[np.ndarray]:
+        """Step 3 at ``joints``: per camera, (rows, cols) bool tiles that the robot's padded geometry covers. With
+        ``future`` (a configuration to test), the links a joint moves only (:meth:`RobotProjector.images`: the base
+        stays inside its own volume); the rendered geometries ("hulls", "meshes") always draw every link."""
         q = self.robot.joint_vector(joints)
         if self.silhouette is None:
-            return self.projector.images(q)
+            return self.projector.images(q, moving_only=future)
         return [robot_tiles(self.silhouette.render(grid.camera, q) > 0.0, grid) for grid in self.grids]
 
     def robot_bits(self, configurations) -> np.ndarray:
-        """(C, K, words) uint64: per camera, the tiles covered by each of the (K, n) configurations."""
+        """(C, K, words) uint64: per camera, the tiles covered by each of the (K, n) configurations to test (as
+        :meth:`robot_image` with ``future``)."""
         if self.silhouette is None:
-            return self.projector.bits(configurations)
+            return self.projector.bits(configurations, moving_only=True)
         q = np.asarray(configurations, dtype=np.float64)
         n = self.robot.n_joints
         if q.ndim != 2 or q.shape[1] != n or not np.all(np.isfinite(q)):
@@ -136,7 +139,7 @@ class ImageCollisionTest:
         words = max(grid.words for grid in self.grids)
         bits = np.zeros((len(self.grids), len(q), words), dtype=np.uint64)
         for k, joints in enumerate(q):
-            for c, (grid, tiles) in enumerate(zip(self.grids, self.robot_image(joints))):
+            for c, (grid, tiles) in enumerate(zip(self.grids, self.robot_image(joints, future=True))):
                 bits[c, k, : grid.words] = grid.pack(tiles)
         return bits
 
@@ -169,31 +172,35 @@ class ImageCollisionTest:
 
     def observe(self, images: Mapping[str, np.ndarray], joints) -> list[np.ndarray]:
         """Steps 2-5 for one set of images (camera name -> (height, width) image) captured at ``joints``: the revised
-        obstacle images, kept for :meth:`test`, and returned (per camera, (rows, cols) uint8 labels)."""
+        obstacle images, kept for :meth:`test`, and returned (per camera, (rows, cols) uint8 labels). A set that is
+        refused (bad images or joints) leaves no answer behind: :meth:`test` refuses until a set is observed."""
+        self.revised = None  # no test answers from older images once a new set arrived
+        self.gains = []
         if self.reference is None:
             raise InputError("set_reference first: the difference images need the reference", field="reference")
         frames = self._per_camera(images, "images")
         robot_now = self.robot_image(joints)
         obstacles = []
-        self.gains = []
+        gains = []
         for frame, grid, reference, robot in zip(frames, self.grids, self.reference, robot_now):
             if self.images == "depth":
-                self.gains.append(1.0)
+                gains.append(1.0)
                 foreground = depth_difference_image(frame, reference, grid, self.thresholds)
             else:
                 features = tile_features(frame, grid)
                 gain = light_gain(features, reference) if self.lighting else 1.0
                 if not (math.isfinite(gain) and config.LIGHT_GAIN_RANGE[0] <= gain <= config.LIGHT_GAIN_RANGE[1]):
                     gain = math.nan  # no trustworthy estimate: every tile of this camera is foreground
-                self.gains.append(gain)
+                gains.append(gain)
                 foreground = difference_image(features, reference, self.thresholds, gain, self.classifier)
             obstacles.append(obstacle_image(foreground, robot))
         self.revised = revised_obstacle_images(obstacles, self.bands, self.theta)
+        self.gains = gains
         return self.revised
 
     def test(self, joints) -> Verdict:
         """Step 6 for the configuration ``joints`` against the last observed images."""
-        return self._verdict(self.robot_image(joints))
+        return self._verdict(self.robot_image(joints, future=True))
 
     def test_motion(self, path, chunk: int = 8) -> Verdict:
         """Steps 6-7 for a whole motion: ``path`` (P, n) configurations joined by straight lines in joint space. The
@@ -210,10 +217,10 @@ class ImageCollisionTest:
             raise InputError(f"chunk must be a whole number of steps >= 1, got {chunk!r}", field="chunk")
         samples = self.projector.samples(path)
         if len(samples) == 1:
-            return self._verdict(self.projector.swept_images(samples))
+            return self._verdict(self.projector.swept_images(samples, moving_only=True))
         best = None
         for start in range(0, len(samples) - 1, chunk):
-            v = self._verdict(self.projector.swept_images(samples[start: start + chunk + 1]))
+            v = self._verdict(self.projector.swept_images(samples[start: start + chunk + 1], moving_only=True))
             if v.collision:
                 return v
             best = v if best is None or v.klass > best.klass else best

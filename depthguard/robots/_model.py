@@ -510,6 +510,11 @@ class RobotModel:
         data = self._forward(q, check)
         return self._capsule_anchors.positions(data, self.T_world_base).reshape(-1, 2, 3)
 
+    def moving_links(self) -> np.ndarray:
+        """(m,) bool per link of :attr:`link_names`: whether a movable joint moves it (False for the base and links
+        fixed to it)."""
+        return np.array([joint != 0 for joint in self._capsule_anchors.joints[::2]], dtype=bool)
+
     def joint_reaches(self) -> np.ndarray:
         """(n,) float64, for every joint (:attr:`joint_names` order) a bound, valid at every configuration, on how
         fast any point of the padded capsules moves per unit of that joint's velocity: metres per radian for a
