@@ -32,6 +32,7 @@ KERNEL_MODULES = (
     "depthguard.baselines",
     "depthguard.collision._kernels",
     "depthguard.collision._plan_kernels",
+    "depthguard.collision._update_kernels",
     "depthguard.depth._kernels",
     "depthguard.depthgrid._kernels",
     "depthguard.depthspace._frustum",

@@ -167,6 +167,10 @@ def _run_workloads() -> None:
 
     T = grids[0].camera.T_camera_world
     cam = grids[0].camera
+    from depthguard.collision import box_tiles
+    from depthguard.scenes import Box
+
+    box_tiles(grids[0], Box.from_bounds(box.lo, box.hi))
     for project in (collision_kernels.capsule_tile_bits, collision_kernels.capsule_tile_bits_parallel):
         project(np.array([[[box.lo, box.hi]]], dtype=np.float64), np.array([0.05]), np.ascontiguousarray(T[:3, :3]),
                 np.ascontiguousarray(T[:3, 3]), cam.fx, cam.fy, cam.cx, cam.cy, grids[0].col_edges,

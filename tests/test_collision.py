@@ -736,3 +736,44 @@ def test_a_bayes_classifier_refuses_what_it_cannot_learn_from():
                  (np.full((10, 2), np.nan), np.zeros(10, bool))):
         with pytest.raises(InputError, match="distances"):
             classifier.fit(x, y)
+
+
+def test_a_refused_set_of_images_leaves_no_answer_behind(iiwa_scene):
+    test, robot, cameras, backgrounds = iiwa_scene
+    poses = [np.array([a, 0.5, 0.0, -1.4, 0.0, 0.8, 0.0]) for a in (-1.2, -0.6, 0.0, 0.6, 1.2)]
+    test.set_reference({name: [_draw(test, backgrounds, cameras, q)[name] for q in poses] for name in cameras})
+    now = poses[2]
+    good = _draw(test, backgrounds, cameras, now)
+    test.observe(good, now)
+    assert test.test(now).klass in "ABCD" and len(test.gains) == 4
+    with pytest.raises(InputError):
+        test.observe({**good, "c2": good["c2"][:-1]}, now)
+    with pytest.raises(InputError, match="observe"):
+        test.test(now)
+    assert test.gains == []
+
+
+def test_a_dark_tiles_balance_point_is_not_compared():
+    """On a near-black tile a few grey levels of noise put the balance point anywhere: only the mean is compared
+    there; on a brighter tile the same shift of the balance point makes it foreground."""
+    from depthguard.collision import BALANCE_MIN_MEAN, difference_image, feature_distances
+
+    reference = np.array([[[2.0, 0.5], [100.0, 0.5]]])
+    now = np.array([[[2.5, 0.9], [100.0, 0.9]]])
+    distances = feature_distances(now, reference)
+    assert distances[0, 0, 1] == 0.0 and distances[0, 1, 1] == pytest.approx(0.4)
+    assert BALANCE_MIN_MEAN > 2.5
+    assert difference_image(now, reference).tolist() == [[False, True]]
+
+
+def test_future_configurations_leave_the_base_out(iiwa_scene):
+    """The base never moves: a future configuration's tiles are its moving links' (the base stays inside the robot's
+    own volume); the current robot image keeps every link."""
+    test, robot = iiwa_scene[:2]
+    moving = robot.moving_links()
+    assert moving.tolist() == [False] + [True] * 7
+    q = np.array([0.3, 0.5, 0.0, -1.4, 0.0, 0.8, 0.0])
+    everything = test.robot_image(q)
+    future = test.robot_image(q, future=True)
+    for all_tiles, moving_tiles in zip(everything, future):
+        assert np.all(all_tiles >= moving_tiles) and all_tiles.sum() > moving_tiles.sum()

@@ -18,6 +18,7 @@ The command line (``depthguard collide``, ``depthguard plan``) lives in :mod:`de
 """
 
 from depthguard.collision._difference import (
+    BALANCE_MIN_MEAN,
     FOUR_NEIGHBOURS,
     BayesTileClassifier,
     depth_metres,
@@ -34,6 +35,7 @@ from depthguard.collision._epipolar import EpipolarBands, TileGrid, workspace_de
 from depthguard.collision._plan import MAX_GRID_CELLS, ConfigurationGrid, plan_path, wave_propagation
 from depthguard.collision._robot_image import RobotProjector
 from depthguard.collision._test import ConfigurationTable, ImageCollisionTest
+from depthguard.collision._update import ReferenceUpdate, box_tiles
 from depthguard.collision._tables import (
     BACKGROUND,
     ERROR,
@@ -51,6 +53,7 @@ from depthguard.collision._tables import (
 
 __all__ = [
     "BACKGROUND",
+    "BALANCE_MIN_MEAN",
     "BayesTileClassifier",
     "ConfigurationGrid",
     "ConfigurationTable",
@@ -62,10 +65,12 @@ __all__ = [
     "MAX_GRID_CELLS",
     "OBSTACLE",
     "POSSIBLE",
+    "ReferenceUpdate",
     "RobotProjector",
     "TileGrid",
     "UNKNOWN",
     "Verdict",
+    "box_tiles",
     "camera_collisions",
     "depth_metres",
     "depth_difference_image",

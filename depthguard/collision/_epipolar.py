@@ -75,6 +75,12 @@ class TileGrid:
         flat[: self.n_tiles] = np.asarray(mask, dtype=bool).reshape(-1)
         return np.packbits(flat, bitorder="little").view("<u8").copy()
 
+    def unpack(self, bits: np.ndarray) -> np.ndarray:
+        """(words,) uint64 bitset (at least :attr:`words` words; tile index order) -> (rows, cols) bool."""
+        words = np.ascontiguousarray(np.asarray(bits, dtype=np.uint64)[: self.words]).astype("<u8")
+        flat = np.unpackbits(words.view(np.uint8), bitorder="little")
+        return flat[: self.n_tiles].astype(bool).reshape(self.rows, self.cols)
+
 
 def _box(workspace) -> tuple[np.ndarray, np.ndarray]:
     """(low, high) corners of a workspace box given as [[x, y, z], [x, y, z]], metres: finite, low < high."""

@@ -55,16 +55,15 @@ class RobotProjector:
             self._poses.append((np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
                                 float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy)))
 
-    def _segments(self, configurations) -> np.ndarray:
+    def _segments(self, configurations, field: str = "configurations") -> np.ndarray:
         n = self.robot.n_joints
         try:
             q = np.asarray(configurations, dtype=np.float64)
         except (TypeError, ValueError):
-            raise InputError(f"configurations must be (K, {n}) joint positions, got "
-                             f"{type(configurations).__name__}", field="configurations") from None
+            raise InputError(f"{field} must be (K, {n}) joint positions, got {type(configurations).__name__}",
+                             field=field) from None
         if q.ndim != 2 or q.shape[1] != n or not np.all(np.isfinite(q)):
-            raise InputError(f"configurations must be (K, {n}) finite joint positions, got {q.shape}",
-                             field="configurations")
+            raise InputError(f"{field} must be (K, {n}) finite joint positions, got {q.shape}", field=field)
         tol = config.JOINT_LIMIT_TOLERANCE
         outside = np.any((q < self.robot.lower - tol) | (q > self.robot.upper + tol), axis=1)
         if outside.any():
@@ -112,7 +111,7 @@ class RobotProjector:
             raise InputError(f"path must be (P, n) joint positions, got {type(path).__name__}", field="path") from None
         if q.ndim == 1:
             q = q[None]
-        self._segments(q)  # checks the path (shape, finite, limits)
+        self._segments(q, "path")  # checks the path (shape, finite, limits)
         out = [q[:1]]
         for a, b in zip(q[:-1], q[1:]):
             steps = max(1, int(np.sum(np.ceil(np.abs(b - a) * self.reaches / self.x_max - 1e-12))))
@@ -137,8 +136,4 @@ class RobotProjector:
 
     def unpack(self, bits: np.ndarray) -> list[np.ndarray]:
         """(C, words) bitsets -> per camera (rows, cols) bool."""
-        out = []
-        for grid, row in zip(self.grids, bits):
-            flat = np.unpackbits(np.ascontiguousarray(row[: grid.words]).view(np.uint8), bitorder="little")
-            out.append(flat[: grid.n_tiles].astype(bool).reshape(grid.rows, grid.cols))
-        return out
+        return [grid.unpack(row) for grid, row in zip(self.grids, bits)]

@@ -2,9 +2,10 @@
 and the gripped work piece as part of the robot.
 
 When the robot picks a work piece up or puts it down, the cameras see a change where it lay or now lies: foreground
-against the reference, a virtual obstacle. The update replaces those tiles' reference features with the current
-ones, tile by tile, once nothing hides them: neither the robot (R) nor anything that may be an obstacle in front of
-them (O). Tile images are (rows, cols) bool arrays of a camera's :class:`TileGrid`.
+against the reference, a virtual obstacle. The update replaces those tiles of the reference (their features, or
+their pixels of a reference depth image) with the current image's, tile by tile, once nothing hides them: neither
+the robot (R) nor anything that may be an obstacle in front of them (O). Tile images are (rows, cols) bool arrays of
+a camera's :class:`TileGrid`.
 
 Boxes are :class:`depthguard.scenes.Box`: ``center`` (3,) metres, ``half_extents`` (3,) metres (>= 0) along the box's
 own axes, ``R_world_box`` (3, 3) its rotation, all in the frame the function names (the world frame, or the
@@ -22,7 +23,13 @@ from scipy import ndimage
 
 from depthguard import config
 from depthguard.collision import _update_kernels
-from depthguard.collision._difference import FOUR_NEIGHBOURS, depth_metres, tile_features
+from depthguard.collision._difference import (
+    FOUR_NEIGHBOURS,
+    depth_difference_image,
+    depth_metres,
+    difference_image,
+    tile_features,
+)
 from depthguard.collision._epipolar import TileGrid
 from depthguard.collision._tables import (
     BACKGROUND,
@@ -35,6 +42,7 @@ from depthguard.collision._tables import (
     revised_obstacle_images,
     verdict,
 )
+from depthguard.collision._test import ImageCollisionTest
 from depthguard.errors import InputError, real_vector
 from depthguard.scenes import Box
 from depthguard.transforms import invert
@@ -99,12 +107,6 @@ def _grid_bits(grid: TileGrid, corners: np.ndarray) -> np.ndarray:
     return out
 
 
-def _unpack(grid: TileGrid, words: np.ndarray) -> np.ndarray:
-    """(words,) uint64 bitset -> (rows, cols) bool (:meth:`TileGrid.pack`'s inverse)."""
-    flat = np.unpackbits(np.ascontiguousarray(words, dtype="<u8").view(np.uint8), bitorder="little")
-    return flat[: grid.n_tiles].astype(bool).reshape(grid.rows, grid.cols)
-
-
 def box_tiles(grid: TileGrid, box: Box) -> np.ndarray:
     """The tiles of ``grid``'s camera that ``box`` (world frame, metres) may be seen in: (rows, cols) bool.
 
@@ -118,7 +120,7 @@ def box_tiles(grid: TileGrid, box: Box) -> np.ndarray:
     """
     if not isinstance(grid, TileGrid):
         raise InputError(f"grid must be a TileGrid, got {type(grid).__name__}", field="grid")
-    return _unpack(grid, _grid_bits(grid, box_corners(box, "box")[None])[0])
+    return grid.unpack(_grid_bits(grid, box_corners(box, "box")[None])[0])
 
 
 # ------------------------------------------------------------------------------------------------ the update
@@ -159,6 +161,7 @@ class ReferenceUpdate:
     update: the tiles absorbed now read as background from the next set of images on.
 
     Attributes:
+        collision_test: the ImageCollisionTest (``test`` above; its ``reference`` is replaced by every step).
         pending: per camera, (rows, cols) bool: U, the tiles still to update.
         absorbed: per camera, (rows, cols) bool: E of the last :meth:`step`, the tiles it updated.
         blocked: per camera, (rows, cols) bool: O of the last :meth:`step`, the tiles of U it held back.
@@ -169,8 +172,6 @@ class ReferenceUpdate:
     """
 
     def __init__(self, test):
-        from depthguard.collision._test import ImageCollisionTest
-
         if not isinstance(test, ImageCollisionTest):
             raise InputError(f"test must be an ImageCollisionTest, got {type(test).__name__}", field="test")
         if len(test.grids) < 2:
@@ -209,7 +210,7 @@ class ReferenceUpdate:
         robot = self.collision_test.robot
         q = robot.joint_vector(joints_t0)
         for c, grid in enumerate(self.collision_test.grids):
-            self.pending[c] |= _unpack(grid, _grid_bits(grid, corners[None])[0])
+            self.pending[c] |= grid.unpack(_grid_bits(grid, corners[None])[0])
         self.joints_t0 = q
         return moved_box(piece, invert(robot.link_poses(q)[self.link]))
 
@@ -240,7 +241,7 @@ class ReferenceUpdate:
         if piece is None:
             return images
         corners = box_corners(piece)[None]
-        return [image | _unpack(grid, _grid_bits(grid, corners)[0]) for image, grid in zip(images, test.grids)]
+        return [image | grid.unpack(_grid_bits(grid, corners)[0]) for image, grid in zip(images, test.grids)]
 
     # -------------------------------------------------------------------------------------------- the loop
 
@@ -261,23 +262,42 @@ class ReferenceUpdate:
         obstacles = [np.where(robot, UNKNOWN, np.where(fg, OBSTACLE, BACKGROUND)).astype(np.uint8)
                      for fg, robot in zip(seen, robot_now)]
         test.revised = revised_obstacle_images(obstacles, test.bands, test.theta)
-        self.blocked = self.possible_obstacles(seen, robot_now)
-        references = []
+
+        # Per camera: the current image's reference content (tile features, or depth pixels in metres), and the
+        # difference image against the reference as it would be with all of U updated (for O).
+        currents, after = [], []
         for c, (grid, name) in enumerate(zip(test.grids, test.names)):
+            reference, gain, pending = test.reference[c], test.gains[c], self.pending[c]
+            if test.images == "intensity":  # the reference: (rows, cols, 2) tile features
+                features = tile_features(images[name], grid)
+                current = features.copy()
+                current[..., 0] /= gain  # at the reference's brightness (NaN: no estimate, nothing is updated)
+                where = pending
+            else:  # the reference: (height, width) depth image, metres
+                current = depth_metres(images[name], grid)
+                rows, cols = grid.tile_of_pixels()
+                where = pending[rows[:, None], cols[None, :]]
+            future = np.array(reference, dtype=np.float64, copy=True)
+            future[where] = current[where]
+            if test.images == "intensity":
+                after.append(difference_image(features, future, test.thresholds, gain, test.classifier))
+            else:
+                after.append(depth_difference_image(images[name], future, grid, test.thresholds))
+            currents.append(current)
+        self.blocked = self.possible_obstacles(after, robot_now)
+
+        references = []
+        for c, grid in enumerate(test.grids):
             absorb = self.pending[c] & ~robot_now[c] & ~self.blocked[c]
-            gain = test.gains[c]
-            if not math.isfinite(gain):  # no trustworthy light estimate: the camera updates nothing
+            if not math.isfinite(test.gains[c]):  # no trustworthy light estimate: the camera updates nothing
                 absorb[:] = False
             reference = np.array(test.reference[c], dtype=np.float64, copy=True)
-            if absorb.any():
-                if test.images == "intensity":  # the reference: (rows, cols, 2) tile features
-                    new = tile_features(images[name], grid)[absorb]
-                    new[:, 0] /= gain  # back to the reference's brightness
-                    reference[absorb] = new
-                else:  # the reference: (height, width) depth image, metres
-                    rows, cols = grid.tile_of_pixels()
-                    pixels = absorb[rows[:, None], cols[None, :]]
-                    reference[pixels] = depth_metres(images[name], grid)[pixels]
+            if test.images == "intensity":
+                reference[absorb] = currents[c][absorb]
+            else:
+                rows, cols = grid.tile_of_pixels()
+                pixels = absorb[rows[:, None], cols[None, :]]
+                reference[pixels] = currents[c][pixels]
             references.append(reference)
             self.absorbed[c] = absorb
             self.pending[c] = self.pending[c] & ~absorb
@@ -289,8 +309,9 @@ class ReferenceUpdate:
         the work piece's change, and so must not be absorbed now.
 
         Args:
-            foreground: per camera, (rows, cols) bool, the difference images against the current reference (only
-                their tiles outside ``robot_now`` are read).
+            foreground: per camera, (rows, cols) bool, the difference image of the current image against the
+                reference as it would be with every tile of U updated (U's tiles replaced by the current image's):
+                U's own change then makes no foreground, and the difference image's closing joins no tile to it.
             robot_now: per camera, (rows, cols) bool, the robot's tiles now with the gripped piece (R).
 
         The rule. Inside U a difference tells nothing: the moved piece makes U foreground, and so does a hand next
@@ -305,8 +326,8 @@ class ReferenceUpdate:
         A tile t of camera a's U is in O when
 
         1. for any other camera b, t's epipolar band in b meets X_b (one camera suffices, not C - theta); or
-        2. t is 4-connected, through tiles of U_a that are foreground or the robot's, to a tile of X_a or P_a: an
-           obstacle of camera a's own image, seen or possibly behind the robot, that reaches into the update area.
+        2. t is 4-connected through U_a to a tile of X_a or P_a: an obstacle in camera a's own image, seen or
+           possibly behind the robot, that reaches into the update area.
 
         Why it is fail-safe. Absorbing a tile that shows an obstacle would hide that obstacle from this camera for
         good; keeping a tile in U costs only time (it stays foreground: a virtual obstacle, on the safe side). Any
@@ -324,7 +345,7 @@ class ReferenceUpdate:
         possible obstacle anywhere. Adding them would hold tiles back for obstacles elsewhere along the bands.
 
         The price: while anything unexplained is seen along a tile's bands (a person anywhere on them, a tile the
-        difference image's closing adds between the robot's image and the update area's), that tile waits.
+        closing adds between the robot's image and something else), that tile waits.
         """
         test = self.collision_test
         grids, bands = test.grids, test.bands
@@ -348,8 +369,7 @@ class ReferenceUpdate:
                 blocked.reshape(-1)[tiles[hit]] = True
                 seeds = seen[a] | possible[a]
                 if seeds.any():  # (2)
-                    labels, _ = ndimage.label((pending & (foreground[a] | robot_now[a])) | seeds,
-                                              structure=FOUR_NEIGHBOURS)
+                    labels, _ = ndimage.label(pending | seeds, structure=FOUR_NEIGHBOURS)
                     touched = np.unique(labels[seeds])
                     blocked |= pending & np.isin(labels, touched[touched > 0])
             out.append(blocked)
@@ -427,7 +447,7 @@ class ReferenceUpdate:
             part = slice(first, first + chunk + 1)
             images = []
             for image, grid in zip(projector.swept_images(samples[part]), test.grids):
-                images.append(image | _unpack(grid, np.bitwise_or.reduce(_grid_bits(grid, world[part]), axis=0)))
+                images.append(image | grid.unpack(np.bitwise_or.reduce(_grid_bits(grid, world[part]), axis=0)))
             v = self._verdict(images)
             if v.collision:
                 return v
