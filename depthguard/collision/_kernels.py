@@ -82,6 +82,41 @@ def _tiles_spanned(edges, lo, hi):
     return first, last
 
 
+@kernel(inline=True)
+def mark_hull_tiles(xs, ys, hull_x, hull_y, col_edges, row_edges, out, k):
+    """Set in out[k] (a uint64 bitset, tile index r * cols + c) every tile whose footprint (col_edges[c] ..
+    col_edges[c + 1] x row_edges[r] .. row_edges[r + 1], pixels) meets the convex hull of the points (xs, ys)
+    (pixels, at most 8); hull_x, hull_y: work arrays of twice their length."""
+    cols = col_edges.shape[0] - 1
+    rows = row_edges.shape[0] - 1
+    m = convex_hull(xs, ys, hull_x, hull_y)
+    lo_x = np.inf
+    hi_x = -np.inf
+    lo_y = np.inf
+    hi_y = -np.inf
+    for i in range(xs.shape[0]):
+        lo_x = min(lo_x, xs[i])
+        hi_x = max(hi_x, xs[i])
+        lo_y = min(lo_y, ys[i])
+        hi_y = max(hi_y, ys[i])
+    if hi_x < col_edges[0] or lo_x > col_edges[cols] or hi_y < row_edges[0] or lo_y > row_edges[rows]:
+        return
+    c_lo, c_hi = _tiles_spanned(col_edges, lo_x, hi_x)
+    r_lo, r_hi = _tiles_spanned(row_edges, lo_y, hi_y)
+    for r in range(r_lo, r_hi + 1):
+        for c in range(c_lo, c_hi + 1):
+            if _rect_meets_hull(col_edges[c], col_edges[c + 1], row_edges[r], row_edges[r + 1], hull_x, hull_y, m):
+                tile = r * cols + c
+                out[k, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
+
+
+@kernel(inline=True)
+def mark_every_tile(n_tiles, out, k):
+    """Set in out[k] the bits of tiles 0 .. n_tiles - 1 (something that may be seen anywhere)."""
+    for tile in range(n_tiles):
+        out[k, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
+
+
 @kernel(parallel=True)
 def tile_bands(rays, depths, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
     """For every tile of camera A, the tiles of camera B that its frustum between depths[tile, 0] and depths[tile, 1]
@@ -119,27 +154,9 @@ def tile_bands(rays, depths, R, t, fx, fy, cx, cy, col_edges, row_edges, words, 
             xs[corner] = fx * bx / bz + cx
             ys[corner] = fy * by / bz + cy
         if behind:
-            for tile in range(rows * cols):
-                out[a, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
-            continue
-        m = convex_hull(xs, ys, hull_x, hull_y)
-        lo_x = np.inf
-        hi_x = -np.inf
-        lo_y = np.inf
-        hi_y = -np.inf
-        for i in range(8):
-            lo_x = min(lo_x, xs[i])
-            hi_x = max(hi_x, xs[i])
-            lo_y = min(lo_y, ys[i])
-            hi_y = max(hi_y, ys[i])
-        c_lo, c_hi = _tiles_spanned(col_edges, lo_x, hi_x)
-        r_lo, r_hi = _tiles_spanned(row_edges, lo_y, hi_y)
-        for r in range(r_lo, r_hi + 1):
-            for c in range(c_lo, c_hi + 1):
-                if _rect_meets_hull(col_edges[c], col_edges[c + 1], row_edges[r], row_edges[r + 1], hull_x, hull_y,
-                                    m):
-                    tile = r * cols + c
-                    out[a, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
+            mark_every_tile(rows * cols, out, a)
+        else:
+            mark_hull_tiles(xs, ys, hull_x, hull_y, col_edges, row_edges, out, a)
 
 
 @kernel(inline=True)
@@ -191,29 +208,9 @@ def _capsule_set_bits(ends, k, radii, R, t, fx, fy, cx, cy, col_edges, row_edges
             xs[4 * e + 3] = u1
             ys[4 * e + 3] = v1
         if behind:
-            for tile in range(rows * cols):
-                out[k, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
+            mark_every_tile(rows * cols, out, k)
             return
-        hm = convex_hull(xs, ys, hull_x, hull_y)
-        lo_x = np.inf
-        hi_x = -np.inf
-        lo_y = np.inf
-        hi_y = -np.inf
-        for i in range(8):
-            lo_x = min(lo_x, xs[i])
-            hi_x = max(hi_x, xs[i])
-            lo_y = min(lo_y, ys[i])
-            hi_y = max(hi_y, ys[i])
-        if hi_x < col_edges[0] or lo_x > col_edges[cols] or hi_y < row_edges[0] or lo_y > row_edges[rows]:
-            continue
-        c_lo, c_hi = _tiles_spanned(col_edges, lo_x, hi_x)
-        r_lo, r_hi = _tiles_spanned(row_edges, lo_y, hi_y)
-        for r in range(r_lo, r_hi + 1):
-            for c in range(c_lo, c_hi + 1):
-                if _rect_meets_hull(col_edges[c], col_edges[c + 1], row_edges[r], row_edges[r + 1], hull_x, hull_y,
-                                    hm):
-                    tile = r * cols + c
-                    out[k, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
+        mark_hull_tiles(xs, ys, hull_x, hull_y, col_edges, row_edges, out, k)
 
 
 @kernel()

@@ -4,7 +4,7 @@ camera that boxes (work pieces) may be seen in. It trusts its inputs; ``_update.
 import numpy as np
 
 from depthguard._jit import kernel
-from depthguard.collision._kernels import _rect_meets_hull, _tiles_spanned, convex_hull
+from depthguard.collision._kernels import mark_every_tile, mark_hull_tiles
 
 
 @kernel()
@@ -42,26 +42,6 @@ def box_tile_bits(corners, R, t, fx, fy, cx, cy, near, col_edges, row_edges, wor
             xs[i] = fx * x / z + cx
             ys[i] = fy * y / z + cy
         if behind:
-            for tile in range(rows * cols):
-                out[k, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
-            continue
-        m = convex_hull(xs, ys, hull_x, hull_y)
-        lo_x = np.inf
-        hi_x = -np.inf
-        lo_y = np.inf
-        hi_y = -np.inf
-        for i in range(8):
-            lo_x = min(lo_x, xs[i])
-            hi_x = max(hi_x, xs[i])
-            lo_y = min(lo_y, ys[i])
-            hi_y = max(hi_y, ys[i])
-        if hi_x < col_edges[0] or lo_x > col_edges[cols] or hi_y < row_edges[0] or lo_y > row_edges[rows]:
-            continue
-        c_lo, c_hi = _tiles_spanned(col_edges, lo_x, hi_x)
-        r_lo, r_hi = _tiles_spanned(row_edges, lo_y, hi_y)
-        for r in range(r_lo, r_hi + 1):
-            for c in range(c_lo, c_hi + 1):
-                if _rect_meets_hull(col_edges[c], col_edges[c + 1], row_edges[r], row_edges[r + 1], hull_x, hull_y,
-                                    m):
-                    tile = r * cols + c
-                    out[k, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
+            mark_every_tile(rows * cols, out, k)
+        else:
+            mark_hull_tiles(xs, ys, hull_x, hull_y, col_edges, row_edges, out, k)

@@ -103,30 +103,10 @@ def read_intensity_png(path, camera=None) -> np.ndarray:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error")
-            try:
-                image = PngImagePlugin.PngImageFile(io.BytesIO(data))
-            except Exception as exc:  # noqa: BLE001 - Pillow reports corrupt files in many exception types
-                raise DepthImageError(f"not a readable PNG file ({_reason(exc)})") from None
-            with image:
-                width, height = image.size
-                _check_size(width, height, camera)
-                limit = Image.MAX_IMAGE_PIXELS
-                if limit is not None and width * height > limit:
-                    raise DepthImageError(f"image of {width}x{height} pixels is larger than Pillow's "
-                                          f"decompression-bomb limit of {limit} pixels", field="width/height")
-                if image.mode != "L":
-                    raise DepthImageError(f"image mode {image.mode!r} is not 8-bit grayscale ('L')", field="dtype")
-                try:
-                    image.load()
-                    array = np.array(image)
-                except Exception as exc:  # noqa: BLE001 - truncated or corrupt pixel data
-                    raise DepthImageError(f"corrupt PNG file ({_reason(exc)})") from None
+            array, _ = _open_pillow(data, "PNG", camera, ("L",), "is not 8-bit grayscale ('L')")
     except DepthImageError as exc:
         raise DepthImageError(exc.message, source=str(path), field=exc.field, **context) from None
-    if array.shape != (height, width) or array.dtype != np.uint8:
-        raise DepthImageError(f"corrupt PNG file (decoded {array.dtype} {array.shape}, header says {height}x{width})",
-                              source=str(path), **context)
-    return array
+    return array.astype(np.uint8)
 
 
 def write_depth_png(path, depth_u16: np.ndarray) -> None:
@@ -270,7 +250,10 @@ def _read_pillow(data: bytes, kind: str, camera) -> np.ndarray:
         return _decode_pillow(data, kind, camera)
 
 
-def _decode_pillow(data: bytes, kind: str, camera) -> np.ndarray:
+def _open_pillow(data: bytes, kind: str, camera, modes, refusal: str) -> tuple[np.ndarray, str]:
+    """(array, mode) of an image that only the ``kind`` plugin decodes; its size checked against ``camera`` (and
+    Pillow's decompression-bomb limit) before decoding; a mode not in ``modes`` refused with "image mode M
+    ``refusal``"."""
     try:
         # The plugin of the format the suffix names, constructed directly: no other Pillow plugin (EPS, whose loader
         # runs Ghostscript, among them) ever sees the bytes, and the size checks below come before Pillow's own.
@@ -285,9 +268,8 @@ def _decode_pillow(data: bytes, kind: str, camera) -> np.ndarray:
             raise DepthImageError(f"image of {width}x{height} pixels is larger than Pillow's decompression-bomb "
                                   f"limit of {limit} pixels", field="width/height")
         mode = image.mode
-        if mode not in _PILLOW_MODES:
-            raise DepthImageError(f"image mode {mode!r} holds no depth (expected 16-bit grayscale or 32-bit float)",
-                                  field="dtype")
+        if mode not in modes:
+            raise DepthImageError(f"image mode {mode!r} {refusal}", field="dtype")
         try:
             image.load()
             array = np.array(image)
@@ -295,6 +277,12 @@ def _decode_pillow(data: bytes, kind: str, camera) -> np.ndarray:
             raise DepthImageError(f"corrupt {kind} file ({_reason(exc)})") from None
     if array.shape != (height, width):
         raise DepthImageError(f"corrupt {kind} file (decoded {array.shape}, header says {height}x{width})")
+    return array, mode
+
+
+def _decode_pillow(data: bytes, kind: str, camera) -> np.ndarray:
+    array, mode = _open_pillow(data, kind, camera, _PILLOW_MODES,
+                               "holds no depth (expected 16-bit grayscale or 32-bit float)")
     if mode in _UINT16_MODES:
         return array.astype(np.uint16)
     if mode == "I":  # 32-bit integer container
