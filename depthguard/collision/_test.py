@@ -45,8 +45,8 @@ class ImageCollisionTest:
             of the thresholds.
         thresholds: per tile feature, the change that makes a tile foreground (:func:`difference_image`): for
             intensity images (mean grey value, balance point row in tile heights), default (6, 0.05) (scenario C:
-            88 % of the tiles a person covers by a tenth, 0.1 % of the room; (12, 0.1) found 76 %,
-            benchmarks/probe_tile_classifier.py; a trained BayesTileClassifier 98 %); for depth
+            88 % of the tiles a person covers by a tenth; (12, 0.1) found 76 %, a trained BayesTileClassifier 99 %:
+            benchmarks/probe_tile_classifier.py); for depth
             images (the change in metres that makes a pixel changed, at least the camera's noise margin; the
             fraction of changed pixels that makes a tile foreground), default (0.05, 0.25): a quarter, above
             the few pixels a depth camera drops at random near edges and at grazing angles.
