@@ -164,3 +164,16 @@ def test_bad_input_is_refused_naming_the_camera_and_option(recorded, capsys, tmp
     Image.fromarray(np.zeros((64, 80), dtype=np.uint8), mode="L").save(small)
     swapped = [a if not str(a).startswith("c0=") or "now" not in str(a) else f"c0={small}" for a in base]
     assert_refused(swapped, capsys, "c0")
+
+
+def test_any_urdf_file_gives_the_built_in_robots_answers(recorded, capsys):
+    """--robot takes a URDF file as well as a built-in name: the iiwa's file from pybullet_data answers as 'iiwa'."""
+    from depthguard.robots import default_robot_path
+
+    extra = ("--theta", "1", "--unseen", "free", "--future", _values(THROUGH), "--future", _values(AWAY), "--json")
+    by_name = run_cli(_argv(recorded, "collide", "grey", *extra), capsys)
+    argv = [str(default_robot_path()) if a == "iiwa" else a for a in _argv(recorded, "collide", "grey", *extra)]
+    by_file = run_cli(argv, capsys)
+    assert by_name[0] == by_file[0] == 0 and json.loads(by_name[1]) == json.loads(by_file[1])
+    assert_refused([a if a != "iiwa" else str(recorded / "missing.urdf") for a in _argv(recorded, "collide", "grey",
+                                                                                          *extra)], capsys, "missing")
