@@ -154,6 +154,8 @@ def test_bad_input_is_refused_naming_the_camera_and_option(recorded, capsys, tmp
     assert_refused(base + ["--future", "0,0,0"], capsys, "--future")
     assert_refused(base + ["--future", "0,0,0,0,0,0,9"], capsys, "--future", "limits")
     assert_refused(base + ["--theta", "4"], capsys, "theta")
+    assert_refused(base + ["--tiles", "abc"], capsys, "--tiles")
+    assert_refused(base + ["--tiles", "0x5"], capsys, "rows")
     assert_refused(base + ["--reference-joints", _values(NOW)], capsys, "--reference-joints", "5 images")
     assert_refused(base[: -2], capsys, "--future")  # nothing to test
     colour = tmp_path / "colour.png"
