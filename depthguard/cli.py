@@ -4,7 +4,7 @@
     depthguard build-map --rig RIG.yaml [--principal NAME] [--d-min M --d-max M --delta-d M] --out MAP
     depthguard simulate [SCENE.yaml] --out DIR [--seed N] [--duration S] [--bag]
     depthguard replay RECORDING --out RESULTS.csv [--robot URDF|iiwa|panda] [--points POINTS] [--rho 0.4] ...
-    depthguard demo [--out DIR] [--duration S] [--mode none|avoid|ssm ...] [--no-bag]
+    depthguard demo [--out DIR] [--duration S] [--mode none|avoid|ssm ...] [--cameras 4|2] [--no-bag]
     depthguard workcell [--out DIR] [--duration S]
     depthguard fusion-workcell [--out DIR] [--scene SCENE.yaml ...] [--all-frames]
     depthguard coverage --rig RIG.yaml [--robot URDF|iiwa|panda] [--trajectory joint_states.csv] [--rho 0.4] ...
@@ -182,6 +182,9 @@ def _build_parser() -> argparse.ArgumentParser:
                       help="only the first S seconds, at least one frame (1/30 s) (default: all 4)")
     demo.add_argument("--mode", action="append", choices=("none", "avoid", "ssm"),
                       help="run only this mode (repeatable; default: none, avoid and ssm)")
+    demo.add_argument("--cameras", type=int, choices=(2, 4), default=4,
+                      help="four depth cameras round the robot (issue 8's reference layout, default) or the scene's "
+                           "two front ones (faster)")
     demo.add_argument("--no-bag", action="store_true",
                       help="do not write the avoid run as a recording (DIR/bag_avoid, an MCAP file of about 150 MB)")
 
@@ -282,7 +285,7 @@ def main(argv=None) -> int:
             from depthguard.experiments import avoidance_demo
 
             return avoidance_demo.main(out=args.out, duration=_duration(args.duration, config.SIM_RATE),
-                                       modes=args.mode, bag=not args.no_bag)
+                                       modes=args.mode, bag=not args.no_bag, cameras=args.cameras)
         if args.command == "workcell":
             from depthguard.experiments import workcell
 

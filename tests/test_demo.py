@@ -98,5 +98,8 @@ def test_demo_writes_one_summary_per_mode_and_plots(tmp_path, capsys):
     # Run again: the command replaces its own recording; --no-bag writes none.
     assert cli.main(["demo", "--out", str(tmp_path), "--duration", "0.05", "--mode", "avoid"]) == 0
     assert cli.main(["demo", "--out", str(tmp_path / "quiet"), "--duration", "0.05", "--mode", "avoid",
-                     "--no-bag"]) == 0
+                     "--no-bag", "--cameras", "2"]) == 0
     assert not (tmp_path / "quiet" / "bag_avoid").exists()
+    # four cameras round the robot by default (issue 8's reference layout), the scene's front two on request
+    assert summary["cameras"] == ["principal", "second", "third", "fourth"]
+    assert json.loads((tmp_path / "quiet" / "summary.json").read_text())["cameras"] == ["principal", "second"]

@@ -1,8 +1,9 @@
 """The Quick start's main job (issue 9): a robot doing its task next to a person, in closed loop, three ways.
 
 Scene ``scenario_b_reach.yaml``: a KUKA iiwa traces the 2016 paper's vertical hexagon at 0.4 m/s while a person walks
-up and reaches into its end-effector; two simulated 640x480 depth cameras (Kinect noise, edge dropouts) at 30 Hz are
-fused through the depth grid with the free-space memory; control runs at 500 Hz
+up and reaches into its end-effector; four simulated 640x480 depth cameras (Kinect noise, edge dropouts) at 30 Hz,
+issue 8's reference layout (``scenario_b_four.yaml``: the scene's two front cameras and two in the back corners;
+``cameras=2`` keeps the front two), are fused through the depth grid with the free-space memory; control runs at 500 Hz
 (:func:`depthguard.simulation._closed_loop.run_closed_loop`). The same episode is run per mode:
 
 - ``none``: the task alone (the baseline: it shows the collision that would happen);
@@ -35,7 +36,7 @@ papers' avoidance as a recording a user can open in Foxglove or rerun (``bag_avo
 joint states, the robot's capsules and control points coloured by distance, the distances over time;
 :mod:`depthguard.simulation._loop_bag`; about 0.6 MB per depth image, 150 MB for the whole run).
 
-    depthguard demo [--out DIR] [--duration S] [--mode none|avoid|ssm ...] [--no-bag]
+    depthguard demo [--out DIR] [--duration S] [--mode none|avoid|ssm ...] [--cameras 4|2] [--no-bag]
 """
 
 from __future__ import annotations
@@ -48,6 +49,9 @@ from pathlib import Path
 import numpy as np
 
 SCENE = "scenario_b_reach.yaml"
+#: The camera layouts by number of cameras: the scene's own two, or issue 8's four (its reference layout; neither
+#: reached issue 8's usefulness goal, and the issue asks for four then).
+LAYOUTS = {2: None, 4: "scenario_b_four.yaml"}
 
 #: A repulsive velocity below this (m/s) counts as none (the papers' sigmoid never quite reaches 0).
 REPULSIVE_EPSILON = 1e-3
@@ -55,10 +59,17 @@ REPULSIVE_EPSILON = 1e-3
 SLOWED_BELOW = 0.99
 
 
-def load_scene():
+def load_scene(cameras: int = 4):
+    """The demo's workcell with ``cameras`` (2 or 4) depth cameras (:data:`LAYOUTS`)."""
     from depthguard.simulation import load_workcell
 
-    return load_workcell(Path(str(resources.files("depthguard.simulation").joinpath(SCENE))))
+    if cameras not in LAYOUTS:
+        from depthguard.errors import InputError
+
+        raise InputError(f"the demo runs with 2 or 4 cameras, got {cameras!r}", field="cameras")
+    folder = Path(str(resources.files("depthguard.simulation")))
+    layout = None if LAYOUTS[cameras] is None else folder / LAYOUTS[cameras]
+    return load_workcell(folder / SCENE, layout=layout)
 
 
 def summarize(log, dt: float) -> dict:
@@ -144,7 +155,8 @@ def plot(log, mode_summary: dict, path: Path, control_points, rho: float) -> Non
 BAG_MODE = "avoid"  # the run written as a recording
 
 
-def main(out="out/demo", duration: float | None = None, modes=None, progress: bool = True, bag: bool = True) -> int:
+def main(out="out/demo", duration: float | None = None, modes=None, progress: bool = True, bag: bool = True,
+         cameras: int = 4) -> int:
     """Run the scene once per mode, print a table, write the plots and summary.json into ``out`` (and, with
     ``bag``, the ``avoid`` run as a recording in ``out/bag_avoid``, replacing an earlier one)."""
     from depthguard.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
@@ -152,7 +164,7 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
     modes = list(MODES) if not modes else list(dict.fromkeys(modes))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    workcell = load_scene()
+    workcell = load_scene(cameras)
     settings = LoopSettings()
     dt = 1.0 / settings.control_rate
     span = workcell.duration if duration is None else min(duration, workcell.duration)
