@@ -117,6 +117,26 @@ def mark_every_tile(n_tiles, out, k):
         out[k, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
 
 
+@kernel(inline=True)
+def mark_projected_points(points, R, t, fx, fy, cx, cy, near, col_edges, row_edges, out, k, xs, ys, hull_x, hull_y):
+    """Set in out[k] the tiles whose footprint meets the convex hull of ``points`` ((8, 3), metres) as a camera sees
+    them (R, t: the points' frame -> its optical frame; fx, fy, cx, cy: its intrinsics); every tile when a point lies
+    at optical depth <= ``near`` (it may be seen anywhere). xs, ys (8,) and hull_x, hull_y (16,): work arrays."""
+    for i in range(points.shape[0]):
+        px = points[i, 0]
+        py = points[i, 1]
+        pz = points[i, 2]
+        x = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz + t[0]
+        y = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + t[1]
+        z = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + t[2]
+        if not z > near:
+            mark_every_tile((row_edges.shape[0] - 1) * (col_edges.shape[0] - 1), out, k)
+            return
+        xs[i] = fx * x / z + cx
+        ys[i] = fy * y / z + cy
+    mark_hull_tiles(xs, ys, hull_x, hull_y, col_edges, row_edges, out, k)
+
+
 @kernel(parallel=True)
 def tile_bands(rays, depths, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
     """For every tile of camera A, the tiles of camera B that its frustum between depths[tile, 0] and depths[tile, 1]
@@ -129,34 +149,20 @@ def tile_bands(rays, depths, R, t, fx, fy, cx, cy, col_edges, row_edges, words, 
     pixel footprints: pixel p covers [p - 0.5, p + 0.5]). A piece that reaches behind B's image plane (a corner at
     B's depth <= 1 mm) sets every tile: it may be seen anywhere."""
     n = rays.shape[0]
-    cols = col_edges.shape[0] - 1
-    rows = row_edges.shape[0] - 1
     for a in prange(n):
+        corners = np.empty((8, 3))
         xs = np.empty(8)
         ys = np.empty(8)
         hull_x = np.empty(16)
         hull_y = np.empty(16)
         for w in range(words):
             out[a, w] = np.uint64(0)
-        behind = False
         for corner in range(8):
-            ray = corner % 4
             z = depths[a, corner // 4]
-            px = rays[a, ray, 0] * z
-            py = rays[a, ray, 1] * z
-            pz = rays[a, ray, 2] * z
-            bx = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz + t[0]
-            by = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + t[1]
-            bz = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + t[2]
-            if not bz > 1e-3:
-                behind = True
-                break
-            xs[corner] = fx * bx / bz + cx
-            ys[corner] = fy * by / bz + cy
-        if behind:
-            mark_every_tile(rows * cols, out, a)
-        else:
-            mark_hull_tiles(xs, ys, hull_x, hull_y, col_edges, row_edges, out, a)
+            for axis in range(3):
+                corners[corner, axis] = rays[a, corner % 4, axis] * z
+        mark_projected_points(corners, R, t, fx, fy, cx, cy, 1e-3, col_edges, row_edges, out, a, xs, ys, hull_x,
+                              hull_y)
 
 
 @kernel(inline=True)

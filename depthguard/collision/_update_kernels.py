@@ -4,7 +4,7 @@ camera that boxes (work pieces) may be seen in. It trusts its inputs; ``_update.
 import numpy as np
 
 from depthguard._jit import kernel
-from depthguard.collision._kernels import mark_every_tile, mark_hull_tiles
+from depthguard.collision._kernels import mark_projected_points
 
 
 @kernel()
@@ -18,30 +18,12 @@ def box_tile_bits(corners, R, t, fx, fy, cx, cy, near, col_edges, row_edges, wor
     its projection is the convex hull of theirs (exact, not a bound, while the box lies in front of the camera). A box
     with a corner at optical depth <= ``near`` (metres; within 1 mm of the camera's plane, or behind it) sets every
     tile: it may be seen anywhere."""
-    n_boxes = corners.shape[0]
-    cols = col_edges.shape[0] - 1
-    rows = row_edges.shape[0] - 1
     xs = np.empty(8)
     ys = np.empty(8)
     hull_x = np.empty(16)
     hull_y = np.empty(16)
-    for k in range(n_boxes):
+    for k in range(corners.shape[0]):
         for w in range(words):
             out[k, w] = np.uint64(0)
-        behind = False
-        for i in range(8):
-            px = corners[k, i, 0]
-            py = corners[k, i, 1]
-            pz = corners[k, i, 2]
-            x = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz + t[0]
-            y = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + t[1]
-            z = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + t[2]
-            if not z > near:
-                behind = True
-                break
-            xs[i] = fx * x / z + cx
-            ys[i] = fy * y / z + cy
-        if behind:
-            mark_every_tile(rows * cols, out, k)
-        else:
-            mark_hull_tiles(xs, ys, hull_x, hull_y, col_edges, row_edges, out, k)
+        mark_projected_points(corners[k], R, t, fx, fy, cx, cy, near, col_edges, row_edges, out, k, xs, ys, hull_x,
+                              hull_y)
