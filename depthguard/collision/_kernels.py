@@ -118,17 +118,19 @@ def mark_every_tile(n_tiles, out, k):
 
 
 @kernel(inline=True)
+def _in_frame(R, t, px, py, pz):
+    """(x, y, z) = R (px, py, pz) + t."""
+    return (R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz + t[0], R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + t[1],
+            R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + t[2])
+
+
+@kernel(inline=True)
 def mark_projected_points(points, R, t, fx, fy, cx, cy, near, col_edges, row_edges, out, k, xs, ys, hull_x, hull_y):
     """Set in out[k] the tiles whose footprint meets the convex hull of ``points`` ((8, 3), metres) as a camera sees
     them (R, t: the points' frame -> its optical frame; fx, fy, cx, cy: its intrinsics); every tile when a point lies
     at optical depth <= ``near`` (it may be seen anywhere). xs, ys (8,) and hull_x, hull_y (16,): work arrays."""
     for i in range(points.shape[0]):
-        px = points[i, 0]
-        py = points[i, 1]
-        pz = points[i, 2]
-        x = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz + t[0]
-        y = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + t[1]
-        z = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + t[2]
+        x, y, z = _in_frame(R, t, points[i, 0], points[i, 1], points[i, 2])
         if not z > near:
             mark_every_tile((row_edges.shape[0] - 1) * (col_edges.shape[0] - 1), out, k)
             return
@@ -190,12 +192,7 @@ def _capsule_set_bits(ends, k, radii, R, t, fx, fy, cx, cy, col_edges, row_edges
         rho = radii[j]
         behind = False
         for e in range(2):
-            px = ends[k, j, e, 0]
-            py = ends[k, j, e, 1]
-            pz = ends[k, j, e, 2]
-            x = R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz + t[0]
-            y = R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + t[1]
-            z = R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + t[2]
+            x, y, z = _in_frame(R, t, ends[k, j, e, 0], ends[k, j, e, 1], ends[k, j, e, 2])
             if not z - rho > 1e-3:
                 behind = True
                 break
