@@ -263,7 +263,13 @@ def plan(args) -> int:
     grid = ConfigurationGrid(lower, upper, counts)
     collision, _ = ConfigurationTable(test, grid.configurations()).verdicts()
     free = ~collision.reshape(grid.shape)
-    start_cell, goal_cell = grid.nearest(current), grid.nearest(goal)
+    cells_of = {}
+    for option, q in (("--current", current), ("--goal", goal)):
+        try:
+            cells_of[option] = grid.nearest(q)
+        except InputError as exc:
+            raise InputError(f"{option} lies outside the configuration grid ({exc.message}): widen --lower/--upper")
+    start_cell, goal_cell = cells_of["--current"], cells_of["--goal"]
     result = {"path": None, "grid": [int(c) for c in grid.shape], "free_cells": int(free.sum()),
               "start_free": bool(free[start_cell]), "goal_free": bool(free[goal_cell]), "motion": None}
     start_free = result["start_free"]

@@ -136,6 +136,14 @@ def test_plan_goes_around_the_box(recorded, capsys):
     assert json.loads(out)[0]["collision"]
 
 
+def test_plan_refuses_a_grid_that_leaves_out_the_current_or_the_goal_configuration(recorded, capsys):
+    argv = _argv(recorded, "plan", "grey", "--goal", _values((1.8,) + NOW[1:]), "--counts", "4,2,1,2,1,1,1")
+    assert_refused(argv + ["--lower", "0,0.2,0,-1.9,0,0.8,0", "--upper", "2.2,1.2,0,-0.7,0,0.8,0"], capsys,
+                   "--current", "outside")
+    assert_refused(argv + ["--lower", "-2.2,0.2,0,-1.9,0,0.8,0", "--upper", "1,1.2,0,-0.7,0,0.8,0"], capsys,
+                   "--goal", "outside")
+
+
 def test_plan_without_a_way_says_so(recorded, capsys):
     """The default rule near the box leaves no free configuration on this grid: no path, exit status 1."""
     status, out, err = run_cli(_argv(recorded, "plan", "grey", "--goal", _values((1.8,) + NOW[1:]), "--counts",
