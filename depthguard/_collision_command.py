@@ -117,7 +117,10 @@ def _robot(args):
 
     kwargs = {}
     if args.base is not None:
-        values = [float(x) for x in args.base.split(",")] if args.base.count(",") in (2, 3) else []
+        try:
+            values = [float(x) for x in args.base.split(",")] if args.base.count(",") in (2, 3) else []
+        except ValueError:
+            values = []
         if len(values) not in (3, 4) or not all(math.isfinite(v) and abs(v) <= config.COORDINATE_LIMIT
                                                 for v in values):
             raise InputError(f"--base: expected X,Y,Z or X,Y,Z,YAW (finite metres, radians), got {args.base!r}")

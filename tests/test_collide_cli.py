@@ -163,6 +163,10 @@ def test_bad_input_is_refused_naming_the_camera_and_option(recorded, capsys, tmp
     assert_refused(base + ["--future", "0,0,0,0,0,0,9"], capsys, "--future", "limits")
     assert_refused(base + ["--theta", "4"], capsys, "theta")
     assert_refused(base + ["--tiles", "abc"], capsys, "--tiles")
+    for bad in ("a,b,c", "1,2", "1,2,3,4,5", "nan,0,0", "0,0,1e9"):
+        assert_refused(base + ["--base", bad], capsys, "--base")
+    for bad in ("a,b,c,d,e,f", "0,0,0,1,1", "0,0,0,1,1,inf"):
+        assert_refused(base + ["--workspace", bad], capsys, "--workspace")
     assert_refused(base + ["--tiles", "0x5"], capsys, "rows")
     assert_refused(base + ["--reference-joints", _values(NOW)], capsys, "--reference-joints", "5 images")
     assert_refused(base[: -2], capsys, "--future")  # nothing to test
