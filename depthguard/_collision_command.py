@@ -138,8 +138,9 @@ def _robot(args):
 def _joints(robot, text: str, option: str) -> np.ndarray:
     from depthguard.cli import parse_joints
 
+    values = parse_joints(text, option)  # its errors name the option
     try:
-        return robot.joint_vector(parse_joints(text, option))
+        return robot.joint_vector(values)
     except InputError as exc:
         raise InputError(f"{option}: {exc.message}") from None
 
