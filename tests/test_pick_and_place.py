@@ -504,3 +504,30 @@ def test_the_update_refuses_what_it_cannot_use(scene):
         update.test_motion(np.zeros((2, 6)))
     with pytest.raises(InputError, match="chunk"):
         update.test_motion([s.home, s.up_B], chunk=0)
+
+
+def test_a_configuration_table_with_the_gripped_piece_gives_the_updates_verdicts(scene):
+    """ConfigurationTable(piece=...): every configuration's tiles include the gripped piece's, and the verdicts equal
+    ReferenceUpdate.test's, configuration by configuration; the piece changes some verdicts."""
+    from depthguard.collision import ConfigurationTable
+
+    s = scene
+    test = _test(s, theta=1, unseen="free")
+    update = ReferenceUpdate(test)
+    update.gripped(s.piece_in_link)
+    hand = [(s.hand, 250)]
+    update.step(_draw(s, s.up_B, [(moved_box(s.piece_in_link, s.robot.link_poses(s.up_B)[s.link]), PIECE_GREY)]
+                      + hand)[0], s.up_B)
+    rng = np.random.default_rng(21)
+    configurations = np.vstack([s.q_hand, s.q_B, s.home, s.up_A,
+                                s.up_B + rng.uniform(-0.6, 0.6, (16, 7)) * [1.0, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5]])
+    configurations = np.clip(configurations, s.robot.lower, s.robot.upper)
+    with_piece = ConfigurationTable(test, configurations, piece=s.piece_in_link)
+    bare = ConfigurationTable(test, configurations)
+    assert np.all(with_piece.bits >= bare.bits) and np.any(with_piece.bits != bare.bits)
+    collision, klass = with_piece.verdicts()
+    for k, q in enumerate(configurations):
+        v = update.test(q)
+        assert (collision[k], klass[k]) == (v.collision, v.klass), k
+    assert collision[0]  # through the hand
+    assert not np.array_equal(klass, bare.verdicts()[1])

@@ -242,14 +242,28 @@ class ConfigurationTable:
         test: the :class:`ImageCollisionTest` (its cameras, grids, theta and robot geometry).
         configurations: (K, n) joint positions, radians, the robot's joint order (e.g. a discretised configuration
             space; the paper used 8,192).
+        piece: a gripped work piece, a :class:`~depthguard.scenes.Box` in the end-effector link's frame (what
+            :meth:`ReferenceUpdate.gripped` takes): it extends the robot in every configuration.
 
     ``bits`` is (C, K, words) uint64: camera c's tiles covered by configuration k.
     """
 
-    def __init__(self, test: ImageCollisionTest, configurations):
+    def __init__(self, test: ImageCollisionTest, configurations, piece=None):
         self.test = test
         self.bits = test.robot_bits(configurations)
         self.configurations = np.asarray(configurations, dtype=np.float64)
+        if piece is not None:
+            from depthguard.collision._update import _grid_bits, box_corners
+
+            robot = test.robot
+            link = robot.control_points[robot.end_effector_index].link
+            local = box_corners(piece, "piece")
+            corners = np.empty((len(self.configurations), 8, 3))
+            for k, q in enumerate(self.configurations):
+                T = robot.link_poses(q, check=False)[link]
+                corners[k] = local @ T[:3, :3].T + T[:3, 3]
+            for c, grid in enumerate(test.grids):
+                self.bits[c, :, : grid.words] |= _grid_bits(grid, corners)
 
     def verdicts(self, revised=None) -> tuple[np.ndarray, np.ndarray]:
         """(collision (K,) bool, class (K,) str "A"-"D") of every configuration against ``revised`` (per camera, the

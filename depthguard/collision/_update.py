@@ -231,12 +231,13 @@ class ReferenceUpdate:
         q = self.collision_test.robot.joint_vector(joints)
         return moved_box(self.piece_in_gripper, self.collision_test.robot.link_poses(q)[self.link])
 
-    def robot_image(self, joints) -> list[np.ndarray]:
-        """Per camera, (rows, cols) bool: the robot's tiles at ``joints`` ((n,) radians; ``test.robot_image``) ORed
-        with the gripped piece's tiles at the end-effector link's pose there (:func:`box_tiles`)."""
+    def robot_image(self, joints, future: bool = False) -> list[np.ndarray]:
+        """Per camera, (rows, cols) bool: the robot's tiles at ``joints`` ((n,) radians; ``test.robot_image``, with
+        ``future`` the links a joint moves only) ORed with the gripped piece's tiles at the end-effector link's pose
+        there (:func:`box_tiles`)."""
         test = self.collision_test
         q = test.robot.joint_vector(joints)
-        images = test.robot_image(q)
+        images = test.robot_image(q, future=future)
         piece = self.piece_at(q)
         if piece is None:
             return images
@@ -400,7 +401,7 @@ class ReferenceUpdate:
     def test(self, joints) -> Verdict:
         """Step 6 for the configuration ``joints`` ((n,) radians) with the gripped piece (:meth:`robot_image`),
         against the revised obstacle images of the last :meth:`step` (the test's theta and unseen rule)."""
-        return self._verdict(self.robot_image(joints))
+        return self._verdict(self.robot_image(joints, future=True))
 
     def test_motion(self, path, chunk: int = 8) -> Verdict:
         """Steps 6-7 for a whole motion ``path`` ((P, n) radians, straight lines in joint space) with the gripped
@@ -446,7 +447,7 @@ class ReferenceUpdate:
         for first in range(0, max(len(samples) - 1, 1), chunk):
             part = slice(first, first + chunk + 1)
             images = []
-            for image, grid in zip(projector.swept_images(samples[part]), test.grids):
+            for image, grid in zip(projector.swept_images(samples[part], moving_only=True), test.grids):
                 images.append(image | grid.unpack(np.bitwise_or.reduce(_grid_bits(grid, world[part]), axis=0)))
             v = self._verdict(images)
             if v.collision:
