@@ -64,6 +64,9 @@ def add_arguments(parser, *, plan: bool) -> None:
                              "default) or free (the paper's class B)")
     parser.add_argument("--depth", action="store_true",
                         help="depth images instead of 8-bit intensity images (the depth variant)")
+    parser.add_argument("--gripped", metavar="CX,CY,CZ,HX,HY,HZ", default=None,
+                        help="a work piece the robot holds: a box in the end-effector link's frame (centre and half "
+                             "extents, metres), part of the robot in the images and in every test")
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     if plan:
         parser.add_argument("--goal", required=True, metavar="VALUES", help="the goal configuration, as --current")
@@ -152,9 +155,12 @@ def _read(path: str, camera, depth: bool) -> np.ndarray:
 
 
 def prepare(args):
-    """(test, robot, current joints) from the shared options: the reference set and the current images observed."""
+    """(tester, test, robot, current joints, piece) from the shared options: the reference set and the current
+    images observed. ``tester`` answers ``test(q)`` and ``test_motion(path)``: the :class:`ImageCollisionTest`, or
+    with ``--gripped`` a :class:`ReferenceUpdate` holding the piece (``piece``, else None) as part of the robot."""
     from depthguard.cameras import load_rig
-    from depthguard.collision import ImageCollisionTest
+    from depthguard.collision import ImageCollisionTest, ReferenceUpdate
+    from depthguard.scenes import Box
 
     rig = load_rig(args.rig)
     cameras = rig.cameras
@@ -192,8 +198,18 @@ def prepare(args):
                 raise InputError(f"--reference-joints gives {len(joints)} configurations, --reference {name} "
                                  f"{len(stack)} images", camera=name)
     test.set_reference(stacks, joints)
-    test.observe({name: _read(path, cameras[name], args.depth) for name, path in images.items()}, current)
-    return test, robot, current
+    frames = {name: _read(path, cameras[name], args.depth) for name, path in images.items()}
+    if args.gripped is None:
+        test.observe(frames, current)
+        return test, test, robot, current, None
+    values = _numbers(args.gripped, 6, "--gripped")
+    if not all(0.0 < h <= config.COORDINATE_LIMIT for h in values[3:]):
+        raise InputError(f"--gripped: half extents must be > 0 metres, got {args.gripped!r}")
+    piece = Box(tuple(values[:3]), tuple(values[3:]))
+    update = ReferenceUpdate(test)
+    update.gripped(piece)
+    update.step(frames, current)  # observes with the piece as part of the robot (nothing to update)
+    return update, test, robot, current, piece
 
 
 def _verdict_json(test, v, **extra) -> dict:
@@ -207,20 +223,20 @@ def _verdict_json(test, v, **extra) -> dict:
 
 def collide(args) -> int:
     """``depthguard collide``: one verdict per ``--future`` configuration, then one for ``--motion``."""
-    test, robot, _ = prepare(args)
+    tester, test, robot, _, _ = prepare(args)
     if not args.future and args.motion is None:
         raise InputError("nothing to test: give --future VALUES (repeatable) and/or --motion")
     results = []
     for text in args.future:
         q = _joints(robot, text, "--future")
-        results.append(("future", text, _verdict_json(test, test.test(q), kind="future")))
+        results.append(("future", text, _verdict_json(test, tester.test(q), kind="future")))
     if args.motion is not None:
         path = [_joints(robot, text, "--motion") for text in args.motion.split(";") if text.strip()]
         if not path:
             raise InputError("--motion: no configurations")
         samples = len(test.projector.samples(np.array(path)))
-        results.append(("motion", args.motion, _verdict_json(test, test.test_motion(np.array(path)), kind="motion",
-                                                             samples=samples)))
+        results.append(("motion", args.motion, _verdict_json(test, tester.test_motion(np.array(path)),
+                                                             kind="motion", samples=samples)))
     if args.json:
         print(json.dumps([r for _, _, r in results]))
         return 0
@@ -249,7 +265,7 @@ def plan(args) -> int:
     volume); it is given only if that is free. Exit status 0 with a path, 1 without one."""
     from depthguard.collision import ConfigurationGrid, ConfigurationTable, plan_path
 
-    test, robot, current = prepare(args)
+    tester, test, robot, current, piece = prepare(args)
     goal = _joints(robot, args.goal, "--goal")
     # Default range: the span between the current and the goal configuration, widened by DEFAULT_PLAN_MARGIN on
     # each side, within the joint limits (and +-pi): a joint that need not move gets a narrow range.
@@ -265,7 +281,7 @@ def plan(args) -> int:
     else:
         counts = default_counts(robot, lower, upper)
     grid = ConfigurationGrid(lower, upper, counts)
-    collision, _ = ConfigurationTable(test, grid.configurations()).verdicts()
+    collision, _ = ConfigurationTable(test, grid.configurations(), piece=piece).verdicts()
     free = ~collision.reshape(grid.shape)
     cells_of = {}
     for option, q in (("--current", current), ("--goal", goal)):
@@ -281,7 +297,7 @@ def plan(args) -> int:
     cells = plan_path(grid, free, current, goal)
     if cells is not None:
         path = np.vstack([current, cells, goal])
-        motion = test.test_motion(path)
+        motion = tester.test_motion(path)
         result["motion"] = {"collision": motion.collision, "class": motion.klass}
         if not motion.collision:
             result["path"] = [[round(float(x), 6) for x in q] for q in path]

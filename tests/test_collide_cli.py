@@ -191,3 +191,21 @@ def test_any_urdf_file_gives_the_built_in_robots_answers(recorded, capsys):
     assert by_name[0] == by_file[0] == 0 and json.loads(by_name[1]) == json.loads(by_file[1])
     assert_refused([a if a != "iiwa" else str(recorded / "missing.urdf") for a in _argv(recorded, "collide", "grey",
                                                                                           *extra)], capsys, "missing")
+
+
+def test_a_gripped_piece_is_part_of_the_robot(recorded, capsys):
+    """--gripped: a box held in the end-effector link's frame extends the robot: a configuration whose bare arm
+    passes beside the box collides once it holds a 30 cm piece; plan uses it too; a bad piece is refused."""
+    beside = (THROUGH[0] + 0.6,) + THROUGH[1:]
+    rule = ("--theta", "1", "--unseen", "free", "--json")
+    _, bare, _ = run_cli(_argv(recorded, "collide", "grey", "--future", _values(beside), *rule), capsys)
+    status, held, err = run_cli(_argv(recorded, "collide", "grey", "--future", _values(beside), "--gripped",
+                                      "0,0,0,0.15,0.15,0.15", *rule), capsys)
+    assert status == 0, err
+    assert not json.loads(bare)[0]["collision"] and json.loads(held)[0]["collision"]
+    status, out, err = run_cli(_argv(recorded, "plan", "grey", "--goal", _values((1.8,) + NOW[1:]), "--counts",
+                                     "16,2,1,2,1,1,1", "--gripped", "0,0,0,0.05,0.05,0.05", *rule), capsys)
+    assert status in (0, 1) and set(json.loads(out)) >= {"path", "free_cells", "motion"}, err
+    for bad in ("0,0,0,0.1,0.1", "0,0,0,0,0.1,0.1", "0,0,0,-0.1,0.1,0.1", "a,b,c,d,e,f"):
+        assert_refused(_argv(recorded, "collide", "grey", "--future", _values(beside), "--gripped", bad), capsys,
+                       "--gripped")
