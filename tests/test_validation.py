@@ -751,7 +751,8 @@ def test_any_value_in_a_rig_gives_a_rig_or_a_rig_error(where, key, value):
     except dg.RigError as exc:
         assert "\n" not in str(exc) and len(str(exc)) < 1000
         return
-    camera = rig.camera(rig.principal or "a")  # what was accepted keeps the ranges
+    camera = rig.camera(rig.principal or next(iter(rig.cameras)))  # what was accepted keeps the ranges (the one
+    # camera is "a" unless the drawn value was a valid name for it, e.g. "0")
     assert 0 < camera.width <= config.MAX_IMAGE_SIDE and config.FOCAL_LENGTH_MIN <= camera.fx <= config.INTRINSICS_LIMIT
     assert np.isfinite(camera.T_world_camera).all() and math.isfinite(camera.depth_range[0])
     assert key in RIG_KEYS + CAMERA_KEYS  # an unknown key never passes
