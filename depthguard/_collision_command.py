@@ -127,11 +127,9 @@ def _robot(args):
         if len(values) not in (3, 4) or not all(math.isfinite(v) and abs(v) <= config.COORDINATE_LIMIT
                                                 for v in values):
             raise InputError(f"--base: expected X,Y,Z or X,Y,Z,YAW (finite metres, radians), got {args.base!r}")
-        yaw = values[3] if len(values) == 4 else 0.0
-        T = np.eye(4)
-        T[:3, :3] = [[math.cos(yaw), -math.sin(yaw), 0.0], [math.sin(yaw), math.cos(yaw), 0.0], [0.0, 0.0, 1.0]]
-        T[:3, 3] = values[:3]
-        kwargs["T_world_base"] = T
+        from depthguard.transforms import yaw_pose
+
+        kwargs["T_world_base"] = yaw_pose(values[:3], values[3] if len(values) == 4 else 0.0)
     if args.robot in ("iiwa", "panda", "xarm6"):
         robot = RobotModel.builtin(args.robot)
         return robot.with_base(kwargs["T_world_base"]) if kwargs else robot

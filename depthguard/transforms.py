@@ -6,6 +6,8 @@ Compose with :func:`concat` (``concat(T_a_b, T_b_c)`` gives ``T_a_c``) and inver
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from depthguard import config
@@ -78,6 +80,15 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     y = np.cross(z, x)
     T = np.eye(4)
     T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, y, z, eye
+    return T
+
+
+def yaw_pose(position, yaw: float) -> np.ndarray:
+    """(4, 4) float64: a pose at ``position`` ((3,) metres) turned by ``yaw`` radians about the z axis."""
+    T = np.eye(4)
+    c, s = math.cos(yaw), math.sin(yaw)
+    T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+    T[:3, 3] = position
     return T
 
 

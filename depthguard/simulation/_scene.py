@@ -92,7 +92,7 @@ from depthguard.simulation._fields import Section, new_name, pose_of
 from depthguard.simulation._people import PART_NAMES, PARTS, ActionSpan, Person, box_primitive
 from depthguard.simulation._sensors import SensorModel
 from depthguard.simulation._trajectory import Hexagon, HexagonTrajectory, JointTrajectory, RobotTrajectory
-from depthguard.transforms import check_transform, look_at
+from depthguard.transforms import check_transform, look_at, yaw_pose
 
 DEFAULT_SCENE = "scenario_b.yaml"
 
@@ -500,10 +500,7 @@ def _robot(section: Section, sample_times: np.ndarray, base_dir: Path):
         position = base.vector("position", 3, default=[0.0, 0.0, 0.0])
         yaw = base.number("yaw", default=0.0)
         base.done()
-        T = np.eye(4)
-        T[:3, :3] = [[math.cos(yaw), -math.sin(yaw), 0.0], [math.sin(yaw), math.cos(yaw), 0.0], [0.0, 0.0, 1.0]]
-        T[:3, 3] = position
-        kwargs["T_world_base"] = T
+        kwargs["T_world_base"] = yaw_pose(position, yaw)
     has_model, has_urdf = section.has("model"), section.has("urdf")
     if has_model == has_urdf:
         raise SceneError("give exactly one of model (iiwa, panda or xarm6) or urdf (a path)", field=section.field("model"))
