@@ -279,6 +279,9 @@ def plan(args) -> int:
     else:
         counts = default_counts(robot, lower, upper)
     grid = ConfigurationGrid(lower, upper, counts)
+    if grid.size > config.MAX_TABLE_CONFIGURATIONS:
+        raise InputError(f"--counts: the grid holds {grid.size} configurations, at most "
+                         f"{config.MAX_TABLE_CONFIGURATIONS} are judged at once")
     collision, _ = ConfigurationTable(test, grid.configurations(), piece=piece).verdicts()
     free = ~collision.reshape(grid.shape)
     cells_of = {}

@@ -390,3 +390,7 @@ SSM_MAXIMA = {"human_speed": 10.0, "human_speed_near": 10.0, "near_separation": 
 #: Image-based collision test (SPEC 10): the range of the room light's gain (an image's brightness relative to the
 #: reference images) that the difference images follow; outside it a camera sees every tile as foreground.
 LIGHT_GAIN_RANGE = (0.5, 2.0)
+
+#: Image-based collision test: the most configurations a ConfigurationTable holds (its bitsets take C x 8 x words
+#: bytes each: 2 KiB for four cameras of 64 x 64 tiles, 256 MiB at the cap).
+MAX_TABLE_CONFIGURATIONS = 2**17

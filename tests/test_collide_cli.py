@@ -144,6 +144,12 @@ def test_plan_refuses_a_grid_that_leaves_out_the_current_or_the_goal_configurati
                    "--goal", "outside")
 
 
+def test_plan_refuses_a_grid_larger_than_it_judges(recorded, capsys):
+    """16.7 million configurations would take gigabytes: refused at once, naming --counts."""
+    assert_refused(_argv(recorded, "plan", "grey", "--goal", _values(NOW), "--counts", "64,64,4,16,4,4,4"), capsys,
+                   "--counts", "at most")
+
+
 def test_plan_without_a_way_says_so(recorded, capsys):
     """The default rule near the box leaves no free configuration on this grid: no path, exit status 1."""
     status, out, err = run_cli(_argv(recorded, "plan", "grey", "--goal", _values((1.8,) + NOW[1:]), "--counts",

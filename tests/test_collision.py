@@ -444,6 +444,7 @@ def test_the_whole_test_finds_a_box_in_a_future_configurations_way_and_nothing_w
 
 @pytest.mark.parametrize("workspace", [
     [[0, 0, 0], [1, 1]], [[0, 0, 0], [np.nan, 1, 1]], [[0, 0, 0], [np.inf, 1, 1]], [[1, 0, 0], [0, 1, 1]], "box", None,
+    [[-1e300, 0, 0], [1e300, 1, 1]],
 ])
 def test_bad_workspaces_are_refused(workspace):
     cam = _camera("c", (2.0, 0.0, 0.5))
@@ -777,3 +778,22 @@ def test_future_configurations_leave_the_base_out(iiwa_scene):
     future = test.robot_image(q, future=True)
     for all_tiles, moving_tiles in zip(everything, future):
         assert np.all(all_tiles >= moving_tiles) and all_tiles.sum() > moving_tiles.sum()
+
+
+def test_a_bayes_classifier_calls_what_it_cannot_measure_foreground():
+    from depthguard.collision import BayesTileClassifier
+
+    rng = np.random.default_rng(1)
+    x = np.concatenate([np.abs(rng.normal(0.5, 0.3, (50, 2))), np.abs(rng.normal(30.0, 5.0, (50, 2)))])
+    classifier = BayesTileClassifier(0.5).fit(x, np.arange(100) >= 50)
+    assert classifier.foreground(np.array([[np.nan, 0.0], [0.0, np.inf], [0.1, 0.0]])).tolist() == [True, True, False]
+
+
+def test_a_configuration_table_refuses_more_configurations_than_its_cap(iiwa_scene, monkeypatch):
+    from depthguard import config
+    from depthguard.collision import ConfigurationTable
+
+    monkeypatch.setattr(config, "MAX_TABLE_CONFIGURATIONS", 8)
+    with pytest.raises(InputError, match="at most 8"):
+        ConfigurationTable(iiwa_scene[0], np.zeros((9, 7)))
+    assert ConfigurationTable(iiwa_scene[0], np.zeros((8, 7))).bits.shape[1] == 8

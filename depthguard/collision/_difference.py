@@ -178,7 +178,8 @@ class BayesTileClassifier:
         return self
 
     def foreground(self, distances) -> np.ndarray:
-        """(...) bool from (..., 2) feature distances: P(foreground | distances) >= threshold."""
+        """(...) bool from (..., 2) feature distances: P(foreground | distances) >= threshold; a tile whose
+        distances are not finite (NaN, inf) is foreground (the conservative answer)."""
         if self.means is None:
             raise InputError("fit the classifier first", field="classifier")
         x = np.asarray(distances, dtype=np.float64)
@@ -188,8 +189,9 @@ class BayesTileClassifier:
             inverse = np.linalg.inv(cov)
             mahalanobis = np.einsum("...i,ij,...j->...", d, inverse, d)
             log_p.append(math.log(prior) - 0.5 * (mahalanobis + math.log(np.linalg.det(cov))))
-        # P(fg) >= t  <=>  log p_fg - log p_bg >= log(t / (1 - t))
-        return log_p[1] - log_p[0] >= math.log(self.threshold / (1.0 - self.threshold))
+        # P(fg) >= t  <=>  log p_fg - log p_bg >= log(t / (1 - t)); distances that are not finite: foreground
+        decided = log_p[1] - log_p[0] >= math.log(self.threshold / (1.0 - self.threshold))
+        return decided | ~np.all(np.isfinite(x), axis=-1)
 
 
 def labelled_tiles(features, reference_features, truth, grid: TileGrid, gain: float = 1.0, exclude=None):

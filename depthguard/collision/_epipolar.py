@@ -10,6 +10,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from depthguard import config
 from depthguard.cameras import PinholeCamera
 from depthguard.collision import _kernels
 from depthguard.errors import InputError, short_repr
@@ -83,14 +84,16 @@ class TileGrid:
 
 
 def _box(workspace) -> tuple[np.ndarray, np.ndarray]:
-    """(low, high) corners of a workspace box given as [[x, y, z], [x, y, z]], metres: finite, low < high."""
+    """(low, high) corners of a workspace box given as [[x, y, z], [x, y, z]], metres: finite, within
+    +-``config.COORDINATE_LIMIT``, low < high."""
     try:
         box = np.array(workspace, dtype=np.float64)
     except (TypeError, ValueError):
         box = None
-    if box is None or box.shape != (2, 3) or not np.all(np.isfinite(box)) or not np.all(box[0] < box[1]):
-        raise InputError(f"workspace must be [[x, y, z], [x, y, z]] (low and high corners, metres, finite, low < high), "
-                         f"got {short_repr(workspace)}", field="workspace")
+    if box is None or box.shape != (2, 3) or not np.all(np.abs(box) <= config.COORDINATE_LIMIT) or \
+            not np.all(box[0] < box[1]):
+        raise InputError(f"workspace must be [[x, y, z], [x, y, z]] (low and high corners, metres, within "
+                         f"+-{config.COORDINATE_LIMIT:g}, low < high), got {short_repr(workspace)}", field="workspace")
     return box[0], box[1]
 
 

@@ -249,6 +249,10 @@ class ConfigurationTable:
     """
 
     def __init__(self, test: ImageCollisionTest, configurations, piece=None):
+        count = np.shape(configurations)[0] if np.ndim(configurations) else 0
+        if count > config.MAX_TABLE_CONFIGURATIONS:
+            raise InputError(f"a configuration table holds at most {config.MAX_TABLE_CONFIGURATIONS} configurations "
+                             f"(memory), got {count}", field="configurations")
         self.test = test
         self.bits = test.robot_bits(configurations)
         self.configurations = np.asarray(configurations, dtype=np.float64)
