@@ -394,3 +394,7 @@ LIGHT_GAIN_RANGE = (0.5, 2.0)
 #: Image-based collision test: the most configurations a ConfigurationTable holds (its bitsets take C x 8 x words
 #: bytes each: 2 KiB for four cameras of 64 x 64 tiles, 256 MiB at the cap).
 MAX_TABLE_CONFIGURATIONS = 2**17
+
+#: Image-based collision test: the most samples of one motion's swept volume (each a configuration projected into
+#: every camera; a motion across every joint's whole range takes about 2,000 with x_max = 2 cm).
+MAX_MOTION_SAMPLES = 100_000

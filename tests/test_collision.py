@@ -797,3 +797,14 @@ def test_a_configuration_table_refuses_more_configurations_than_its_cap(iiwa_sce
     with pytest.raises(InputError, match="at most 8"):
         ConfigurationTable(iiwa_scene[0], np.zeros((9, 7)))
     assert ConfigurationTable(iiwa_scene[0], np.zeros((8, 7))).bits.shape[1] == 8
+
+
+def test_a_motion_needing_more_samples_than_the_cap_is_refused(iiwa_scene, monkeypatch):
+    from depthguard import config
+
+    test, robot = iiwa_scene[:2]
+    path = np.array([robot.lower * 0.5, robot.upper * 0.5])
+    n = len(test.projector.samples(path))
+    monkeypatch.setattr(config, "MAX_MOTION_SAMPLES", n - 2)
+    with pytest.raises(InputError, match="at most"):
+        test.projector.samples(path)

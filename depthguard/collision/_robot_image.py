@@ -98,13 +98,15 @@ class RobotProjector:
         meet every possible obstacle the base's tiles hold."""
         return self.unpack(self.bits(np.asarray(joints, dtype=np.float64)[None], moving_only)[:, 0])
 
-    def samples(self, path) -> np.ndarray:
+    def samples(self, path, reaches=None) -> np.ndarray:
         """(N, n) configurations along the piecewise-linear joint-space ``path`` ((P, n), P >= 1): each segment
         from q_a to q_b is cut into s = max(1, sum_i ceil(|dq_i| l_i / x_max)) equal steps, l_i = :attr:`reaches`.
 
         This is the paper's n = sum_i n_i with joint i's step x_max / l_i, the arc on which a point at l_i from the
         axis travels x_max, instead of the paper's 2 arcsin(x_max / (2 l_i)), the chord: when joints move together
-        their points' paths add up as arcs, and with the chord the total travel per step could exceed x_max."""
+        their points' paths add up as arcs, and with the chord the total travel per step could exceed x_max.
+        ``reaches``: (n,) other bounds than :attr:`reaches` (e.g. with a gripped piece). At most
+        ``config.MAX_MOTION_SAMPLES`` samples, else InputError (field ``path``)."""
         try:
             q = np.asarray(path, dtype=np.float64)
         except (TypeError, ValueError):
@@ -112,11 +114,15 @@ class RobotProjector:
         if q.ndim == 1:
             q = q[None]
         self._segments(q, "path")  # checks the path (shape, finite, limits)
+        reaches = self.reaches if reaches is None else np.asarray(reaches, dtype=np.float64)
+        steps = [max(1, int(np.sum(np.ceil(np.abs(b - a) * reaches / self.x_max - 1e-12))))
+                 for a, b in zip(q[:-1], q[1:])]
+        if sum(steps) > config.MAX_MOTION_SAMPLES:
+            raise InputError(f"the motion needs {sum(steps)} samples {self.x_max:g} m apart, at most "
+                             f"{config.MAX_MOTION_SAMPLES}: test it in parts", field="path")
         out = [q[:1]]
-        for a, b in zip(q[:-1], q[1:]):
-            steps = max(1, int(np.sum(np.ceil(np.abs(b - a) * self.reaches / self.x_max - 1e-12))))
-            s = np.arange(1, steps + 1)[:, None] / steps
-            out.append(a + s * (b - a))
+        for a, b, n in zip(q[:-1], q[1:], steps):
+            out.append(a + np.arange(1, n + 1)[:, None] / n * (b - a))
         return np.concatenate(out)
 
     def swept_bits(self, path, moving_only: bool = False) -> np.ndarray:

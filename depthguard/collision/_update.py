@@ -430,11 +430,7 @@ class ReferenceUpdate:
                              "piece's speed", field="piece_in_gripper")
         local = box_corners(self.piece_in_gripper, "piece_in_gripper")
         reaches = projector.reaches + float(np.linalg.norm(local - capsule.p0, axis=1).max())
-        samples = [q[:1]]
-        for a, b in zip(q[:-1], q[1:]):
-            steps = max(1, int(np.sum(np.ceil(np.abs(b - a) * reaches / projector.x_max - 1e-12))))
-            samples.append(a + np.arange(1, steps + 1)[:, None] / steps * (b - a))
-        samples = np.concatenate(samples)
+        samples = projector.samples(q, reaches)
         widen = projector.x_max / 2.0 if len(samples) > 1 else 0.0
         piece = Box(self.piece_in_gripper.center, tuple(np.asarray(self.piece_in_gripper.half_extents) + widen),
                     self.piece_in_gripper.R_world_box)
