@@ -320,6 +320,16 @@ DEFAULT_MEMORY = True
 #: it removes few false alarms at a thickness that stays safe (benchmarks/probe_robot_zone.py).
 DEFAULT_ROBOT_ZONE = 0.0
 ROBOT_ZONE_MAX = 0.2
+#: The avoidance loop's robot zone (run_closed_loop, ``depthguard demo``), metres. A depth camera cannot tell a hand
+#: within its noise margin of the robot's surface from the robot: the self-filter takes a measurement up to its
+#: tolerance (2 cm) in front of the robot for the robot, and the fusion clears space only beyond the noise margin
+#: (Kinect v1, 3 sigma, 3-4 cm at the robot's 2.5-3.3 m from the cameras) plus the fusion margin (1 cm). Nothing
+#: clears that shell, and it moves with the links: every control point read 0.07-0.15 m from it, the avoidance pushed
+#: the arm away from its own shadow and the task never resumed (issue 9). Measured in the demo's scene with four
+#: cameras (36 frames, no person): 3 cm removes none of it, 6 cm nearly all (4.5 cm: the task did not resume). The
+#: loop takes it as a stated tolerance: a distance may exceed the truth by up to this much for an object reaching
+#: within it, so the avoidance takes it off every distance (AvoidanceParams.tolerance) and SSM adds it to Z_d.
+LOOP_ROBOT_ZONE = 0.06
 FREESPACE_VOXEL = 0.04
 
 #: Largest free-space box, in voxels: its arrival times (float64), the distance transform's work space (int32) and a

@@ -139,6 +139,54 @@ def test_the_command_respects_position_velocity_and_acceleration_limits_at_every
         assert np.all(q >= limits.lower - 1e-9) and np.all(q <= limits.upper + 1e-9), k
 
 
+@pytest.mark.parametrize("speed", [0.3, 1.0, 2.0])  # rad/s; from 2.4 on it cannot stop in 0.3 rad
+def test_a_joint_driven_into_its_limit_brakes_in_time_in_steps_of_dt(iiwa, speed):
+    """Every step asks for full speed towards the upper limit; the box and the acceleration's reach must stop the
+    joint at its limit, never past it (in steps of dt, not only in continuous time)."""
+    from depthguard.avoidance import reachable
+
+    limits = JointLimits.from_robot(iiwa, velocity=3.0, acceleration=10.0)
+    dt = 0.002
+    q = limits.upper - 0.3
+    dq = np.full(limits.n, speed)
+    for _ in range(2000):
+        low, high = limits.position_velocity_box(q, dt)
+        lo, hi = reachable(low, high, dq, limits.acceleration * dt)
+        dq = np.clip(np.full(limits.n, 10.0), lo, hi)
+        q = q + dq * dt
+        assert np.all(q <= limits.upper + 1e-12), (q - limits.upper).max()
+    assert np.all(limits.upper - q < 1e-3)  # and it does get there
+
+
+def test_a_task_that_turns_a_corner_is_followed_as_soon_as_the_accelerations_allow(iiwa):
+    """The hexagon's corner: the end-effector moves at 0.4 m/s along +y and the task turns to +z. The joints cannot
+    change their velocities at once (10 rad/s^2 at 500 Hz), so the command must go towards the new task as fast as
+    they allow and follow it within a few tens of steps. (SNS inside the acceleration's reach scaled the task to 0
+    there, and the end-effector drifted off its path: issue 9, 5-8 cm after a person had left.)"""
+    limits = JointLimits.from_robot(iiwa, acceleration=10.0)
+    controller = AvoidanceController(iiwa, AvoidanceParams(), limits)
+    nothing = result_of(np.full(len(iiwa.control_points), np.inf), np.zeros((len(iiwa.control_points), 3)))
+    dt = 0.002
+    q = np.array([0.0, 0.5, 0.0, -1.5, 0.0, 0.8, 0.0])
+    ee = iiwa.end_effector_index
+    dq = damped_pinv(iiwa.control_point_jacobians(q)[ee]) @ np.array([0.0, 0.4, 0.0])  # moving along +y
+    task = np.array([0.0, 0.0, 0.4])
+    steps_to_follow = None
+    for k in range(150):
+        command = controller.command(nothing, q, task, dq, dt)
+        assert np.all(np.abs(command.dq - dq) <= limits.acceleration * dt + 1e-9)
+        assert command.scale == 1.0  # nothing near: the bounds allow the whole task
+        dq = command.dq
+        q = q + dq * dt
+        achieved = iiwa.control_point_jacobians(q)[ee] @ dq
+        if steps_to_follow is None and np.linalg.norm(achieved - task) < 1e-3:
+            steps_to_follow = k
+    # The joints' velocity change from the old task to the new one, at 10 rad/s^2, takes this many steps at least.
+    change = damped_pinv(iiwa.control_point_jacobians(q)[ee]) @ (task - np.array([0.0, 0.4, 0.0]))
+    assert steps_to_follow is not None, "the new task was never followed"
+    assert steps_to_follow <= 1.5 * np.max(np.abs(change)) / (limits.acceleration[0] * dt) + 5
+
+
 def test_joints_that_would_move_a_point_towards_its_obstacle_are_bounded_as_the_paper_says(iiwa):
     controller = AvoidanceController(iiwa)
     q = np.array([0.0, 0.6, 0.0, -1.2, 0.0, 0.8, 0.0])

@@ -24,11 +24,20 @@ def reach_workcell():
     return load_workcell(_packaged("scenario_b_reach.yaml"))
 
 
+#: The person has left (every control point truly farther than 0.4 m for good) at about 3.4 s; the task must be back
+#: within 1 cm of its path this soon after (measured: 0.69 s with two cameras, 0.70 s with four).
+RESUME_WITHIN = 1.2
+#: metres: the median task error from then on may be at most this.
+RESUMED_MEDIAN = 0.015
+
+
 @pytest.fixture(scope="module")
 def runs(reach_workcell):
+    """The three modes over the contact window; the avoidance on to the scene's end (the person walks away)."""
     start, duration = CONTACT_WINDOW
-    return {mode: run_closed_loop(reach_workcell, mode, start=start, duration=duration)
-            for mode in ("none", "avoid", "ssm")}
+    logs = {mode: run_closed_loop(reach_workcell, mode, start=start, duration=duration) for mode in ("none", "ssm")}
+    logs["avoid"] = run_closed_loop(reach_workcell, "avoid", start=start)
+    return logs
 
 
 @pytest.mark.slow
@@ -36,6 +45,25 @@ def test_without_avoidance_the_hand_meets_the_robot_and_with_it_the_robot_keeps_
     assert runs["none"].clearance.min() <= 0.0
     assert runs["avoid"].clearance.min() >= CLEARANCE
     assert runs["ssm"].clearance.min() >= CLEARANCE
+
+
+@pytest.mark.slow
+def test_the_task_resumes_after_the_person_has_left(runs):
+    """Issue 9: after the avoidance the end-effector's task resumes, its error back below 1 cm within RESUME_WITHIN
+    of the person leaving, and near it from then on. This needs the loop's robot zone (config.LOOP_ROBOT_ZONE):
+    without it the uncleared shell round the links kept the arm pushed 0.1-0.44 m off its path after the person had
+    gone. What is left pushes it 1-3 cm off now and then (median RESUMED_MEDIAN at most; measured 0.8-1.1 cm): in
+    about one frame in six, sensor dropouts at the robot's own silhouette in three of four cameras leave cells 5 cm
+    beyond the zone uncleared, 0.12-0.15 m from the elbow's control points."""
+    from depthguard.experiments.avoidance_demo import resumption
+
+    log = runs["avoid"]
+    assert log.times[-1] > 5.4  # the run lasts until the person is gone
+    assert log.task_error.max() > 0.1  # the avoidance did take the end-effector off its path
+    left, resumed, median = resumption(log)
+    assert left is not None and left < 4.0, left
+    assert resumed is not None and resumed <= RESUME_WITHIN, resumed
+    assert median < RESUMED_MEDIAN, median
 
 
 #: The board is carried face first into the end-effector's path, edge-on to the principal camera
@@ -228,7 +256,7 @@ def test_the_loop_runs_cameras_at_their_rate_and_answers_from_frames_no_younger_
                                                                                                  reach_workcell):
     log = runs["avoid"]
     settings = LoopSettings()
-    _, duration = CONTACT_WINDOW
+    duration = reach_workcell.duration - CONTACT_WINDOW[0]
     assert log.frames == int(np.ceil(duration * reach_workcell.rate - 1e-9))
     seen = np.isfinite(log.data_age)
     assert not seen[0] and seen[-1]  # nothing to answer from before the first set is usable

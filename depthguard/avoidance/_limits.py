@@ -64,15 +64,19 @@ class JointLimits:
         seconds from positions ``q`` ((n,)): (low, high), (n,) each, low <= 0 <= high.
 
         - velocity: |dq| <= velocity;
-        - position: after the step the joint can still stop before its limit at full deceleration:
-          dq <= sqrt(2 acceleration (upper - q)) and dq dt <= upper - q (and the same towards lower).
+        - position: the step and a stop at full deceleration after it, in steps of ``dt``, stay within the limit:
+          dq dt + dq^2 / (2 acceleration) <= upper - q, i.e. dq <= sqrt((a dt)^2 + 2 a (upper - q)) - a dt (and the
+          same towards lower). Braking in steps of dt from dq covers at most dq^2 / (2 a) after the step; the
+          continuous bound sqrt(2 a (upper - q)) alone let a joint pass its limit by up to dq dt / 2 (measured:
+          1e-4 rad at the iiwa's fourth joint).
         """
         q = np.asarray(q, dtype=np.float64)
         a = self.acceleration
         room_up = np.maximum(self.upper - q, 0.0)
         room_down = np.maximum(q - self.lower, 0.0)
-        high = np.minimum.reduce([self.velocity, np.sqrt(2.0 * a * room_up), room_up / dt])
-        low = -np.minimum.reduce([self.velocity, np.sqrt(2.0 * a * room_down), room_down / dt])
+        step = a * dt
+        high = np.minimum(self.velocity, np.sqrt(step * step + 2.0 * a * room_up) - step)
+        low = -np.minimum(self.velocity, np.sqrt(step * step + 2.0 * a * room_down) - step)
         return low, high
 
 

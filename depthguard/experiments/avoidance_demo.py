@@ -19,6 +19,9 @@ run. Per mode it reports (``summary.json``, one object per mode):
 - ``clearance_m``: the smallest exact distance between the robot's meshes and any obstacle;
 - ``true_min_distance_m``: the smallest exact distance of a control point to an obstacle;
 - ``task_error_after_m``: how far the end-effector is from where the task wants it at the end;
+- ``obstacles_left_s``, ``task_resumed_after_s``, ``task_error_median_resumed_m``: when every control point was truly
+  farther than 0.4 m from every obstacle for good, how many seconds later the task error first fell below 1 cm, and
+  its median from then on (:func:`resumption`; null where it did not happen);
 - ``oscillation_per_s``: reversals per second of the reaction: for ``avoid`` the repulsive velocity's direction
   turning by more than 90 degrees from one control step to the next, for ``ssm`` the speed factor crossing 0.5, for
   ``none`` 0 (it does not react);
@@ -57,6 +60,29 @@ LAYOUTS = {2: None, 4: "scenario_b_four.yaml"}
 REPULSIVE_EPSILON = 1e-3
 #: A step whose task scale or speed factor is below this counts as slowed.
 SLOWED_BELOW = 0.99
+#: The task has resumed when the end-effector is within this of where the task wants it (metres; issue 9: 1 cm).
+RESUMED_WITHIN = 0.01
+#: The obstacles have left when every control point is truly farther than this from every obstacle (metres; the
+#: avoidance's rho, beyond which nothing acts) for the rest of the run.
+LEFT_BEYOND = 0.4
+
+
+def resumption(log) -> tuple[float | None, float | None, float | None]:
+    """When the task resumed after the obstacles left (:class:`~depthguard.simulation._closed_loop.LoopLog`):
+    (the time the obstacles left, seconds: from then on every control point is truly farther than
+    :data:`LEFT_BEYOND` from every obstacle; the seconds from then until the task error first falls below
+    :data:`RESUMED_WITHIN`; the median task error from then to the end, metres). None where it did not happen: the
+    obstacles did not leave, or the task did not come back."""
+    near = np.flatnonzero(np.min(log.truth, axis=1) <= LEFT_BEYOND) if len(log.truth) else np.array([], int)
+    if len(near) == len(log.truth_steps):
+        return None, None, None
+    step = 0 if not len(near) else int(log.truth_steps[near[-1]]) + 1
+    left = float(log.times[min(step, len(log.times) - 1)])
+    back = np.flatnonzero(log.task_error[step:] < RESUMED_WITHIN)
+    if not len(back):
+        return left, None, None
+    first = step + int(back[0])
+    return left, float(log.times[first] - left), float(np.median(log.task_error[first:]))
 
 
 def load_scene(cameras: int = 4):
@@ -92,12 +118,16 @@ def summarize(log, dt: float) -> dict:
     # Before the first set of frames is usable the monitor has seen nothing and answers 0: not counted here.
     seen = np.isfinite(log.data_age)
     reported = log.reported[seen] if seen.any() else np.full_like(log.reported[:1], np.inf)
+    left, resumed, error_after = resumption(log)
     return {
         "collisions": collisions,
         "clearance_m": float(np.min(log.clearance)),
         "true_min_distance_m": float(np.min(log.truth)),
         "task_error_after_m": float(log.task_error[-1]),
         "task_error_max_m": float(np.max(log.task_error)),
+        "obstacles_left_s": left,
+        "task_resumed_after_s": resumed,
+        "task_error_median_resumed_m": error_after,
         "oscillation_per_s": reversals / duration if duration > 0 else 0.0,
         "loop_hz": len(log.times) / log.wall_seconds,
         "step_hz": 1.0 / float(np.median(log.step_seconds)),
@@ -110,6 +140,11 @@ def summarize(log, dt: float) -> dict:
             "reported_min_m": [float(v) if np.isfinite(v) else None for v in np.min(reported, axis=0)],
         },
     }
+
+
+def _seconds(value) -> str:
+    """A table cell of 16 characters: seconds, or 'never'."""
+    return f"{'never':>16s}" if value is None else f"{value:16.2f}"
 
 
 def plot(log, mode_summary: dict, path: Path, control_points, rho: float) -> None:
@@ -197,11 +232,13 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
                "control_points": list(workcell.robot.control_point_names), "modes": results}
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     print(f"\n{'mode':6s} {'collisions':>10s} {'clearance m':>12s} {'true min m':>11s} {'reacting s':>11s} "
-          f"{'task error end m':>17s} {'oscillation /s':>15s} {'loop Hz':>8s} {'step Hz':>8s}")
+          f"{'task error end m':>17s} {'resumed after s':>16s} {'oscillation /s':>15s} {'loop Hz':>8s} "
+          f"{'step Hz':>8s}")
     # reacting s: slowed (task scale or speed factor < 0.99, the joints' limits included) or pushed away
     for mode, r in results.items():
         print(f"{mode:6s} {r['collisions']:10d} {r['clearance_m']:12.3f} {r['true_min_distance_m']:11.3f} "
-              f"{r['time_reacting_s']:11.2f} {r['task_error_after_m']:17.3f} {r['oscillation_per_s']:15.2f} "
+              f"{r['time_reacting_s']:11.2f} {r['task_error_after_m']:17.3f} {_seconds(r['task_resumed_after_s'])} "
+              f"{r['oscillation_per_s']:15.2f} "
               f"{r['loop_hz']:8.0f} {r['step_hz']:8.0f}")
     print("\nper control point, smallest true / reported distance over the run (m; '-': nothing within rho; the two\n"
           "smallest need not fall at the same moment: each distance comes from frames 1/30 to 2/30 s old):")

@@ -51,7 +51,9 @@ class LoopSettings:
         gain: 1/s, the task's position feedback.
         posture_gain: 1/s, the redundancy's pull towards the scripted joints.
         truth_every: ground truth every this many control steps (and at every camera frame).
-        avoidance: the papers' parameters (its rho is the monitor's).
+        avoidance: the papers' parameters (its rho is the monitor's), except that by default each control point's
+            distance is measured from its link's surface (``from_surface=True``): the papers measure from the point
+            on the link's axis, which let the forearm come within 1 mm of the box in the elbow scenario.
         acceleration: rad/s^2, the joints' acceleration limits (URDF has none).
         ssm: :class:`~depthguard.avoidance.SSMParams` of mode "ssm" (default: its defaults).
         ssm_rho: metres, the monitor's rho in mode "ssm": above the protective separation distance (0.84 m at
@@ -62,7 +64,10 @@ class LoopSettings:
             person elsewhere in that space. With it on, ``tests/test_closed_loop.py`` found the end-effector
             approaching the person at 8 mm/s while truly inside S_p. Off, every point nearer than S_p at rest stops
             whichever way it moves.
-        monitor: keyword arguments of :class:`~depthguard.DistanceMonitor` besides rig and robot.
+        monitor: keyword arguments of :class:`~depthguard.DistanceMonitor` besides rig and robot. The default robot
+            zone is ``config.LOOP_ROBOT_ZONE`` (the shell round the links that no depth camera can tell from them; see
+            there): a stated tolerance (a distance may exceed the truth by up to its thickness), added to the
+            avoidance's ``tolerance`` and to SSM's Z_d.
     """
 
     control_rate: float = 500.0
@@ -70,12 +75,13 @@ class LoopSettings:
     gain: float = 5.0
     posture_gain: float = 2.0
     truth_every: int = 5
-    avoidance: AvoidanceParams = field(default_factory=AvoidanceParams)
+    avoidance: AvoidanceParams = field(default_factory=lambda: AvoidanceParams(from_surface=True))
     acceleration: float = config.JOINT_ACCELERATION
     ssm: object = None
     ssm_rho: float = 1.0
     ssm_directions: bool = False
-    monitor: dict = field(default_factory=lambda: dict(aggregate="hybrid", invalid="neighbors"))
+    monitor: dict = field(default_factory=lambda: dict(aggregate="hybrid", invalid="neighbors",
+                                                       robot_zone=config.LOOP_ROBOT_ZONE))
 
     def __post_init__(self):
         check_real(self.control_rate, "control_rate", minimum=1.0, maximum=1e5, unit="Hz", field="control_rate")
@@ -162,14 +168,21 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
     dt = 1.0 / settings.control_rate
     steps = int(round((end - start) / dt))
     camera_period = 1.0 / workcell.rate
-    params = replace(settings.avoidance, posture_gain=settings.posture_gain)
+    # The robot zone is a sensing tolerance: a distance may exceed the truth by up to its thickness.
+    zone = settings.monitor.get("robot_zone", config.DEFAULT_ROBOT_ZONE)
+    params = replace(settings.avoidance, posture_gain=settings.posture_gain,
+                     tolerance=settings.avoidance.tolerance + zone)
     limits = JointLimits.from_robot(robot, acceleration=settings.acceleration)
     controller = AvoidanceController(robot, params, limits)
     ssm = None
     if mode == "ssm":
         from depthguard.avoidance import SpeedSeparationMonitor
 
-        ssm = SpeedSeparationMonitor(settings.ssm, rho=settings.ssm_rho)
+        from depthguard.avoidance import SSMParams
+
+        ssm_params = SSMParams() if settings.ssm is None else settings.ssm
+        ssm_params = replace(ssm_params, sensing_uncertainty=ssm_params.sensing_uncertainty + zone)
+        ssm = SpeedSeparationMonitor(ssm_params, rho=settings.ssm_rho)
     monitor = dg.DistanceMonitor(workcell.rig, rho=settings.ssm_rho if mode == "ssm" else params.rho, robot=robot,
                                  **settings.monitor)
     truth = TruthComputer(robot)
