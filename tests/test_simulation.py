@@ -659,3 +659,17 @@ def test_a_scene_loads_with_another_scenes_camera_layout(tmp_path):
     (tmp_path / "bad.yaml").write_text("cameras: 3\n")
     with pytest.raises(SceneError, match="with the cameras of"):
         load_workcell(folder / "scenario_b_reach.yaml", layout=tmp_path / "bad.yaml")
+
+
+def test_rotation_with_z_is_a_rotation_whose_third_column_is_the_axis():
+    from depthguard.simulation._truth import rotation_with_z
+
+    rng = np.random.default_rng(7)
+    axes = [np.array(a, dtype=float) for a in ([1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0.9, 0.1, 0.0])]
+    axes += list(rng.normal(size=(200, 3)))
+    for axis in axes:
+        axis = axis / np.linalg.norm(axis)
+        R = rotation_with_z(axis)
+        np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
+        assert np.linalg.det(R) > 0.0
+        np.testing.assert_allclose(R[:, 2], axis, atol=1e-15)
