@@ -103,3 +103,27 @@ def test_demo_writes_one_summary_per_mode_and_plots(tmp_path, capsys):
     # four cameras round the robot by default (issue 8's reference layout), the scene's front two on request
     assert summary["cameras"] == ["principal", "second", "third", "fourth"]
     assert json.loads((tmp_path / "quiet" / "summary.json").read_text())["cameras"] == ["principal", "second"]
+
+
+def test_resumption_needs_the_obstacles_gone_and_the_task_back_for_a_while():
+    """The demo's "resumed after" figure (issue 9): from when every control point is truly beyond 0.4 m for good,
+    until the task error is below 1 cm and stays there for 0.25 s; a reference passing by a stopped robot does not
+    count."""
+    from types import SimpleNamespace
+
+    from depthguard.experiments.avoidance_demo import resumption
+
+    t = np.arange(0.0, 3.0, 0.002)
+    steps = np.arange(0, len(t), 5)
+    far = np.where(t[steps] < 0.5, 0.1, 1.0)[:, None] * np.ones((1, 3))
+
+    def log(error, truth=far):
+        return SimpleNamespace(truth=truth, truth_steps=steps, times=t, task_error=error)
+
+    back = np.where(t < 1.5, 0.2, 0.004)
+    passing = back.copy()
+    passing[(t > 0.9) & (t < 0.95)] = 0.005  # the path passes by for 0.05 s
+    left, resumed, median = resumption(log(passing))
+    assert abs(left - 0.5) < 0.011 and abs(resumed - 1.0) < 0.011 and median == pytest.approx(0.004)
+    assert resumption(log(np.where((t > 0.9) & (t < 0.95), 0.005, 0.2)))[1:] == (None, None)  # never back
+    assert resumption(log(back, np.full((len(steps), 3), 0.1))) == (None, None, None)  # never left
