@@ -107,7 +107,7 @@ def test_demo_writes_one_summary_per_mode_and_plots(tmp_path, capsys):
 
 def test_resumption_needs_the_obstacles_gone_and_the_task_back_for_a_while():
     """The demo's "resumed after" figure (issue 9): from when every control point is truly beyond 0.4 m for good,
-    until the task error is below 1 cm and stays there for 0.25 s; a reference passing by a stopped robot does not
+    until the task error is below 1 cm and stays there for 0.1 s; a reference passing by a stopped robot does not
     count."""
     from types import SimpleNamespace
 
@@ -127,3 +127,5 @@ def test_resumption_needs_the_obstacles_gone_and_the_task_back_for_a_while():
     assert abs(left - 0.5) < 0.011 and abs(resumed - 1.0) < 0.011 and median == pytest.approx(0.004)
     assert resumption(log(np.where((t > 0.9) & (t < 0.95), 0.005, 0.2)))[1:] == (None, None)  # never back
     assert resumption(log(back, np.full((len(steps), 3), 0.1))) == (None, None, None)  # never left
+    came_late = np.where(t[steps] < 2.0, 1.0, 0.1)[:, None] * np.ones((1, 3))
+    assert resumption(log(back, came_late)) == (None, None, None)  # still there at the end

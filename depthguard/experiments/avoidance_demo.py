@@ -21,7 +21,7 @@ run. Per mode it reports (``summary.json``, one object per mode):
 - ``task_error_after_m``: how far the end-effector is from where the task wants it at the end;
 - ``obstacles_left_s``, ``task_resumed_after_s``, ``task_error_median_resumed_m``: when every control point was truly
   farther than 0.4 m from every obstacle for good, how many seconds later the task error fell below 1 cm and stayed
-  there for 0.25 s, and its median from then on (:func:`resumption`; null where it did not happen);
+  there for 0.1 s, and its median from then on (:func:`resumption`; null where it did not happen);
 - ``oscillation_per_s``: reversals per second of the reaction: for ``avoid`` the repulsive velocity's direction
   turning by more than 90 degrees from one control step to the next, for ``ssm`` the speed factor crossing 0.5, for
   ``none`` 0 (it does not react);
@@ -65,9 +65,9 @@ RESUMED_WITHIN = 0.01
 #: The obstacles have left when every control point is truly farther than this from every obstacle (metres; the
 #: avoidance's rho, beyond which nothing acts) for the rest of the run.
 LEFT_BEYOND = 0.4
-#: ... and for at least this long (seconds): a robot stopped on the task's path is passed by it within 1 cm for a
-#: moment (0.05 s at 0.4 m/s) without having resumed anything.
-RESUMED_HOLD = 0.25
+#: ... for at least this long (seconds): a robot stopped on the task's path is passed by it within 1 cm for a moment
+#: (at most 0.05 s at 0.4 m/s) without having resumed anything.
+RESUMED_HOLD = 0.1
 
 
 def resumption(log) -> tuple[float | None, float | None, float | None]:
@@ -77,7 +77,7 @@ def resumption(log) -> tuple[float | None, float | None, float | None]:
     :data:`RESUMED_WITHIN` and stays there for :data:`RESUMED_HOLD`; the median task error from then to the end,
     metres). None where it did not happen: the obstacles did not leave, or the task did not come back."""
     near = np.flatnonzero(np.min(log.truth, axis=1) <= LEFT_BEYOND) if len(log.truth) else np.array([], int)
-    if len(near) == len(log.truth_steps):
+    if len(near) and near[-1] == len(log.truth_steps) - 1:  # still near at the end
         return None, None, None
     step = 0 if not len(near) else int(log.truth_steps[near[-1]]) + 1
     left = float(log.times[min(step, len(log.times) - 1)])
