@@ -274,3 +274,24 @@ def test_parameters_are_checked():
     for bad in (dict(rho=0.0), dict(v_max=-1.0), dict(alpha=np.nan), dict(posture_gain=-1.0)):
         with pytest.raises(dg.InputError):
             AvoidanceParams(**bad)
+    for bad in (-0.01, np.nan, np.inf, 1e300, "0.06", None, True):
+        with pytest.raises(dg.InputError, match="tolerance"):
+            AvoidanceParams(tolerance=bad)
+
+
+def test_the_tolerance_comes_off_every_distance(iiwa):
+    """A reported distance may exceed the truth by the tolerance (the robot zone): the avoidance acts as if the
+    obstacle were that much nearer, for the end-effector's repulsion and the other points' risk alike."""
+    q = np.array([0.0, 0.5, 0.0, -1.5, 0.0, 0.8, 0.0])
+    m = len(iiwa.control_points)
+    direction = np.tile([0.0, 0.0, 1.0], (m, 1))
+    plain = AvoidanceController(iiwa, AvoidanceParams())
+    tolerant = AvoidanceController(iiwa, AvoidanceParams(tolerance=0.06))
+    far = plain.command(result_of(np.full(m, 0.30), direction), q, np.zeros(3), np.zeros(7), 0.002)
+    near = plain.command(result_of(np.full(m, 0.24), direction), q, np.zeros(3), np.zeros(7), 0.002)
+    shifted = tolerant.command(result_of(np.full(m, 0.30), direction), q, np.zeros(3), np.zeros(7), 0.002)
+    np.testing.assert_allclose(shifted.repulsive, near.repulsive)
+    np.testing.assert_allclose(shifted.risk, near.risk)
+    assert np.all(shifted.risk > far.risk)
+    inside = tolerant.command(result_of(np.full(m, 0.05), direction), q, np.zeros(3), np.zeros(7), 0.002)
+    np.testing.assert_allclose(inside.risk, risk(np.zeros(m), RHO, ALPHA))  # at least 0 is left

@@ -290,6 +290,11 @@ def test_bad_loop_arguments_are_refused_before_any_work(reach_workcell, field, k
     ("ssm_directions", dict(ssm_directions="yes")),
     ("ssm_directions", dict(ssm_directions=1)),
     ("control_rate", dict(control_rate=float("nan"))),
+    ("monitor", dict(monitor="robot_zone=0.06")),
+    ("robot_zone", dict(monitor=dict(robot_zone="0.06"))),
+    ("robot_zone", dict(monitor=dict(robot_zone=-0.01))),
+    ("robot_zone", dict(monitor=dict(robot_zone=float("nan")))),
+    ("robot_zone", dict(monitor=dict(robot_zone=1.0))),
 ])
 def test_bad_loop_settings_are_refused(field, kwargs):
     from depthguard.errors import InputError

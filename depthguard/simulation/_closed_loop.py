@@ -92,6 +92,11 @@ class LoopSettings:
             raise InputError("truth_every must be a whole number >= 1", field="truth_every")
         if not isinstance(self.ssm_directions, bool):
             raise InputError("ssm_directions must be True or False", field="ssm_directions")
+        if not isinstance(self.monitor, dict):
+            raise InputError("monitor must be a dict of DistanceMonitor keyword arguments", field="monitor")
+        # The robot zone is also a tolerance of the avoidance and of SSM here: checked before it is added to them.
+        check_real(self.monitor.get("robot_zone", config.DEFAULT_ROBOT_ZONE), "robot_zone", minimum=0.0,
+                   maximum=config.ROBOT_ZONE_MAX, unit="metres", field="robot_zone")
 
 
 @dataclass(frozen=True, eq=False)
