@@ -25,7 +25,7 @@ from importlib import resources
 from pathlib import Path
 
 from depthguard.avoidance import AvoidanceParams
-from depthguard.experiments.avoidance_demo import summarize
+from depthguard.experiments.avoidance_demo import resumed_cell, summarize
 from depthguard.simulation import load_workcell
 from depthguard.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
 
@@ -36,12 +36,6 @@ LAYOUTS = {"two": None, "four": "scenario_b_four.yaml"}
 
 def _packaged(name: str) -> Path:
     return Path(str(resources.files("depthguard.simulation").joinpath(name)))
-
-
-def _resumed(figures: dict) -> str:
-    if figures["obstacles_left_s"] is None:
-        return "-"
-    return "never" if figures["task_resumed_after_s"] is None else f"{figures['task_resumed_after_s']:.2f}"
 
 
 def main() -> None:
@@ -68,7 +62,7 @@ def main() -> None:
                 log = run_closed_loop(workcell, mode, start=start, duration=duration, settings=settings)
                 s = summarize(log, dt)
                 print(f"{Path(scene).stem:22s} {layout:6s} {mode:6s} {s['collisions']:10d} {s['clearance_m']:12.3f} "
-                      f"{s['task_error_after_m']:17.3f} {_resumed(s):>16s} {s['oscillation_per_s']:13.2f} "
+                      f"{s['task_error_after_m']:17.3f} {resumed_cell(s)} {s['oscillation_per_s']:13.2f} "
                       f"{len(log.times) * dt / log.wall_seconds:15.3f}", flush=True)
 
 

@@ -151,8 +151,12 @@ def summarize(log, dt: float) -> dict:
     }
 
 
-def _seconds(value) -> str:
-    """A table cell of 16 characters: seconds, or 'never'."""
+def resumed_cell(figures: dict) -> str:
+    """The table's "resumed after s" cell, 16 characters: seconds, 'never' (the task did not come back), or '-'
+    (the obstacles did not leave)."""
+    if figures["obstacles_left_s"] is None:
+        return f"{'-':>16s}"
+    value = figures["task_resumed_after_s"]
     return f"{'never':>16s}" if value is None else f"{value:16.2f}"
 
 
@@ -246,7 +250,7 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
     # reacting s: slowed (task scale or speed factor < 0.99, the joints' limits included) or pushed away
     for mode, r in results.items():
         print(f"{mode:6s} {r['collisions']:10d} {r['clearance_m']:12.3f} {r['true_min_distance_m']:11.3f} "
-              f"{r['time_reacting_s']:11.2f} {r['task_error_after_m']:17.3f} {_seconds(r['task_resumed_after_s'])} "
+              f"{r['time_reacting_s']:11.2f} {r['task_error_after_m']:17.3f} {resumed_cell(r)} "
               f"{r['oscillation_per_s']:15.2f} "
               f"{r['loop_hz']:8.0f} {r['step_hz']:8.0f}")
     print("\nper control point, smallest true / reported distance over the run (m; '-': nothing within rho; the two\n"

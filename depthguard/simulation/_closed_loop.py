@@ -56,8 +56,9 @@ class LoopSettings:
             on the link's axis, which let the forearm come within 1 mm of the box in the elbow scenario.
         acceleration: rad/s^2, the joints' acceleration limits (URDF has none).
         ssm: :class:`~depthguard.avoidance.SSMParams` of mode "ssm" (default: its defaults).
-        ssm_rho: metres, the monitor's rho in mode "ssm": above the protective separation distance (0.84 m at
-            standstill with the defaults), or nothing could be seen far enough away to move at all.
+        ssm_rho: metres, the monitor's rho in mode "ssm": above the protective separation distance (0.90 m at
+            standstill with the defaults and the robot zone in Z_d), or nothing could be seen far enough away to move
+            at all.
         ssm_directions: mode "ssm": trust the monitor's directions, so that a point moving away from what is near is
             not slowed. Off by default: a direction summarises all the possibly occupied space within rho (the mean
             direction with ``hybrid``, the nearest point's with ``min``), and moving away from it can approach a
@@ -181,9 +182,7 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
     controller = AvoidanceController(robot, params, limits)
     ssm = None
     if mode == "ssm":
-        from depthguard.avoidance import SpeedSeparationMonitor
-
-        from depthguard.avoidance import SSMParams
+        from depthguard.avoidance import SpeedSeparationMonitor, SSMParams
 
         ssm_params = SSMParams() if settings.ssm is None else settings.ssm
         ssm_params = replace(ssm_params, sensing_uncertainty=ssm_params.sensing_uncertainty + zone)
