@@ -1,7 +1,7 @@
 """The Quick start's main job (issue 9): a robot doing its task next to a person, in closed loop, three ways.
 
 Scene ``scenario_b_reach.yaml``: a KUKA iiwa traces the 2016 paper's vertical hexagon at 0.4 m/s while a person walks
-up and reaches into its end-effector; four simulated 640x480 depth cameras (Kinect noise, edge dropouts) at 30 Hz,
+up, reaches into its end-effector and walks away; four simulated 640x480 depth cameras (Kinect noise, edge dropouts) at 30 Hz,
 issue 8's reference layout (``scenario_b_four.yaml``: the scene's two front cameras and two in the back corners;
 ``cameras=2`` keeps the front two), are fused through the depth grid with the free-space memory; control runs at 500 Hz
 (:func:`depthguard.simulation._closed_loop.run_closed_loop`). The same episode is run per mode:
@@ -217,7 +217,8 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
     dt = 1.0 / settings.control_rate
     span = workcell.duration if duration is None else min(duration, workcell.duration)
     cameras = list(workcell.rig.cameras)
-    print(f"{SCENE}: a KUKA iiwa traces a vertical hexagon at 0.4 m/s while a person reaches into its end-effector;\n"
+    print(f"{SCENE}: a KUKA iiwa traces a vertical hexagon at 0.4 m/s while a person reaches into its end-effector\n"
+          "and walks away; "
           f"{len(cameras)} simulated 640x480 depth cameras ({', '.join(cameras)}) at {workcell.rate:g} Hz fused "
           f"through the depth grid; control at {settings.control_rate:g} Hz; {span:g} s simulated per mode;\n"
           "judged by the exact distances between the robot's meshes and the obstacles (coal).\n")
