@@ -24,8 +24,8 @@ def reach_workcell():
     return load_workcell(_packaged("scenario_b_reach.yaml"))
 
 
-#: The person has left (every control point truly farther than 0.4 m for good) at about 3.4 s; the task must be back
-#: within 1 cm of its path this soon after (measured: 0.69 s with two cameras, 0.70 s with four).
+#: The person has left (every control point truly farther than 0.4 m for good); the task must be back within 1 cm of
+#: its path this soon after (measured: reach 0.76 s with two cameras, 0.70 s with four; board 0.91 s, 0.78 s).
 RESUME_WITHIN = 1.2
 #: metres: the median task error from then on may be at most this.
 RESUMED_MEDIAN = 0.015
@@ -48,20 +48,22 @@ def test_without_avoidance_the_hand_meets_the_robot_and_with_it_the_robot_keeps_
 
 
 @pytest.mark.slow
-def test_the_task_resumes_after_the_person_has_left(runs):
+@pytest.mark.parametrize("scene", ["reach", "board"])
+def test_the_task_resumes_after_the_person_has_left(runs, board_runs, scene):
     """Issue 9: after the avoidance the end-effector's task resumes, its error back below 1 cm within RESUME_WITHIN
-    of the person leaving, and near it from then on. This needs the loop's robot zone (config.LOOP_ROBOT_ZONE):
+    of the person leaving (the reaching hand at about 3.4 s; the board, carried back, at about 4.3 s), and near it
+    from then on. This needs the loop's robot zone (config.LOOP_ROBOT_ZONE):
     without it the uncleared shell round the links kept the arm pushed 0.1-0.44 m off its path after the person had
     gone. What is left pushes it 1-3 cm off now and then (median RESUMED_MEDIAN at most; measured 0.8-1.1 cm): in
     about one frame in six, sensor dropouts at the robot's own silhouette in three of four cameras leave cells 5 cm
     beyond the zone uncleared, 0.12-0.15 m from the elbow's control points."""
     from depthguard.experiments.avoidance_demo import resumption
 
-    log = runs["avoid"]
+    log = (runs if scene == "reach" else board_runs)["avoid"]
     assert log.times[-1] > 5.4  # the run lasts until the person is gone
     assert log.task_error.max() > 0.1  # the avoidance did take the end-effector off its path
     left, resumed, median = resumption(log)
-    assert left is not None and left < 4.0, left
+    assert left is not None and left < log.times[-1] - 1.0, left
     assert resumed is not None and resumed <= RESUME_WITHIN, resumed
     assert median < RESUMED_MEDIAN, median
 
@@ -75,16 +77,20 @@ def _packaged(name: str) -> Path:
     return Path(str(resources.files("depthguard.simulation").joinpath(name)))
 
 
-def _every_mode(name: str, window) -> dict:
-    """The packaged scene ``name`` run in closed loop over ``window`` (start, duration) in each mode."""
+def _every_mode(name: str, window, modes=("none", "avoid", "ssm")) -> dict:
+    """The packaged scene ``name`` run in closed loop over ``window`` (start, duration) in each of ``modes``."""
     workcell = load_workcell(_packaged(name))
     start, duration = window
-    return {mode: run_closed_loop(workcell, mode, start=start, duration=duration) for mode in ("none", "avoid", "ssm")}
+    return {mode: run_closed_loop(workcell, mode, start=start, duration=duration) for mode in modes}
 
 
 @pytest.fixture(scope="module")
 def board_runs():
-    return _every_mode("scenario_b_board.yaml", BOARD_WINDOW)
+    """The three modes over BOARD_WINDOW; the avoidance on to the scene's end (the person steps back with the
+    board at 3.6 s)."""
+    runs = _every_mode("scenario_b_board.yaml", BOARD_WINDOW, modes=("none", "ssm"))
+    runs["avoid"] = run_closed_loop(load_workcell(_packaged("scenario_b_board.yaml")), "avoid", start=BOARD_WINDOW[0])
+    return runs
 
 
 @pytest.mark.slow

@@ -133,6 +133,8 @@ BAD_SCENES = [
     (lambda s: s["people"][0]["actions"].append({"dance": {}}), "people[0].actions[6]"),
     (lambda s: s["people"][0]["actions"][3]["carry"].update(object="crate"), "people[0].actions[3].carry.object"),
     (lambda s: s["people"][0]["actions"][0]["walk"].update(to=[1.0]), "people[0].actions[0].walk.to"),
+    (lambda s: s["people"][0]["actions"][0]["walk"].update(backwards="yes"), "people[0].actions[0].walk.backwards"),
+    (lambda s: s["people"][0]["actions"][3]["carry"].update(backwards=1), "people[0].actions[3].carry.backwards"),
     (lambda s: s.update(duration=8.0), "people[0].actions"),
 ]
 
@@ -673,3 +675,17 @@ def test_rotation_with_z_is_a_rotation_whose_third_column_is_the_axis():
         np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
         assert np.linalg.det(R) > 0.0
         np.testing.assert_allclose(R[:, 2], axis, atol=1e-15)
+
+
+def test_a_person_stepping_back_keeps_facing_the_way_it_came(wc):
+    """walk/carry ``backwards: true`` (scenario_b_board.yaml: the board is carried back out of the robot's reach
+    without swinging through it): the person moves the other way and its heading stays."""
+    scene = copy.deepcopy(wc.scene)
+    person = scene["people"][0]
+    person["actions"] = [{"walk": {"to": [2.0, 0.0], "speed": 1.0}},
+                         {"walk": {"to": [3.0, 0.0], "speed": 0.5, "backwards": True}}]
+    walker = workcell_from_dict(scene).people[0]
+    forward, back = walker.base_at(1.0), walker.base_at(walker.time - 0.1)
+    assert back.position[0] > forward.position[0]  # it went on along +x ...
+    facing = np.array([np.cos(back.heading), np.sin(back.heading)])
+    np.testing.assert_allclose(facing, [-1.0, 0.0], atol=1e-6)  # ... facing -x, the way it came

@@ -119,7 +119,8 @@ def _walk(person, action, context, carried, robot_xy):
     start = person.time
     points = np.concatenate([action.points("via", 2, default=[]), action.vector("to", 2)[None]])
     person.walk(points, action.number("speed", default=person.walk_speed, positive=True),
-                action.number("leg_swing", default=config.SIM_LEG_SWING, minimum=0.0, maximum=1.0))
+                action.number("leg_swing", default=config.SIM_LEG_SWING, minimum=0.0, maximum=1.0),
+                action.boolean("backwards", default=False))
     return start
 
 
@@ -174,7 +175,8 @@ def _carry(person, action, context, carried, robot_xy):
     start = person.time
     person.carry(name, carried[name].size, points, action.number("speed", default=1.0, positive=True),
                  action.number("leg_swing", default=0.3, minimum=0.0, maximum=1.0), place,
-                 hold=action.number("hold", default=0.0, minimum=0.0))
+                 hold=action.number("hold", default=0.0, minimum=0.0),
+                 backwards=action.boolean("backwards", default=False))
     return start
 
 

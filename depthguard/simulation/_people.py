@@ -221,15 +221,17 @@ class Person:
     def heading(self) -> float:
         return self._heading_steps[-1][1]
 
-    def walk(self, points, speed: float, leg_swing: float) -> None:
-        """Walk through ``points`` ((k, 2) metres) at ``speed`` m/s from the current position."""
+    def walk(self, points, speed: float, leg_swing: float, backwards: bool = False) -> None:
+        """Walk through ``points`` ((k, 2) metres) at ``speed`` m/s from the current position, facing the way it goes
+        (``backwards``: facing the other way, as a person stepping back from something keeps facing it)."""
         for p in np.asarray(points, dtype=np.float64).reshape(-1, 2):
             step = p - self.position
             length = float(np.linalg.norm(step))
             if length < 1e-9:
                 continue
             t0 = self.time
-            self._heading_steps.append((t0, math.atan2(step[1], step[0])))
+            heading = math.atan2(step[1], step[0])
+            self._heading_steps.append((t0, heading + math.pi if backwards else heading))
             self._gait_steps.append((t0, float(leg_swing)))
             self._key_t.append(t0 + length / speed)
             self._key_xy.append(p.copy())
@@ -259,11 +261,13 @@ class Person:
         self.arm_tasks.append(_ArmTask(side, t0, t0 + duration, ramp, ramp, target))
         self.hold(duration)
 
-    def carry(self, name: str, size, points, speed: float, leg_swing: float, place, hold: float = 0.0) -> None:
-        """Carry the box ``name`` of full ``size`` (3,) in both hands while walking through ``points`` at ``speed``,
-        then stand ``hold`` seconds; afterwards the box rests at ``place`` ((center, yaw) or None: gone)."""
+    def carry(self, name: str, size, points, speed: float, leg_swing: float, place, hold: float = 0.0,
+              backwards: bool = False) -> None:
+        """Carry the box ``name`` of full ``size`` (3,) in both hands while walking through ``points`` at ``speed``
+        (``backwards``: stepping back, facing the other way), then stand ``hold`` seconds; afterwards the box rests
+        at ``place`` ((center, yaw) or None: gone)."""
         t0 = self.time
-        self.walk(points, speed, leg_swing)
+        self.walk(points, speed, leg_swing, backwards)
         if hold > 0:
             self.hold(hold)
         t1 = self.time

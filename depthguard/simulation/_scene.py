@@ -56,12 +56,14 @@ before it is first carried (without ``rest`` it appears only when carried).
 ``walk_speed`` (1.3 m/s), ``clothes_albedo``, ``skin_albedo``, and ``actions``, a list of one-key mappings run one
 after another (see :mod:`depthguard.simulation._people` for what each does):
 
-- ``walk: {to: [x, y], via: [[x, y], ...], speed: 1.3, leg_swing: 0.35}``
+- ``walk: {to: [x, y], via: [[x, y], ...], speed: 1.3, leg_swing: 0.35, backwards: false}`` (``backwards``:
+  stepping back, facing the other way)
 - ``stand: {duration: s, position: [x, y], via: [...], facing: ...}``
 - ``reach: {hand: right, target: end_effector | control point name | [x, y, z], standoff: 0.0, duration: s,
   ramp: 0.5, position: [x, y], via: [...], facing: ...}`` (facing defaults to the target)
 - ``carry: {object: name, to: [x, y], via: [...], speed: 1.0, leg_swing: 0.3, hold: 0.0,
-  place_at: {center: [x, y, z], yaw: 0.0}}``
+  place_at: {center: [x, y, z], yaw: 0.0}, backwards: false}`` (a second carry of an object still held goes on
+  from the hands)
 - ``shadow: {camera: principal, target: control point name, distance: 1.5, duration: s, via: [...]}``
 - ``hidden_hand: {camera: principal, target: control point name, behind: 0.2, stand_off: 0.6, hand: right,
   duration: s, ramp: 0.5, position: [x, y], via: [...]}``
