@@ -188,7 +188,7 @@ def test_a_task_that_turns_a_corner_is_followed_as_soon_as_the_accelerations_all
 
 
 def test_joints_that_would_move_a_point_towards_its_obstacle_are_bounded_as_the_paper_says(iiwa):
-    controller = AvoidanceController(iiwa)
+    controller = AvoidanceController(iiwa, AvoidanceParams(from_surface=False))  # the papers' distances
     q = np.array([0.0, 0.6, 0.0, -1.2, 0.0, 0.8, 0.0])
     elbow = iiwa.control_point_names.index("elbow")
     points, jacobians = iiwa.control_point_kinematics(q)
@@ -258,7 +258,7 @@ def test_from_surface_takes_the_links_radius_off_every_distance(iiwa):
     directions = rng.normal(size=(len(points), 3))
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     distance = rng.uniform(0.02, 0.35, len(points))
-    plain = AvoidanceController(iiwa)
+    plain = AvoidanceController(iiwa, AvoidanceParams(from_surface=False))
     surface = AvoidanceController(iiwa, AvoidanceParams(from_surface=True))
     command = surface.command(result_of(distance, directions), q, np.zeros(3), np.zeros(7), 0.002)
     shrunk = np.maximum(distance - np.array([radius[p.link] for p in iiwa.control_points]), 0.0)
@@ -266,6 +266,13 @@ def test_from_surface_takes_the_links_radius_off_every_distance(iiwa):
     assert np.allclose(command.risk, expected.risk) and np.allclose(command.dq, expected.dq)
     assert np.all(command.risk >= plain.command(result_of(distance, directions), q, np.zeros(3), np.zeros(7),
                                                 0.002).risk)
+
+
+def test_distances_are_taken_from_the_links_surfaces_unless_the_papers_rule_is_asked_for():
+    """A departure from the papers, on by default: with the papers' distances (from control points on the links'
+    axes) the board and the elbow scenarios collided (README, "Avoidance")."""
+    assert AvoidanceParams().from_surface is True
+    assert AvoidanceParams(from_surface=False).from_surface is False
 
 
 def test_parameters_are_checked():

@@ -62,7 +62,8 @@ def damped_pinv(J: np.ndarray, epsilon: float = config.DLS_EPSILON,
 
 @dataclass(frozen=True)
 class AvoidanceParams:
-    """The avoidance's parameters (SPEC section 9), defaults as the 2015 paper's experiments used them.
+    """The avoidance's parameters (SPEC section 9), defaults as the 2015 paper's experiments used them, except
+    ``from_surface``.
 
     Attributes:
         rho: metres, the distance within which obstacles act (the monitor's rho).
@@ -72,8 +73,10 @@ class AvoidanceParams:
             given (0: no pull; the papers have none).
         from_surface: measure each control point's distance from its link's surface rather than from the point: the
             distance minus the radius of the link's padded capsule (at least 0), in the repulsion and the risk
-            alike. The papers measure from the point; control points on a link's axis then let the link's surface
-            come within a few millimetres of an obstacle it passes (README, the elbow scenario with four cameras).
+            alike. True by default, which departs from the papers: they measure from the point, and control points
+            on a link's axis, a link's radius (0.07-0.1 m) from its surface, let the surface meet what it passes:
+            with this command law the board and the elbow scenarios collided (-0.002 m, -0.008 m; two cameras,
+            ``benchmarks/bench_avoidance_scenarios.py --papers``). False gives the papers' rule.
         tolerance: metres taken off every distance (at least 0 is left) before the repulsion and the risk: how much a
             reported distance may exceed the truth (the monitor's robot zone, ``DistanceMonitor(robot_zone=...)``),
             so that the avoidance acts on the nearest the obstacle may truly be. 0 in the papers.
@@ -83,7 +86,7 @@ class AvoidanceParams:
     v_max: float = config.AVOID_V_MAX
     alpha: float = config.AVOID_ALPHA
     posture_gain: float = 0.0
-    from_surface: bool = False
+    from_surface: bool = True
     tolerance: float = 0.0
 
     def __post_init__(self):

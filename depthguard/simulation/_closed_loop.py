@@ -51,9 +51,8 @@ class LoopSettings:
         gain: 1/s, the task's position feedback.
         posture_gain: 1/s, the redundancy's pull towards the scripted joints.
         truth_every: ground truth every this many control steps (and at every camera frame).
-        avoidance: the papers' parameters (its rho is the monitor's), except that by default each control point's
-            distance is measured from its link's surface (``from_surface=True``): the papers measure from the point
-            on the link's axis, which let the forearm come within 1 mm of the box in the elbow scenario.
+        avoidance: the avoidance's parameters (:class:`~depthguard.avoidance.AvoidanceParams`; its rho is the
+            monitor's; distances from the links' surfaces by default).
         acceleration: rad/s^2, the joints' acceleration limits (URDF has none).
         ssm: :class:`~depthguard.avoidance.SSMParams` of mode "ssm" (default: its defaults).
         ssm_rho: metres, the monitor's rho in mode "ssm": above the protective separation distance (0.90 m at
@@ -76,7 +75,7 @@ class LoopSettings:
     gain: float = 5.0
     posture_gain: float = 2.0
     truth_every: int = 5
-    avoidance: AvoidanceParams = field(default_factory=lambda: AvoidanceParams(from_surface=True))
+    avoidance: AvoidanceParams = field(default_factory=AvoidanceParams)
     acceleration: float = config.JOINT_ACCELERATION
     ssm: object = None
     ssm_rho: float = 1.0
