@@ -501,7 +501,7 @@ def test_ground_truth_against_coal_and_pybullet(wc):
 
 def _pybullet_body(pybullet, client, primitive, Rotation):
     from depthguard.scenes import Box
-    from depthguard.simulation._truth import rotation_with_z
+    from depthguard.transforms import rotation_with_z
 
     if isinstance(primitive, Capsule):
         p0, p1 = np.asarray(primitive.p0), np.asarray(primitive.p1)
@@ -664,7 +664,7 @@ def test_a_scene_loads_with_another_scenes_camera_layout(tmp_path):
 
 
 def test_rotation_with_z_is_a_rotation_whose_third_column_is_the_axis():
-    from depthguard.simulation._truth import rotation_with_z
+    from depthguard.transforms import rotation_with_z
 
     rng = np.random.default_rng(7)
     axes = [np.array(a, dtype=float) for a in ([1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0.9, 0.1, 0.0])]

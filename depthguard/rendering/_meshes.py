@@ -22,6 +22,7 @@ from scipy.spatial import ConvexHull
 
 from depthguard import config
 from depthguard.errors import InputError
+from depthguard.transforms import rotation_with_z
 
 
 @functools.lru_cache(maxsize=16)
@@ -36,14 +37,6 @@ def _unit_hull(segments: int) -> tuple[np.ndarray, float]:
     h = float((-ConvexHull(directions).equations[:, 3]).min())
     directions.setflags(write=False)
     return directions, h
-
-
-def _frame_with_z(axis: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation whose third column is the unit vector ``axis``."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    x = np.cross(helper, axis)
-    x /= np.linalg.norm(x)
-    return np.stack([x, np.cross(axis, x), axis], axis=1)
 
 
 def _outward_hull(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -105,7 +98,7 @@ def primitive_mesh(prim, segments: int = config.PRIMITIVE_MESH_SEGMENTS) -> tupl
         length = float(np.linalg.norm(p1 - p0))
         if length == 0.0:
             return _outward_hull(directions * scale + p0)
-        ball = (directions * scale) @ _frame_with_z((p1 - p0) / length).T
+        ball = (directions * scale) @ rotation_with_z((p1 - p0) / length).T
         return _outward_hull(np.concatenate([ball + p0, ball + p1]))
     raise InputError(f"primitive_mesh takes a Box, Sphere or Capsule, got {type(prim).__name__}")
 

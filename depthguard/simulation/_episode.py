@@ -24,7 +24,8 @@ from depthguard.scenes import Box, Capsule
 from depthguard.simulation._people import PARTS
 from depthguard.simulation._scene import Workcell
 from depthguard.simulation._sensors import simulate_depth, simulate_intensity
-from depthguard.simulation._truth import GroundTruth, TruthComputer, rotation_with_z
+from depthguard.simulation._truth import GroundTruth, TruthComputer
+from depthguard.transforms import rotation_with_z
 
 
 @dataclass(frozen=True, eq=False)

@@ -35,6 +35,7 @@ from depthguard.recordings import (
     ros_nanoseconds,
     ros_typestore,
 )
+from depthguard.transforms import rotation_with_z
 
 DISTANCES_TOPIC = "/depthguard/distances"
 TRUE_DISTANCES_TOPIC = "/depthguard/true_distances"
@@ -164,7 +165,7 @@ def _robot_markers(store, ns, robot, q, reported, rho):
         length = float(np.linalg.norm(axis))
         d = 2.0 * capsule.radius
         if length > 1e-9:
-            add("links", Marker.CYLINDER, (p0 + p1) / 2, _z_towards(axis / length), (d, d, length), grey)
+            add("links", Marker.CYLINDER, (p0 + p1) / 2, rotation_with_z(axis / length), (d, d, length), grey)
         for end in (p0, p1):
             add("links", Marker.SPHERE, end, np.eye(3), (d, d, d), grey)
     for point, distance in zip(robot.control_point_positions(q, check=False), reported):
@@ -173,10 +174,3 @@ def _robot_markers(store, ns, robot, q, reported, rho):
         add("control_points", Marker.SPHERE, point, np.eye(3), (CONTROL_POINT_SIZE,) * 3, color)
     return types["visualization_msgs/msg/MarkerArray"](markers=markers)
 
-
-def _z_towards(axis):
-    """A rotation whose z axis is the unit vector ``axis``."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    x = np.cross(helper, axis)
-    x /= np.linalg.norm(x)
-    return np.column_stack([x, np.cross(axis, x), axis])

@@ -21,6 +21,7 @@ import coal
 import numpy as np
 
 from depthguard.scenes import Box, Capsule, Sphere
+from depthguard.transforms import rotation_with_z
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,19 +70,6 @@ def coal_shape(primitive) -> tuple[object, "coal.Transform3s"]:
         return (coal.Box(*size), coal.Transform3s(np.asarray(primitive.R_world_box, float),
                                                   np.asarray(primitive.center, float)))
     raise TypeError(f"not a depthguard.scenes primitive: {type(primitive).__name__}")
-
-
-def rotation_with_z(axis) -> np.ndarray:
-    """(3, 3) rotation whose third column is the unit vector ``axis``."""
-    a0, a1, a2 = (float(v) for v in axis)
-    # x = helper x axis, with helper (1, 0, 0) or (0, 1, 0); then y = axis x x (cross products written out: numpy's
-    # cross costs 40 us a call, and the loop's ground truth makes thousands)
-    x0, x1, x2 = (0.0, -a2, a1) if abs(a0) < 0.9 else (a2, 0.0, -a0)
-    norm = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
-    x0, x1, x2 = x0 / norm, x1 / norm, x2 / norm
-    return np.array([[x0, a1 * x2 - a2 * x1, a0],
-                     [x1, a2 * x0 - a0 * x2, a1],
-                     [x2, a0 * x1 - a1 * x0, a2]])
 
 
 class TruthComputer:
