@@ -181,8 +181,8 @@ class AvoidanceController:
         if jacobians is None:
             jacobians = self.robot.control_point_jacobians(q, check=False)
         distance = np.asarray(result.distance, dtype=np.float64)
-        if params.from_surface or params.tolerance:
-            distance = np.maximum(distance - (self._radius if params.from_surface else 0.0) - params.tolerance, 0.0)
+        # From the links' surfaces, less the tolerance (a distance may exceed the truth by that much); at least 0.
+        distance = np.maximum(distance - (self._radius if params.from_surface else 0.0) - params.tolerance, 0.0)
         direction = np.asarray(result.direction, dtype=np.float64)
         f = risk(distance, params.rho, params.alpha)
         # The end-effector: repulsion along the result's direction, added to the task.
