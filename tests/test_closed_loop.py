@@ -292,8 +292,11 @@ def test_bad_loop_arguments_are_refused_before_any_work(reach_workcell, field, k
 @pytest.mark.parametrize("field, kwargs", [
     ("truth_every", dict(truth_every=0)),
     ("truth_every", dict(truth_every=True)),
-    ("ssm_directions", dict(ssm_directions="yes")),
-    ("ssm_directions", dict(ssm_directions=1)),
+    ("ssm_lookahead", dict(ssm_lookahead="yes")),
+    ("ssm_lookahead", dict(ssm_lookahead=1)),
+    ("ssm_rho", dict(ssm_rho=0.0)),
+    ("ssm_rho", dict(ssm_rho=float("inf"))),
+    ("ssm_rho", dict(ssm_rho="1.2")),
     ("control_rate", dict(control_rate=float("nan"))),
     ("monitor", dict(monitor="robot_zone=0.06")),
     ("robot_zone", dict(monitor=dict(robot_zone="0.06"))),

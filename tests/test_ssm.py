@@ -341,6 +341,141 @@ def test_random_cases_keep_the_separation():
     assert min(stats.values()) > 50, stats
 
 
+# ------------------------------------------------------------------------------------------------ looking ahead
+#
+# The judge: a cloud of possibly occupied points, known exactly. SSM sees only distances from the cloud (at the point
+# and at the point looked ahead to, each possibly reported smaller than the truth, as a conservative monitor does) and
+# no direction; every point of the cloud that the scaled command approaches must keep S_p's condition with its own
+# exact direction and distance.
+
+
+def cloud_distance(x, cloud, radius=0.0):
+    """Exact distance from x (3,) to the nearest point of the (N, 3) cloud, minus a sphere's radius (>= 0)."""
+    return max(float(np.min(np.linalg.norm(cloud - x, axis=1))) - radius, 0.0)
+
+
+def lookahead_verdict(monitor, P, velocity, cloud, T_r, radius=0.0, under=(0.0, 0.0)):
+    """SSM's verdict for one point P (3,) moving at ``velocity`` (3,) m/s, told only distances to the cloud (reported
+    ``under`` = (metres, metres) below the truth at P and ahead), with an unknown direction."""
+    J = np.diag(velocity)[None]
+    T = monitor.lookahead_time(T_r)
+    D = max(cloud_distance(P, cloud, radius) - under[0], 0.0)
+    ahead = max(cloud_distance(P + T * velocity, cloud, radius) - under[1], 0.0)
+    return monitor.speed_factor(np.array([D]), np.zeros((1, 3)), J, np.ones(3), T_r, ahead=np.array([ahead]))
+
+
+def test_looking_ahead_keeps_every_occupied_point_s_separation():
+    rng = np.random.default_rng(20261125)
+    stats = {"certified": 0, "stopped": 0, "slowed": 0}
+    for _ in range(1500):
+        p = random_params(rng)
+        T_r = rng.uniform(0.0, 0.3)
+        radius = 0.0 if rng.random() < 0.3 else rng.uniform(0.0, 0.12)
+        P = np.zeros(3)
+        centre = rng.normal(size=3)
+        centre *= rng.uniform(0.3, 2.5) / np.linalg.norm(centre)
+        cloud = centre + rng.normal(scale=rng.uniform(0.01, 0.8), size=(int(rng.integers(1, 60)), 3))
+        velocity = rng.normal(size=3) * rng.uniform(0.0, 2.0)
+        if rng.random() < 0.3:  # straight away from the cloud's centre
+            velocity = -centre / np.linalg.norm(centre) * rng.uniform(0.0, 2.0)
+        under = (0.0, 0.0) if rng.random() < 0.5 else tuple(rng.uniform(0.0, 0.2, size=2))
+        monitor = SpeedSeparationMonitor(p, rho=np.inf)
+        verdict = lookahead_verdict(monitor, P, velocity, cloud, T_r, radius, under)
+        k = verdict.factor
+        for q in cloud:  # the judge: each occupied point with its exact direction and distance
+            d = max(np.linalg.norm(q - P) - radius, 0.0)
+            u = (q - P) / max(np.linalg.norm(q - P), 1e-300)
+            approach = k * float(velocity @ u)
+            if approach > 1e-12:
+                assert d >= sp_by_hand(p, approach, T_r, d) - TOL, (d, approach, k, bool(verdict.certified[0]))
+        stats["certified" if verdict.certified[0] else "stopped" if k == 0.0 else "slowed"] += 1
+    assert min(stats.values()) > 100, stats
+
+
+def test_moving_straight_away_from_everything_is_not_slowed():
+    """A point moving straight away from a person (a ball of points) is not slowed while it is beyond S_p at rest,
+    however fast; sideways at that distance it is, as if it approached at its whole speed."""
+    p = SSMParams()
+    T_r = 0.1
+    monitor = SpeedSeparationMonitor(p, rho=np.inf)
+    rng = np.random.default_rng(3)
+    ball = rng.normal(size=(400, 3))
+    ball = 0.25 * ball / np.linalg.norm(ball, axis=1, keepdims=True) + [0.0, 0.0, 0.0]  # a 0.25 m sphere's surface
+    at_rest = sp_by_hand(p, 0.0, T_r, 1.0)
+    for gap in (at_rest + 1e-3, at_rest + 0.1, 2.0):
+        P = np.array([0.25 + gap, 0.0, 0.0])  # the sphere's nearest point is at x = 0.25
+        for speed in (0.1, 0.5, 2.0):
+            verdict = lookahead_verdict(monitor, P, np.array([speed, 0.0, 0.0]), ball, T_r)
+            assert verdict.factor == 1.0 and verdict.certified[0], (gap, speed)
+    P = np.array([0.25 + at_rest + 0.05, 0.0, 0.0])
+    sideways = lookahead_verdict(monitor, P, np.array([0.0, 1.0, 0.0]), ball, T_r)
+    assert not sideways.certified[0] and sideways.factor < 1.0
+    towards = lookahead_verdict(monitor, P, np.array([-1.0, 0.0, 0.0]), ball, T_r)
+    assert not towards.certified[0] and towards.factor == pytest.approx(sideways.factor)
+    # nearer than S_p at rest, the distances cannot tell away from towards: it stops
+    P = np.array([0.25 + at_rest - 0.01, 0.0, 0.0])
+    assert lookahead_verdict(monitor, P, np.array([1.0, 0.0, 0.0]), ball, T_r).factor == 0.0
+
+
+def test_looking_ahead_to_nothing_within_rho():
+    """ahead = inf says only that nothing is within rho of the point looked ahead to: it counts as rho."""
+    p = SSMParams()
+    directions, J, dq = one_point([0.0, 0.0, 0.0], [1.0, 0.0, 0.0])
+    D = np.array([2.0])
+    at_rest = sp_by_hand(p, 0.0, 0.1, 2.0)
+    T = SpeedSeparationMonitor(p, rho=1.0).lookahead_time(0.1)
+    assert T == pytest.approx(0.1 + p.stopping_time / 2)
+    for rho, certified in ((at_rest + T * 1.0 + 1e-6, True), (at_rest + T * 1.0 - 1e-6, False)):
+        verdict = SpeedSeparationMonitor(p, rho=rho).speed_factor(np.array([np.inf]), directions, J, dq, 0.1,
+                                                                  ahead=np.array([np.inf]))
+        assert bool(verdict.certified[0]) is certified
+        assert (verdict.factor == 1.0) is certified or verdict.factor == 1.0
+    assert SpeedSeparationMonitor(p, rho=np.inf).speed_factor(D, directions, J, dq, 0.1,
+                                                              ahead=np.array([np.inf])).certified[0]
+    # without ahead, nothing is certified
+    assert not SpeedSeparationMonitor(p, rho=np.inf).speed_factor(D, directions, J, dq, 0.1).certified.any()
+
+
+def test_a_depth_camera_lets_a_point_move_away_from_a_person_unslowed():
+    """The look-ahead on a depth camera's distances (what it counts occupied: the person, the space they hide, the
+    edge of the view): a point 0.85 m beside a person (a 0.25 m ball), just beyond S_p at rest, moving away at 1 m/s
+    is not slowed; moving towards them or sideways it is, to what its distance allows at its whole speed."""
+    import depthguard as dg
+    from depthguard.scenes import Box, Sphere, render_depth, scene_distance
+
+    camera = dg.PinholeCamera("cam", 320, 240, 262.5, 262.5, 159.5, 119.5, np.eye(4), depth_range=(0.2, 10.0),
+                              noise=dg.NoiseModel.none())
+    person = Sphere((-0.8, 0.0, 4.0), 0.25)
+    occupancy = dg.prepare_depth(dg.depth_image(render_depth(
+        camera, [person, Box.from_bounds([-9, -9, 8.0], [9, 9, 8.1])]), camera), camera)
+    T_r, rho = 0.1, 2.0
+    monitor = SpeedSeparationMonitor(SSMParams(), rho=rho)
+    T = monitor.lookahead_time(T_r)
+    P = np.array([0.3, 0.0, 4.0])
+    factors = {}
+    for name, velocity in (("away", [1.0, 0.0, 0.0]), ("towards", [-1.0, 0.0, 0.0]), ("sideways", [0.0, 1.0, 0.0])):
+        velocity = np.array(velocity)
+        D, ahead = dg.single_camera_distances(occupancy, np.array([P, P + T * velocity]), rho, "min").distance
+        assert D <= scene_distance([person], P[None])[0] + 1e-9
+        J = np.diag(velocity)[None]
+        verdict = monitor.speed_factor(np.array([D]), np.zeros((1, 3)), J, np.ones(3), T_r, ahead=np.array([ahead]))
+        blind = monitor.speed_factor(np.array([D]), np.zeros((1, 3)), J, np.ones(3), T_r)
+        factors[name] = (verdict.factor, blind.factor, bool(verdict.certified[0]))
+    assert factors["away"] == (1.0, pytest.approx(factors["towards"][1]), True), factors
+    assert 0.0 < factors["away"][1] < 0.5  # without looking ahead, moving away was slowed as much as approaching
+    for name in ("towards", "sideways"):
+        assert factors[name][0] == factors[name][1] < 0.5 and not factors[name][2], factors
+
+
+@pytest.mark.parametrize("ahead", [np.array([0.5]), np.array([0.5, math.nan]), np.array([0.5, -0.1]),
+                                   np.array([0.5, -math.inf]), np.zeros((2, 1)), "far"])
+def test_bad_ahead(ahead):
+    args = good_args()
+    with pytest.raises(InputError) as info:
+        SpeedSeparationMonitor(rho=np.inf).speed_factor(*args, ahead=ahead)
+    assert info.value.field == "ahead"
+
+
 # ------------------------------------------------------------------------------------------------ bad inputs
 
 

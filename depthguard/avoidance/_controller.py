@@ -146,9 +146,7 @@ class AvoidanceController:
         if not isinstance(self.limits, JointLimits) or self.limits.n != robot.n_joints:
             raise InputError(f"limits must be JointLimits for {robot.n_joints} joints", field="limits")
         self.ee = robot.end_effector_index
-        # Each control point's link capsule radius (padding included; 0 for a link without geometry).
-        radii = {capsule.link: capsule.radius for capsule in robot.capsules}
-        self._radius = np.array([radii.get(point.link, 0.0) for point in robot.control_points])
+        self._radius = robot.control_point_radii
 
     def command(self, result, q, task_velocity, dq_previous, dt: float, *, jacobians=None, posture=None,
                 check: bool = True) -> AvoidanceCommand:

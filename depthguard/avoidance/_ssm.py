@@ -19,6 +19,25 @@ Scaling the whole joint velocity keeps the commanded path and only slows the rob
 from its obstacle imposes nothing, so motion away is never slowed, and a robot whose motion approaches no obstacle
 is not slowed at all.
 
+**Looking ahead, when no direction can be trusted.** A depth monitor's "obstacle" is every possibly occupied point
+within rho (people, unseen space), and one direction cannot summarise it: moving away from the nearest point can
+approach another. What bounds the approach to all of them at once is the distance D' reported at the point looked
+ahead to, P' = P + T v with T = T_r + T_s / 2 (:meth:`SpeedSeparationMonitor.lookahead_time`) and v the point's
+velocity under the unscaled command. If
+
+    D' >= S_p(0) + T |v|        (S_p(0): S_p at rest, v_h chosen by the point's own distance D <= every d_p)
+
+then every possibly occupied point p that the point approaches (v . u_p > 0, u_p the unit vector from P to p, d_p
+its distance) keeps d_p - T v . u_p >= S_p(0), which is S_p's condition d_p >= S_p(v . u_p); and so does every
+scaled command k v, k in [0, 1]. Proof: |P' - p|^2 = (d_p - T v.u_p)^2 + T^2 (|v|^2 - (v.u_p)^2), so d_p - T v.u_p
+>= |P' - p| - T |v| >= D' - T |v| when d_p - T v.u_p >= 0; when it is negative, |P' - p|^2 < T^2 |v|^2 - d_p^2,
+so |P' - p| < T |v| <= D', impossible. For k < 1, |P + k T v - p| >= D' - (1 - k) T |v| >= S_p(0) + k T |v| and the
+same argument holds with k v. Such a point imposes nothing: a point moving straight away from everything within
+reach (D' = D + T |v|) is not slowed while D >= S_p(0); one moving sideways or towards is slowed as if it approached
+at its whole speed. The bound needs nothing but distances, so it holds for whatever the monitor counts as occupied.
+Robot points are taken as spheres: pass distances from the spheres' surfaces (the distance minus the radius) for
+both D and D'.
+
 Frames and units: world frame, metres, seconds, radians. Directions point from the obstacle towards the point (the
 way to move away), as in :class:`~depthguard.DistanceResult`.
 """
@@ -239,8 +258,11 @@ class SSMVerdict:
         allowed_speed: (m,) float64, m/s, :func:`allowed_approach_speed` of each point's distance (inf: nothing
             within rho).
         protective_distance: (m,) float64, metres, S_p at each point's scaled approach speed ``factor *
-            approach_speed`` (separation = its distance). At most the distance wherever that speed is > 0.
+            approach_speed`` (separation = its distance). At most the distance wherever that speed is > 0 and the
+            point is not ``certified``.
         limiting: index of the point that set ``factor``, or -1 when the factor is 1.
+        certified: (m,) bool, the points that the distance looked ahead to showed approach nothing faster than its
+            distance allows (see the module's docstring); they impose nothing. All False without ``ahead``.
     """
 
     factor: float
@@ -248,6 +270,7 @@ class SSMVerdict:
     allowed_speed: np.ndarray
     protective_distance: np.ndarray
     limiting: int
+    certified: np.ndarray
 
 
 class SpeedSeparationMonitor:
@@ -266,8 +289,13 @@ class SpeedSeparationMonitor:
         self.rho = check_real(rho, "rho", minimum=0.0, above_minimum=True, unit="metres", field="rho") \
             if not (isinstance(rho, (int, float)) and rho == math.inf) else math.inf
 
+    def lookahead_time(self, reaction_time: float) -> float:
+        """T = T_r + T_s / 2, seconds: look ahead to P + T v (v: the point's velocity, m/s) for ``ahead`` of
+        :meth:`speed_factor` (see the module's docstring)."""
+        return _speed_slope(self.params, _reaction_time(reaction_time))
+
     def speed_factor(self, result_or_distances, directions, jacobians, dq, reaction_time: float, *,
-                     check: bool = True) -> SSMVerdict:
+                     ahead=None, check: bool = True) -> SSMVerdict:
         """The factor k in [0, 1] for the commanded joint velocities ``dq``: the largest k with
         k v_i <= allowed_approach_speed(D_i) for every control point i, where v_i = -direction_i . (J_i dq) is the
         point's speed towards its obstacle.
@@ -289,6 +317,11 @@ class SpeedSeparationMonitor:
             dq: (n,) float64, the commanded joint velocities, rad/s (m/s for prismatic joints).
             reaction_time: T_r, seconds, >= 0: the data's age when the command is sent + computation + one control
                 cycle.
+            ahead: None, or (m,) float64 metres (>= 0, inf: nothing within rho, counted as rho): the distances
+                reported at the points looked ahead to, P_i + T J_i dq with T = :meth:`lookahead_time`, from the
+                same possibly occupied space. A point with ahead_i >= S_p at rest + T |J_i dq| approaches nothing
+                too fast, whatever its direction, and imposes nothing (``certified``). Give 0 where it was not
+                asked.
             check: False skips the validation (the caller guarantees float64 arrays of those shapes and values).
 
         Returns:
@@ -312,6 +345,8 @@ class SpeedSeparationMonitor:
                 raise InputError("directions must be unit vectors or the zero vector (unknown)", field="directions")
             jacobians = _array(jacobians, "jacobians", shape=(m, 3, None))
             dq = _array(dq, "dq", shape=(jacobians.shape[2],))
+            if ahead is not None:
+                ahead = _array(ahead, "ahead", shape=(m,), allow_inf=True, nonnegative=True)
         beyond = ~np.isfinite(distances)
         if beyond.any() and math.isfinite(self.rho):  # nothing within rho: at least rho, from anywhere
             distances = np.where(beyond, self.rho, distances)
@@ -323,11 +358,19 @@ class SpeedSeparationMonitor:
         approach = np.where(unknown, np.linalg.norm(velocity, axis=1), approach)
 
         allowed = _allowed(params, distances, reaction_time)
-        approaching = finite & (approach > 0.0)
+        certified = np.zeros(len(distances), dtype=bool)
+        if ahead is not None:
+            ahead = np.where(np.isfinite(ahead), ahead, self.rho)  # nothing within rho: at least rho
+            with np.errstate(invalid="ignore"):  # inf - inf where rho is inf: certified below by the comparison
+                room = ahead - SSM_ROUNDING * np.maximum(ahead, 1.0)
+            speed = np.linalg.norm(velocity, axis=1)
+            certified = np.where(np.isinf(ahead), True, room >= _fixed_part(params, reaction_time, distances)
+                                 + _speed_slope(params, reaction_time) * speed)
+        approaching = finite & (approach > 0.0) & ~certified
         with np.errstate(divide="ignore", over="ignore"):
             ratio = np.where(approaching, allowed / np.where(approaching, approach, 1.0), np.inf)
         limiting = int(np.argmin(ratio)) if len(ratio) and ratio.min() < 1.0 else -1
         factor = float(ratio[limiting]) if limiting >= 0 else 1.0
         protective = _protective(params, factor * approach, reaction_time, distances)
         return SSMVerdict(factor=factor, approach_speed=approach, allowed_speed=allowed,
-                          protective_distance=protective, limiting=limiting)
+                          protective_distance=protective, limiting=limiting, certified=certified)

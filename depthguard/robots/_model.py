@@ -376,6 +376,14 @@ class RobotModel:
         return tuple(point.name for point in self.control_points)
 
     @property
+    def control_point_radii(self) -> np.ndarray:
+        """(m,) float64 metres, each control point's link capsule radius (padding included; 0 for a link without
+        geometry): a distance from the control point minus it is the distance from the link's surface there (the
+        point taken as the centre of a sphere of that radius)."""
+        radii = {capsule.link: capsule.radius for capsule in self.capsules}
+        return np.array([radii.get(point.link, 0.0) for point in self.control_points], dtype=np.float64)
+
+    @property
     def end_effector_index(self) -> int:
         """Row of the end-effector control point in :meth:`control_point_positions`."""
         return self.control_point_names.index(self.end_effector)

@@ -55,15 +55,17 @@ class LoopSettings:
             monitor's; distances from the links' surfaces by default).
         acceleration: rad/s^2, the joints' acceleration limits (URDF has none).
         ssm: :class:`~depthguard.avoidance.SSMParams` of mode "ssm" (default: its defaults).
-        ssm_rho: metres, the monitor's rho in mode "ssm": above the protective separation distance (0.90 m at
-            standstill with the defaults and the robot zone in Z_d), or nothing could be seen far enough away to move
-            at all.
-        ssm_directions: mode "ssm": trust the monitor's directions, so that a point moving away from what is near is
-            not slowed. Off by default: a direction summarises all the possibly occupied space within rho (the mean
-            direction with ``hybrid``, the nearest point's with ``min``), and moving away from it can approach a
-            person elsewhere in that space. With it on, ``tests/test_closed_loop.py`` found the end-effector
-            approaching the person at 8 mm/s while truly inside S_p. Off, every point nearer than S_p at rest stops
-            whichever way it moves.
+        ssm_rho: metres, the monitor's rho in mode "ssm": above the protective separation distance at the
+            robot's speed plus the links' radii (0.90 m at standstill with the defaults and the robot zone in Z_d),
+            or nothing could be seen far enough away to move at all.
+        ssm_lookahead: mode "ssm": where a point would be slowed, ask the monitor for the distance at the point
+            looked ahead to (``SpeedSeparationMonitor.lookahead_time``), so that a point moving away from everything
+            possibly occupied is not slowed (the rule and its proof: ``depthguard.avoidance._ssm``). The monitor's
+            directions are never trusted: one direction summarises all the possibly occupied space within rho (the
+            mean direction with ``hybrid``), and moving away from it can approach a person elsewhere in that space
+            (with them, ``tests/test_closed_loop.py`` once found the end-effector approaching the person at 8 mm/s
+            while truly inside S_p). False: every point moving within reach of S_p is slowed as if it approached at
+            its whole speed.
         monitor: keyword arguments of :class:`~depthguard.DistanceMonitor` besides rig and robot. The default robot
             zone is ``config.LOOP_ROBOT_ZONE`` (the shell round the links that no depth camera can tell from them; see
             there): a stated tolerance (a distance may exceed the truth by up to its thickness), added to the
@@ -78,8 +80,8 @@ class LoopSettings:
     avoidance: AvoidanceParams = field(default_factory=AvoidanceParams)
     acceleration: float = config.JOINT_ACCELERATION
     ssm: object = None
-    ssm_rho: float = 1.0
-    ssm_directions: bool = False
+    ssm_rho: float = 1.2
+    ssm_lookahead: bool = True
     monitor: dict = field(default_factory=lambda: dict(aggregate="hybrid", invalid="neighbors",
                                                        robot_zone=config.LOOP_ROBOT_ZONE))
 
@@ -90,8 +92,10 @@ class LoopSettings:
         check_real(self.posture_gain, "posture_gain", minimum=0.0, maximum=1e3, unit="1/s", field="posture_gain")
         if isinstance(self.truth_every, bool) or not isinstance(self.truth_every, int) or self.truth_every < 1:
             raise InputError("truth_every must be a whole number >= 1", field="truth_every")
-        if not isinstance(self.ssm_directions, bool):
-            raise InputError("ssm_directions must be True or False", field="ssm_directions")
+        if not isinstance(self.ssm_lookahead, bool):
+            raise InputError("ssm_lookahead must be True or False", field="ssm_lookahead")
+        check_real(self.ssm_rho, "ssm_rho", minimum=0.0, above_minimum=True, maximum=10.0, unit="metres",
+                   field="ssm_rho")
         if not isinstance(self.monitor, dict):
             raise InputError("monitor must be a dict of DistanceMonitor keyword arguments", field="monitor")
         # The robot zone is also a tolerance of the avoidance and of SSM here: checked before it is added to them.
@@ -192,6 +196,7 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
     part_names = {name: workcell.part_names(name) for name in workcell.obstacle_names}
     m, n = len(robot.control_points), robot.n_joints
     ee = robot.end_effector_index
+    radii = robot.control_point_radii
     nothing = _empty_result(m)
 
     def reference(t):
@@ -260,9 +265,9 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
                 requested = requested_before = dq_new
                 if mode == "ssm":
                     # Nothing seen yet: no reaction time can be stated, and the robot stays.
-                    directions = result.direction if settings.ssm_directions else np.zeros_like(result.direction)
-                    scale = 0.0 if current is None else ssm.speed_factor(result.distance, directions, jacobians,
-                                                                         dq_new, age + dt).factor
+                    scale = 0.0 if current is None else _ssm_factor(ssm, current[0], result.distance, points,
+                                                                    jacobians, dq_new, age + dt, radii,
+                                                                    settings.ssm_lookahead)
                     # The robot brakes as hard as its joints allow: the stopping time T_s of SSM covers it.
                     low, high = reachable(np.minimum(dq_new * scale, 0.0), np.maximum(dq_new * scale, 0.0), dq,
                                           limits.acceleration * dt)
@@ -286,6 +291,30 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
     return LoopLog(mode=mode, truth_steps=np.array(truth_steps, dtype=np.int64), truth=np.array(truth_rows),
                    clearance=np.array(clearance), frames=frames, wall_seconds=time.perf_counter() - wall,
                    captures=tuple(captures), **arrays)
+
+
+def _ssm_factor(ssm, prepared, distance, points, jacobians, dq, reaction_time, radii, lookahead) -> float:
+    """SSM's speed factor for the command dq (n,) rad/s at the control points (m, 3) with Jacobians (m, 3, n) and
+    monitor distances (m,) (inf: nothing within rho). Each point is a sphere of its link's radius (m,): distances
+    count from the sphere (inf: at least rho minus the radius), and no direction is trusted. With ``lookahead``, the
+    points that would slow the robot are asked again at the points looked ahead to (``prepared``: the set the
+    distances came from)."""
+    rho = ssm.rho
+
+    def from_spheres(d, r):
+        return np.maximum(np.where(np.isfinite(d), d, rho) - r, 0.0)
+
+    surface = from_spheres(distance, radii)
+    unknown = np.zeros((len(surface), 3))
+    verdict = ssm.speed_factor(surface, unknown, jacobians, dq, reaction_time, check=False)
+    if verdict.factor < 1.0 and lookahead:
+        # Only a point beyond S_p at rest can be certified (D' <= D + T |v|): ask for those that slow the robot.
+        asks = np.flatnonzero((verdict.approach_speed > verdict.allowed_speed) & (verdict.allowed_speed > 0.0))
+        looked = points[asks] + ssm.lookahead_time(reaction_time) * (jacobians[asks] @ dq)
+        ahead = np.zeros(len(surface))  # not asked: certifies nothing
+        ahead[asks] = from_spheres(prepared.query(looked, check=False).distance, radii[asks])
+        verdict = ssm.speed_factor(surface, unknown, jacobians, dq, reaction_time, ahead=ahead, check=False)
+    return verdict.factor
 
 
 def _empty_result(m: int) -> DistanceResult:
