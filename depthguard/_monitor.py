@@ -62,6 +62,11 @@ class DistanceMonitor:
             as the self-filter takes a measurement up to its tolerance in front of the robot for the robot. An object
             wholly inside it is not seen, and a distance to one that reaches into it may exceed the truth by up to
             this much: state it with your other tolerances (SSM's Z_d). 0 (default) turns it off.
+        static: known static solids no person can be inside (the floor, a pedestal, walls, a table built down to the
+            floor): a list or tuple of :class:`depthguard.scenes.Box`, world frame. Their surfaces, measured where
+            they are known to be, stop counting as obstacles; the space they hide still counts
+            (:class:`depthguard.self_filter.StaticSolids`). An object within ``self_filter_tolerance`` + the noise
+            margin of such a surface is taken for it. None (default): everything the cameras see counts.
 
     Every argument is checked here, once: a wrong type or a value out of range raises
     :class:`~depthguard.errors.InputError` naming it.
@@ -81,7 +86,7 @@ class DistanceMonitor:
                  fusion_margin: float = config.DEFAULT_FUSION_MARGIN,
                  fusion_pixels: int = config.DEFAULT_FUSION_PIXELS, memory: bool = config.DEFAULT_MEMORY,
                  v_max: float = config.FREESPACE_V_MAX, memory_voxel: float = config.FREESPACE_VOXEL,
-                 robot_zone: float = config.DEFAULT_ROBOT_ZONE):
+                 robot_zone: float = config.DEFAULT_ROBOT_ZONE, static=None):
         if not isinstance(rig, Rig):
             raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}", field="rig")
         self.rig = rig
@@ -114,6 +119,11 @@ class DistanceMonitor:
             from depthguard.self_filter import RobotSilhouette  # needs OpenGL: only with a robot
 
             self._silhouette = RobotSilhouette(robot, geometry=self.self_filter)
+        self._static = None
+        if static is not None:
+            from depthguard.self_filter import StaticSolids  # needs OpenGL
+
+            self._static = StaticSolids(static, None if self._silhouette is None else self._silhouette.renderer)
         self.robot_zone = check_real(robot_zone, "robot_zone", minimum=0.0, maximum=config.ROBOT_ZONE_MAX,
                                      unit="metres", field="robot_zone")
         self.memory = None
@@ -192,6 +202,8 @@ class DistanceMonitor:
             image = checked_frame(frame, camera)
         else:
             image = depth_image(frame, camera)
+        if self._static is not None:
+            image = self._static.substitute(image, camera, self.self_filter_tolerance)
         robot_near = robot_far = None
         if self._silhouette is not None:
             if joints is None:
@@ -203,9 +215,15 @@ class DistanceMonitor:
             # rather than blind space (whether one camera answers or several), a secondary camera clears the space
             # there, and the depth grid starts the space behind the robot there (case iv).
             robot_far = self._silhouette.render_far(camera, joints)
+            if self._static is not None:
+                far_before = robot_far
+                robot_far, moved = self._static.extend_robot(camera, robot_near, robot_far,
+                                                             self.self_filter_tolerance)
         occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels, robot_near=robot_near,
                                   robot_tolerance=self.self_filter_tolerance, robot_far=robot_far)
         state = _CameraFrame(self, camera, image, occupancy, joints, robot_near, robot_far)
+        if self._static is not None and robot_far is not None and moved.any():
+            state.resting = (moved, far_before)
         if isinstance(frame, DepthImage):
             self._prepared[name] = (frame, state)
         return state
@@ -489,13 +507,18 @@ class _CameraFrame:
         self.robot_far = robot_far
         self._robot_exit = None
         self._free = None
+        self.resting = None  # (pixels, robot_far before): where the robot's far end was moved through a known solid
 
     @property
     def robot_exit(self):
         if self._monitor._silhouette is None:
             return None
         if self._robot_exit is None:
-            self._robot_exit = self._monitor._silhouette.render_first_exit(self.camera, self._joints)
+            exit = self._monitor._silhouette.render_first_exit(self.camera, self._joints)
+            if self.resting is not None:  # a ray that left the robot only into the solid leaves both there
+                moved, far_before = self.resting
+                exit = np.where(moved & (exit >= far_before), self.robot_far, exit).astype(np.float32)
+            self._robot_exit = exit
         return self._robot_exit
 
     @property

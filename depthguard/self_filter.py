@@ -120,3 +120,111 @@ class RobotSilhouette:
     def triangles(self) -> int:
         """Triangles drawn per camera."""
         return sum(self.renderer._mesh(mesh_id).n_faces for _, mesh_id in self._meshes)
+
+
+class StaticSolids:
+    """Known static solids (boxes, world frame) that no person can be inside: the floor, a pedestal, a wall, a table
+    built down to the floor. A camera that measures such a solid's surface where it is known to be has seen the space
+    in front of it free; the solid's own inside holds nobody; only what lies beyond it stays hidden. So a measurement
+    on a solid's surface is replaced by the depth where the pixel's ray leaves the solid (:meth:`substitute`): the
+    space up to there counts free, beyond it possibly occupied, as behind any surface.
+
+    Only pixels whose whole footprint lies on one solid are replaced: the 3 x 3 pixels round it must all hit the same
+    box (their centre rays enclose the pixel's frustum, and a box is convex, so the frustum is inside the box between
+    the nine rays' largest entry and smallest exit depth), and the depth used is the smallest exit of the nine. A
+    measurement matches the surface when it lies within ``tolerance`` + the camera's noise margin of the rendered
+    entry depth; one nearer is something in front of the solid, one deeper means the solid is not where it is known
+    to be, and both are kept as measured.
+
+    What this gives up, stated: an object lying on a solid's surface, within that tolerance of it (a hand flat on the
+    table, 2 cm + the noise margin with the defaults), is taken for the solid, as an object that close to the robot's
+    surface is taken for the robot (SPEC section 7).
+
+    Args:
+        boxes: a list or tuple of :class:`depthguard.scenes.Box` (world frame, metres), each with finite values.
+        renderer: the renderer to draw with (one is made if None).
+    """
+
+    def __init__(self, boxes, renderer: Renderer | None = None):
+        from depthguard.scenes import Box
+
+        if not isinstance(boxes, (list, tuple)):
+            raise InputError(f"static must be a list or tuple of depthguard.scenes.Box, got {short_repr(boxes)}",
+                             field="static")
+        for i, box in enumerate(boxes):
+            if not isinstance(box, Box):
+                raise InputError(f"static[{i}] must be a depthguard.scenes.Box (a solid box, world frame), got "
+                                 f"{short_repr(box)}", field="static")
+            values = np.concatenate([np.ravel(np.asarray(box.center, dtype=np.float64)),
+                                     np.ravel(np.asarray(box.half_extents, dtype=np.float64)),
+                                     np.ravel(np.asarray(box.R_world_box, dtype=np.float64))])
+            if values.size != 15 or not np.all(np.isfinite(values)) or np.any(np.asarray(box.half_extents) <= 0) \
+                    or np.any(np.abs(values) > config.COORDINATE_LIMIT):
+                raise InputError(f"static[{i}]: a box needs a finite centre (3,), half extents (3,) > 0 and a "
+                                 "rotation (3, 3), metres", field="static")
+            R = np.asarray(box.R_world_box, dtype=np.float64)
+            if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+                raise InputError(f"static[{i}]: R_world_box must be a rotation", field="static")
+        self.boxes = tuple(boxes)
+        self.renderer = renderer if renderer is not None else Renderer()
+        self._instances = [MeshInstance(self.renderer.add_mesh(*primitive_mesh(box), closed=True), np.eye(4),
+                                        label=i) for i, box in enumerate(self.boxes)]
+        self._views: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # camera name -> (entry, usable exit)
+
+    def view(self, camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
+        """(entry, exit): (h, w) float32 metres each, for ``camera``: where each pixel's centre ray meets a solid,
+        and where the pixel's whole frustum has left it (0 where the pixel's footprint is not on one solid).
+        Rendered once per camera."""
+        cached = self._views.get(camera.name)
+        if cached is not None and cached[2] is camera:
+            return cached[0], cached[1]
+        result = self.renderer.render(camera, self._instances)
+        exits = self.renderer.render_depth_first_exit(camera, self._instances)
+        label = result.label
+        h, w = label.shape
+        usable = np.zeros((h, w), dtype=np.float32)
+        if h >= 3 and w >= 3:
+            centre = label[1:-1, 1:-1]
+            same = centre >= 0
+            smallest = exits[1:-1, 1:-1].copy()
+            for dv in (-1, 0, 1):
+                for du in (-1, 0, 1):
+                    same &= label[1 + dv:h - 1 + dv, 1 + du:w - 1 + du] == centre
+                    np.minimum(smallest, exits[1 + dv:h - 1 + dv, 1 + du:w - 1 + du], out=smallest)
+            usable[1:-1, 1:-1] = np.where(same & (smallest > 0), smallest, 0.0)
+        self._views[camera.name] = (result.depth, usable, camera)
+        return result.depth, usable
+
+    def substitute(self, image, camera: PinholeCamera, tolerance: float):
+        """``image`` (a checked :class:`~depthguard.DepthImage` of ``camera``) with every measurement on a known
+        solid's surface (within ``tolerance`` metres + the noise margin of the rendered entry) replaced by the depth
+        where the pixel's frustum leaves the solid, at most the camera's largest valid depth. A float32 image in
+        metres, the same timestamp; the image itself when nothing is replaced."""
+        from depthguard.depth import DepthImage
+
+        entry, usable = self.view(camera)
+        depth = image.metres()
+        z_max = np.float32(camera.depth_range[1])
+        with np.errstate(invalid="ignore"):
+            on_solid = (usable > 0) & (np.abs(depth - entry) <= tolerance + camera.noise.margin(entry))
+        if not on_solid.any():
+            return image
+        data = np.where(on_solid, np.minimum(usable, z_max), depth).astype(np.float32)
+        data.flags.writeable = False
+        return DepthImage(camera=image.camera, data=data, depth_scale=1.0, timestamp=image.timestamp)
+
+    def extend_robot(self, camera: PinholeCamera, robot_near: np.ndarray, robot_far: np.ndarray,
+                     tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+        """Where the robot rests on a known solid along a pixel (the solid begins behind where the robot begins, and
+        at most ``tolerance`` + the noise margin beyond where the robot ends, and the pixel's footprint lies on one
+        solid), the space behind the robot is the solid's inside, not hidden space: the robot's far end moves to
+        where the pixel's frustum leaves the solid (the gap between them, at most that tolerance, counts as the
+        robot, as a measurement that close to the robot does). Returns (robot_far, moved): (h, w) float32 metres
+        and the (h, w) bool pixels changed."""
+        entry, usable = self.view(camera)
+        with np.errstate(invalid="ignore"):
+            moved = (robot_far > 0) & (usable > robot_far) & (entry >= robot_near) & \
+                (entry <= robot_far + tolerance + camera.noise.margin(entry))
+        if not moved.any():
+            return robot_far, moved
+        return np.where(moved, usable, robot_far).astype(np.float32), moved
