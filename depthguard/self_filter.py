@@ -198,7 +198,8 @@ class StaticSolids:
     def substitute(self, image, camera: PinholeCamera, tolerance: float):
         """``image`` (a checked :class:`~depthguard.DepthImage` of ``camera``) with every measurement on a known
         solid's surface (within ``tolerance`` metres + the noise margin of the rendered entry) replaced by the depth
-        where the pixel's frustum leaves the solid, at most the camera's largest valid depth. A float32 image in
+        where the pixel's frustum leaves the solid (plus the noise margin there, which preparing the frame takes off
+        again), at most the camera's largest valid depth. A float32 image in
         metres, the same timestamp; the image itself when nothing is replaced."""
         from depthguard.depth import DepthImage
 
@@ -209,7 +210,10 @@ class StaticSolids:
             on_solid = (usable > 0) & (np.abs(depth - entry) <= tolerance + camera.noise.margin(entry))
         if not on_solid.any():
             return image
-        data = np.where(on_solid, np.minimum(usable, z_max), depth).astype(np.float32)
+        # The exit is known geometry, not a measurement: written as exit + m(exit), so that the noise margin the
+        # preparation takes off (m increases with depth) starts the hidden space at the exit, never beyond it.
+        exit_depth = usable + camera.noise.margin(usable)
+        data = np.where(on_solid, np.minimum(exit_depth, z_max), depth).astype(np.float32)
         data.flags.writeable = False
         return DepthImage(camera=image.camera, data=data, depth_scale=1.0, timestamp=image.timestamp)
 
