@@ -1,0 +1,114 @@
+"""Why speed and separation monitoring stops the robot for good in scenario B's workcell (issue 9), layout by layout.
+
+With no person in the room (scenario_b_reach.yaml at 5.2 s, the person gone), SSM lets a control point move only when
+its distance from the link's surface to the nearest possibly occupied space is at least S_p at rest (0.90 m with the
+loop's defaults and robot zone). This probe prints, per layout, that distance for every control point and the nearest
+possibly occupied point (the monitor's ``min`` answer: the point minus distance times direction), so that what stands
+in the way can be read off:
+
+    .venv/bin/python benchmarks/probe_ssm_coverage.py [--time 5.2] [--rho 1.5]
+
+Layouts (the variants are written from the packaged scene files into a temporary directory):
+- ``two``: the scene's two front cameras, workspace top z = 1.5 m (the principal sees up to about z = 1.5 there);
+- ``four``: issue 8's four cameras;
+- ``four+ceiling``: the four, and a wide-angle camera 3.2 m up looking down as the depth grid's principal (512 x 512,
+  120 degrees, as a binned wide-field ToF), the workspace up to z = 2.2 m and 0.1 m wider;
+- ``... known``: the same with the floor, the walls and the pedestal given to the monitor as known static solids
+  (``DistanceMonitor(static=...)``);
+- ``... wide pedestal``: a 0.5 m pedestal instead of 0.3 m.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+import depthguard as dg
+from depthguard import config
+from depthguard.simulation import load_workcell
+from depthguard.simulation._episode import SceneRenderer, sense
+from depthguard.simulation._truth import TruthComputer
+
+PACKAGE = resources.files("depthguard.simulation")
+S_P_AT_REST = 0.90  # metres, the loop's defaults (LoopSettings docstring)
+
+CEILING = """  - name: ceiling          # 3.2 m up, looking straight down: the depth grid's principal
+    width: 512
+    height: 512
+    fx: 147.8
+    fy: 147.8
+    cx: 255.5
+    cy: 255.5
+    look_at: {eye: [0.3, 0.0, 3.2], target: [0.3, 0.0, 0.0], up: [1.0, 0.0, 0.0]}
+    depth_range: [0.25, 5.46]
+    noise: {a: 0.001504, b: -0.00152, c: 0.0019, k: 3.0}
+"""
+
+
+def _variant(directory: Path, name: str, ceiling: bool, wide_pedestal: bool) -> Path:
+    reach = (PACKAGE / "scenario_b_reach.yaml").read_text()
+    if name != "two":
+        four = (PACKAGE / "scenario_b_four.yaml").read_text()
+        start = four.index("  - name: third")
+        end = four.index("\n\n", four.index("  - name: fourth"))
+        reach = reach.replace("\n# No intensity", "\n" + four[start:end] + "\n\n# No intensity", 1)
+    if ceiling:
+        reach = reach.replace("\n# No intensity", "\n" + CEILING + "\n# No intensity", 1)
+        reach = reach.replace("principal: principal ", "principal: ceiling   ")
+        reach = reach.replace("workspace: [[-1.5, -1.5, -0.5], [1.5, 1.5, 1.5]]",
+                              "workspace: [[-1.6, -1.6, -0.5], [1.9, 1.6, 2.2]]")
+    if wide_pedestal:
+        reach = reach.replace("box: {min: [-0.15, -0.15, -0.5], max: [0.15, 0.15, 0.0]}",
+                              "box: {min: [-0.25, -0.25, -0.5], max: [0.25, 0.25, 0.0]}")
+    path = directory / f"{name}_{int(ceiling)}{int(wide_pedestal)}.yaml"
+    path.write_text(reach)
+    return path
+
+
+def probe(path: Path, t: float, rho: float, known: bool) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """(distance from each link's surface, nearest point, names) at time t with the person gone."""
+    workcell = load_workcell(path)
+    robot = workcell.robot
+    static = [box for parts in workcell.background().values() for box in parts] if known else None
+    monitor = dg.DistanceMonitor(workcell.rig, rho=rho, robot=robot, aggregate="min", invalid="neighbors",
+                                 robot_zone=config.LOOP_ROBOT_ZONE, static=static)
+    truth = TruthComputer(robot)
+    parts = {name: workcell.part_names(name) for name in workcell.obstacle_names}
+    scene = SceneRenderer(workcell, None)
+    try:
+        q = workcell.joints_at(t)
+        frame = sense(workcell, scene, truth, parts, q.copy(), t, int(round(t * workcell.rate)), 0)
+        points = robot.control_point_positions(q)
+        result = monitor.query(frame.depth, points, joints=q, now=t)
+    finally:
+        scene.release()
+    nearest = points - np.where(np.isfinite(result.distance), result.distance, 0.0)[:, None] * result.direction
+    return result.distance - robot.control_point_radii, nearest, list(robot.control_point_names)
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--time", type=float, default=5.2, help="seconds into scenario_b_reach.yaml (default 5.2)")
+    parser.add_argument("--rho", type=float, default=1.5, help="the monitor's rho, metres (default 1.5)")
+    args = parser.parse_args(argv)
+    rows = [("two", False, False, False), ("four", False, False, False), ("four+ceiling", True, False, False),
+            ("four+ceiling known", True, False, True), ("four+ceiling known wide pedestal", True, True, True)]
+    print(f"S_p at rest {S_P_AT_REST:.2f} m; distances from the links' surfaces, metres; t = {args.time} s\n")
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, ceiling, wide, known in rows:
+            base = "two" if label == "two" else "four"
+            path = _variant(Path(tmp), base, ceiling, wide)
+            distance, nearest, names = probe(path, args.time, args.rho, known)
+            worst = int(np.argmin(distance))
+            cells = " ".join(f"{d:5.2f}" for d in distance)
+            print(f"{label:34s} {cells}   least {distance[worst]:.2f} ({names[worst]}), nearest possibly occupied "
+                  f"point {np.round(nearest[worst], 2).tolist()}")
+    print("\ncolumns: " + " ".join(names))
+
+
+if __name__ == "__main__":
+    main()
