@@ -123,7 +123,8 @@ class DistanceMonitor:
         if static is not None:
             from depthguard.self_filter import StaticSolids  # needs OpenGL
 
-            self._static = StaticSolids(static, None if self._silhouette is None else self._silhouette.renderer)
+            self._static = StaticSolids(static, self.self_filter_tolerance,
+                                        None if self._silhouette is None else self._silhouette.renderer)
         self.robot_zone = check_real(robot_zone, "robot_zone", minimum=0.0, maximum=config.ROBOT_ZONE_MAX,
                                      unit="metres", field="robot_zone")
         self.memory = None
@@ -203,7 +204,7 @@ class DistanceMonitor:
         else:
             image = depth_image(frame, camera)
         if self._static is not None:
-            image = self._static.substitute(image, camera, self.self_filter_tolerance)
+            image = self._static.substitute(image, camera)
         robot_near = robot_far = None
         if self._silhouette is not None:
             if joints is None:
@@ -217,8 +218,7 @@ class DistanceMonitor:
             robot_far = self._silhouette.render_far(camera, joints)
             if self._static is not None:
                 far_before = robot_far
-                robot_far, moved = self._static.extend_robot(camera, robot_near, robot_far,
-                                                             self.self_filter_tolerance)
+                robot_far, moved = self._static.extend_robot(camera, robot_near, robot_far)
         occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels, robot_near=robot_near,
                                   robot_tolerance=self.self_filter_tolerance, robot_far=robot_far)
         state = _CameraFrame(self, camera, image, occupancy, joints, robot_near, robot_far)

@@ -142,10 +142,11 @@ class StaticSolids:
 
     Args:
         boxes: a list or tuple of :class:`depthguard.scenes.Box` (world frame, metres), each with finite values.
+        tolerance: metres (the monitor's ``self_filter_tolerance``), on top of each camera's noise margin.
         renderer: the renderer to draw with (one is made if None).
     """
 
-    def __init__(self, boxes, renderer: Renderer | None = None):
+    def __init__(self, boxes, tolerance: float, renderer: Renderer | None = None):
         from depthguard.scenes import Box
 
         if not isinstance(boxes, (list, tuple)):
@@ -166,18 +167,26 @@ class StaticSolids:
             if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
                 raise InputError(f"static[{i}]: R_world_box must be a rotation", field="static")
         self.boxes = tuple(boxes)
+        self.tolerance = check_real(tolerance, "tolerance", minimum=0.0, unit="metres", field="tolerance")
         self.renderer = renderer if renderer is not None else Renderer()
         self._instances = [MeshInstance(self.renderer.add_mesh(*primitive_mesh(box), closed=True), np.eye(4),
                                         label=i) for i, box in enumerate(self.boxes)]
-        self._views: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # camera name -> (entry, usable exit)
+        self._views: dict[str, tuple] = {}  # camera name -> (camera, entry, usable exit, reach, replacement)
 
     def view(self, camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
         """(entry, exit): (h, w) float32 metres each, for ``camera``: where each pixel's centre ray meets a solid,
         and where the pixel's whole frustum has left it (0 where the pixel's footprint is not on one solid).
         Rendered once per camera."""
+        return self._view(camera)[1:3]
+
+    def _view(self, camera: PinholeCamera) -> tuple:
+        """(camera, entry, usable exit, reach, replacement), made once per camera: reach (h, w) is how far from the
+        entry a measurement may lie and be the solid (tolerance + noise margin); replacement (h, w) float32 the
+        depth written for it (the exit plus the noise margin there, which preparing the frame takes off again, at
+        most the camera's largest valid depth)."""
         cached = self._views.get(camera.name)
-        if cached is not None and cached[2] is camera:
-            return cached[0], cached[1]
+        if cached is not None and cached[0] is camera:
+            return cached
         result = self.renderer.render(camera, self._instances)
         exits = self.renderer.render_depth_first_exit(camera, self._instances)
         label = result.label
@@ -192,43 +201,41 @@ class StaticSolids:
                     same &= label[1 + dv:h - 1 + dv, 1 + du:w - 1 + du] == centre
                     np.minimum(smallest, exits[1 + dv:h - 1 + dv, 1 + du:w - 1 + du], out=smallest)
             usable[1:-1, 1:-1] = np.where(same & (smallest > 0), smallest, 0.0)
-        self._views[camera.name] = (result.depth, usable, camera)
-        return result.depth, usable
+        entry = result.depth
+        reach = self.tolerance + camera.noise.margin(entry)
+        replacement = np.minimum(usable + camera.noise.margin(usable), camera.depth_range[1]).astype(np.float32)
+        self._views[camera.name] = (camera, entry, usable, reach, replacement)
+        return self._views[camera.name]
 
-    def substitute(self, image, camera: PinholeCamera, tolerance: float):
+    def substitute(self, image, camera: PinholeCamera):
         """``image`` (a checked :class:`~depthguard.DepthImage` of ``camera``) with every measurement on a known
-        solid's surface (within ``tolerance`` metres + the noise margin of the rendered entry) replaced by the depth
-        where the pixel's frustum leaves the solid (plus the noise margin there, which preparing the frame takes off
-        again), at most the camera's largest valid depth. A float32 image in
+        solid's surface (within the tolerance + the noise margin of the rendered entry) replaced by the depth where
+        the pixel's frustum leaves the solid: the exit is known geometry, not a measurement, so it is written as
+        exit + m(exit), and the noise margin that preparing the frame takes off (m grows with depth) starts the
+        hidden space at the exit, never beyond it. At most the camera's largest valid depth. A float32 image in
         metres, the same timestamp; the image itself when nothing is replaced."""
         from depthguard.depth import DepthImage
 
-        entry, usable = self.view(camera)
+        _, entry, usable, reach, replacement = self._view(camera)
         depth = image.metres()
-        z_max = np.float32(camera.depth_range[1])
         with np.errstate(invalid="ignore"):
-            on_solid = (usable > 0) & (np.abs(depth - entry) <= tolerance + camera.noise.margin(entry))
+            on_solid = (usable > 0) & (np.abs(depth - entry) <= reach)
         if not on_solid.any():
             return image
-        # The exit is known geometry, not a measurement: written as exit + m(exit), so that the noise margin the
-        # preparation takes off (m increases with depth) starts the hidden space at the exit, never beyond it.
-        exit_depth = usable + camera.noise.margin(usable)
-        data = np.where(on_solid, np.minimum(exit_depth, z_max), depth).astype(np.float32)
+        data = np.where(on_solid, replacement, depth).astype(np.float32)
         data.flags.writeable = False
         return DepthImage(camera=image.camera, data=data, depth_scale=1.0, timestamp=image.timestamp)
 
-    def extend_robot(self, camera: PinholeCamera, robot_near: np.ndarray, robot_far: np.ndarray,
-                     tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    def extend_robot(self, camera: PinholeCamera, robot_near: np.ndarray,
+                     robot_far: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where the robot rests on a known solid along a pixel (the solid begins behind where the robot begins, and
-        at most ``tolerance`` + the noise margin beyond where the robot ends, and the pixel's footprint lies on one
+        at most the tolerance + the noise margin beyond where the robot ends, and the pixel's footprint lies on one
         solid), the space behind the robot is the solid's inside, not hidden space: the robot's far end moves to
         where the pixel's frustum leaves the solid (the gap between them, at most that tolerance, counts as the
         robot, as a measurement that close to the robot does). Returns (robot_far, moved): (h, w) float32 metres
         and the (h, w) bool pixels changed."""
-        entry, usable = self.view(camera)
-        with np.errstate(invalid="ignore"):
-            moved = (robot_far > 0) & (usable > robot_far) & (entry >= robot_near) & \
-                (entry <= robot_far + tolerance + camera.noise.margin(entry))
+        _, entry, usable, reach, _ = self._view(camera)
+        moved = (robot_far > 0) & (usable > robot_far) & (entry >= robot_near) & (entry <= robot_far + reach)
         if not moved.any():
             return robot_far, moved
         return np.where(moved, usable, robot_far).astype(np.float32), moved

@@ -82,7 +82,7 @@ def test_only_whole_footprints_on_one_solid_are_replaced():
     from depthguard.self_filter import StaticSolids
 
     camera = _camera()
-    solids = StaticSolids([PEDESTAL])
+    solids = StaticSolids([PEDESTAL], 0.02)
     entry, usable = solids.view(camera)
     on = entry > 0
     assert on.sum() > 100
@@ -96,7 +96,7 @@ def test_only_whole_footprints_on_one_solid_are_replaced():
     # where replaced, the depth is the smallest exit of the nine rays, behind the entry
     assert np.all(usable[inner] > entry[inner])
     depth = dg.depth_image(render_depth(camera, [FLOOR, PEDESTAL]), camera)
-    out = solids.substitute(depth, camera, 0.02).data
+    out = solids.substitute(depth, camera).data
     assert np.array_equal(out[inner], usable[inner])
     assert np.array_equal(out[~inner], depth.metres()[~inner].astype(np.float32)) or \
         np.allclose(out[~inner], depth.metres()[~inner], equal_nan=True)
@@ -147,8 +147,8 @@ def test_the_robot_resting_on_a_solid_ends_where_the_solid_does():
                               noise=dg.NoiseModel.none())
     silhouette = RobotSilhouette(robot, geometry="capsules")
     near, far = silhouette.render(camera, q), silhouette.render_far(camera, q)
-    solids = StaticSolids([FLOOR, PEDESTAL], silhouette.renderer)
-    moved_far, moved = solids.extend_robot(camera, near, far, 0.02)
+    solids = StaticSolids([FLOOR, PEDESTAL], 0.02, silhouette.renderer)
+    moved_far, moved = solids.extend_robot(camera, near, far)
     entry, usable = solids.view(camera)
 
     def pixel(x):
