@@ -439,7 +439,8 @@ def test_looking_ahead_to_nothing_within_rho():
 def test_a_depth_camera_lets_a_point_move_away_from_a_person_unslowed():
     """The look-ahead on a depth camera's distances (what it counts occupied: the person, the space they hide, the
     edge of the view): a point 0.85 m beside a person (a 0.25 m ball), just beyond S_p at rest, moving away at 1 m/s
-    is not slowed; moving towards them or sideways it is, to what its distance allows at its whole speed."""
+    is not slowed (factor 1; without looking ahead 0.075); moving towards them or sideways it is, to what its distance
+    allows at its whole speed."""
     import depthguard as dg
     from depthguard.scenes import Box, Sphere, render_depth, scene_distance
 
@@ -462,7 +463,7 @@ def test_a_depth_camera_lets_a_point_move_away_from_a_person_unslowed():
         blind = monitor.speed_factor(np.array([D]), np.zeros((1, 3)), J, np.ones(3), T_r)
         factors[name] = (verdict.factor, blind.factor, bool(verdict.certified[0]))
     assert factors["away"] == (1.0, pytest.approx(factors["towards"][1]), True), factors
-    assert 0.0 < factors["away"][1] < 0.5  # without looking ahead, moving away was slowed as much as approaching
+    assert 0.0 < factors["away"][1] < 0.2  # without looking ahead, moving away was slowed as much as approaching (0.075)
     for name in ("towards", "sideways"):
         assert factors[name][0] == factors[name][1] < 0.5 and not factors[name][2], factors
 
