@@ -310,3 +310,46 @@ def test_bad_loop_settings_are_refused(field, kwargs):
     with pytest.raises(InputError) as info:
         LoopSettings(**kwargs)
     assert info.value.field == field
+
+
+def test_the_loops_ssm_looks_ahead_from_the_links_surfaces():
+    """The loop's SSM step (_ssm_factor) on exact distances to a person (a 0.25 m ball): the points are spheres of
+    their links' radii, no direction is trusted, and a point moving straight away from the person is not slowed
+    while its surface is beyond S_p at rest; without looking ahead it is slowed like one approaching."""
+    from depthguard.avoidance import SpeedSeparationMonitor, SSMParams, protective_separation_distance
+    from depthguard.results import DistanceResult, Flag
+    from depthguard.scenes import Sphere, scene_distance
+    from depthguard.simulation._closed_loop import _ssm_factor
+
+    person = Sphere((0.0, 0.0, 0.0), 0.25)
+    asked = []
+
+    class ExactSet:  # stands in for a PreparedSet: exact distances to the person, inf beyond rho
+        def query(self, points, check=True):
+            asked.append(len(points))
+            d = scene_distance([person], points)
+            d = np.where(d < rho, d, np.inf)
+            return DistanceResult(distance=d, direction=np.zeros((len(d), 3)), count=np.ones(len(d), dtype=np.int64),
+                                  invalid_count=np.zeros(len(d), dtype=np.int64), flags=tuple(Flag(0) for _ in d))
+
+    rho, reaction = 1.2, 0.07
+    params = SSMParams(sensing_uncertainty=0.05 + 0.06)  # Z_d with the loop's robot zone
+    ssm = SpeedSeparationMonitor(params, rho=rho)
+    radii = np.array([0.1, 0.05])
+    at_rest = protective_separation_distance(params, 0.0, reaction, separation=1.0)  # 0.84 m
+    points = np.array([[0.25 + at_rest + 0.1 + 0.01, 0.0, 0.0], [0.0, 3.0, 0.0]])  # surface 1 cm beyond it; far
+    jacobians = np.zeros((2, 3, 3))
+    jacobians[0] = np.eye(3)
+    dq_away, dq_side = np.array([0.5, 0.0, 0.0]), np.array([0.0, 0.5, 0.0])
+    distance = ExactSet().query(points).distance
+    assert distance[1] == np.inf
+    asked.clear()
+    away = _ssm_factor(ssm, ExactSet(), distance, points, jacobians, dq_away, reaction, radii, True)
+    assert away == 1.0 and asked == [1]  # only the point that would slow the robot was asked again
+    blind = _ssm_factor(ssm, ExactSet(), distance, points, jacobians, dq_away, reaction, radii, False)
+    side = _ssm_factor(ssm, ExactSet(), distance, points, jacobians, dq_side, reaction, radii, True)
+    assert 0.0 < blind < 0.5 and side == pytest.approx(blind)
+    # the same point 2 cm nearer is inside S_p at rest from its surface: it stops whichever way it moves
+    nearer = points - [[0.02, 0.0, 0.0], [0.0, 0.0, 0.0]]
+    assert _ssm_factor(ssm, ExactSet(), ExactSet().query(nearer).distance, nearer, jacobians, dq_away, reaction,
+                       radii, True) == 0.0
