@@ -138,7 +138,9 @@ class StaticSolids:
 
     What this gives up, stated: an object lying on a solid's surface, within that tolerance of it (a hand flat on the
     table, 2 cm + the noise margin with the defaults), is taken for the solid, as an object that close to the robot's
-    surface is taken for the robot (SPEC section 7).
+    surface is taken for the robot (SPEC section 7). So is the sliver of a pixel's frustum between its measured depth
+    and a slanted surface (within about a pixel's footprint of the surface), and, where the robot stands in front of
+    a solid (:meth:`extend_robot`), a gap of at most that tolerance between the robot and the solid.
 
     Args:
         boxes: a list or tuple of :class:`depthguard.scenes.Box` (world frame, metres), each with finite values.
