@@ -48,23 +48,28 @@ def test_without_avoidance_the_hand_meets_the_robot_and_with_it_the_robot_keeps_
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("scene", ["reach", "board"])
-def test_the_task_resumes_after_the_person_has_left(runs, board_runs, scene):
+@pytest.mark.parametrize("scene", ["reach", "board", "elbow"])
+def test_the_task_resumes_after_the_person_has_left(runs, board_runs, elbow_runs, scene):
     """Issue 9: after the avoidance the end-effector's task resumes, its error back below 1 cm within RESUME_WITHIN
-    of the person leaving (the reaching hand at about 3.4 s; the board, carried back, at about 3.9 s), and near it
-    from then on. This needs the loop's robot zone (config.LOOP_ROBOT_ZONE): without it the uncleared shell round
-    the links kept the arm pushed 0.1-0.44 m off its path after the person had gone. What is left pushes it 1-3 cm off now and then (median RESUMED_MEDIAN at most; measured 0.8-1.1 cm): in
-    about one frame in six, sensor dropouts at the robot's own silhouette in three of four cameras leave cells 5 cm
-    beyond the zone uncleared, 0.12-0.15 m from the elbow's control points."""
+    of the obstacle leaving (the reaching hand at about 3.4 s; the board, carried back, at about 3.9 s; the box,
+    taken off its stand, at 4.8 s), and near it from then on. This needs the loop's robot zone
+    (config.LOOP_ROBOT_ZONE): without it the uncleared shell round the links kept the arm pushed 0.1-0.44 m off its
+    path after the person had gone. What is left pushes it 1-3 cm off now and then (median RESUMED_MEDIAN at most;
+    measured 0.8-1.1 cm): in about one frame in six, sensor dropouts at the robot's own silhouette in three of four
+    cameras leave cells 5 cm beyond the zone uncleared, 0.12-0.15 m from the elbow's control points. The elbow
+    scenario has bounds of its own (ELBOW_RESUME): the arm comes back from 0.39 m off its path, not 0.1-0.2 m, and in
+    its posture the same phantoms keep more of the arm's points within reach (measured: back 1.19 s after the box
+    left, median error after 1.75 cm, two cameras)."""
     from depthguard.experiments.avoidance_demo import resumption
 
-    log = (runs if scene == "reach" else board_runs)["avoid"]
+    log = {"reach": runs, "board": board_runs, "elbow": elbow_runs}[scene]["avoid"]
+    within, median_bound = ELBOW_RESUME if scene == "elbow" else (RESUME_WITHIN, RESUMED_MEDIAN)
     assert log.times[-1] > 5.4  # the run lasts until the person is gone
     assert log.task_error.max() > 0.1  # the avoidance did take the end-effector off its path
     left, resumed, median = resumption(log)
     assert left is not None and left < log.times[-1] - 1.0, left
-    assert resumed is not None and resumed <= RESUME_WITHIN, resumed
-    assert median < RESUMED_MEDIAN, median
+    assert resumed is not None and resumed <= within, resumed
+    assert median < median_bound, median
 
 
 #: The board is carried face first into the end-effector's path, edge-on to the principal camera
@@ -112,11 +117,15 @@ def test_a_board_the_principal_camera_sees_edge_on_is_avoided(board_runs):
 #: links' surfaces: 0.087 m with avoid, 0.090 m with ssm; benchmarks/bench_avoidance_scenarios.py).
 ELBOW_WINDOW = (2.4, 2.6)
 ELBOW_CLEARANCE = 0.01
+#: The elbow scenario's task comes back within this many seconds of the box leaving, with the median error after it at
+#: most this many metres (see test_the_task_resumes_after_the_person_has_left).
+ELBOW_RESUME = (1.5, 0.025)
 
 
 @pytest.fixture(scope="module")
 def elbow_runs():
-    return _every_mode("scenario_b_elbow.yaml", ELBOW_WINDOW)
+    """The three modes over ELBOW_WINDOW; the avoidance on to the scene's end (the box is taken away at 4.8 s)."""
+    return _every_mode("scenario_b_elbow.yaml", ELBOW_WINDOW, to_the_end=("avoid",))
 
 
 @pytest.mark.slow
