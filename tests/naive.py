@@ -305,6 +305,24 @@ def fill_small_holes_reference(raw, scale, invalid, hole_pixels, margin, z_start
             blind[pixels] = np.inf
 
 
+def fill_self_filter_reference(robot_near, tolerance, margin, policy_start, invalid, z_start, z_end, blind):
+    """After hole filling, a hole's fill is self-filtered as a measurement would be (whole-image numpy): where the
+    robot is rendered and the fill lies at or behind the nearest rendered robot surface of the 3x3 neighbourhood
+    (border pixels count themselves again) less ``tolerance`` and the noise margin there, the pixel shows the robot:
+    free in front, blind from the robot's own depth. Without robot_far (nothing is "seen past" the robot). Only
+    filled holes can change: every other pixel was decided by the first self-filtering. Edits in place."""
+    h, w = robot_near.shape
+    rendered = np.pad(np.where(robot_near > 0, robot_near.astype(np.float64), np.inf), 1, mode="edge")
+    d_near = np.min([rendered[1 + dv:1 + dv + h, 1 + du:1 + du + w] for dv in (-1, 0, 1) for du in (-1, 0, 1)],
+                    axis=0)
+    with np.errstate(invalid="ignore"):
+        front = d_near - tolerance - margin(d_near)
+        filled = (invalid == 1) & np.isfinite(z_start) & (z_start != policy_start)
+        robot = (robot_near > 0) & filled & (z_start.astype(np.float64) >= front)
+    z_start[robot] = np.inf
+    blind[robot] = robot_near[robot]
+
+
 def camera_clears_reference(corners_j, offset_j, free_j, z_near_j, z0, z1, u, v, margin, pad):
     """Whether secondary camera j saw through the whole cell [z0, z1] of principal pixel (u, v), written plainly:
     project the cell's 8 corners, take every pixel whose footprint meets their bounding box (grown by pad)."""

@@ -136,6 +136,9 @@ def test_hole_filling_kernel_equals_its_twin(seed):
             z_start, z_end, blind = (np.array(a) for a in (base.z_start, base.z_end, base.blind))
             naive.fill_small_holes_reference(raw, 0.001, base.invalid, hole_pixels, cam.noise.margin, z_start, z_end,
                                              blind)
+            if robot_near is not None:
+                naive.fill_self_filter_reference(robot_near, dg.config.SELF_FILTER_TOLERANCE, cam.noise.margin,
+                                                 cam.depth_range[0], base.invalid, z_start, z_end, blind)
             assert np.array_equal(occupancy.z_start, z_start.astype(np.float32))
             assert np.array_equal(occupancy.z_end, z_end.astype(np.float32))
             assert np.array_equal(occupancy.blind, blind.astype(np.float32))
@@ -182,3 +185,25 @@ def test_a_surface_seen_past_the_padded_robot_stays_a_surface():
     missed = dg.single_camera_distances(blind_only, P, 0.4, "min")
     assert truth < 0.4 and found.distance[0] <= truth + 2 * 2.5 / cam.fx
     assert missed.distance[0] > truth + 0.02 and dg.Flag.ROBOT_BLIND_SPOT in missed.flags[0]
+
+
+@pytest.mark.parametrize("beside, robot_hole", [(2.01, True), (1.90, False)])
+def test_a_hole_filled_inside_the_robots_outline_is_self_filtered_like_a_measurement(beside, robot_hole):
+    """invalid="neighbors" fills a thin hole from the nearest surface around it. Inside the robot's rendered outline,
+    with that surface just beside the robot and behind its padded front (the pedestal round the base: 2.01 m, the
+    rendered robot at 2.00 m, the robot measured at 2.02 m), the fill lies inside the robot: the hole shows the
+    robot (free in front, blind behind), as a measurement of 2.01 m there would. A surface clearly in front of the
+    robot (1.90 m) stays an obstacle."""
+    cam = dg.PinholeCamera("cam", 20, 20, 20.0, 20.0, 9.5, 9.5, np.eye(4), depth_range=(0.3, 6.0),
+                           noise=dg.NoiseModel.none())
+    near = np.zeros(cam.shape, np.float32)
+    near[:, 8:] = 2.0  # the robot's padded outline covers columns 8..19
+    depth = np.where(near > 0, 2.02, beside).astype(np.float32)
+    depth[9:11, 8:10] = 0.0  # a thin hole at the outline's edge, inside it
+    occupancy = dg.prepare_depth(dg.depth_image(depth, cam), cam, "neighbors", robot_near=near)
+    hole = (slice(9, 11), slice(8, 10))
+    if robot_hole:
+        assert np.all(np.isinf(occupancy.z_start[hole])) and np.all(occupancy.blind[hole] == np.float32(2.0))
+    else:
+        assert np.all(occupancy.z_start[hole] == np.float32(beside)) and np.all(np.isinf(occupancy.blind[hole]))
+    assert np.all(occupancy.invalid[hole] == 1)  # still counted as pixels without a measurement

@@ -82,6 +82,21 @@ def robot_filter(z_start, invalid, policy_start, robot_near, robot_far, has_far,
                                     m0, m1, m2, z_end, blind)
 
 
+@kernel(parallel=True)
+def robot_filter_fills(z_start, invalid, policy_start, robot_near, robot_far, has_far, tolerance, m0, m1, m2, z_end,
+                       blind):
+    """After ``invalid="neighbors"`` filled the small holes: each fill stands for the measurement its pixel lost, and
+    is self-filtered as one (:func:`robot_filter`'s rule) where the robot is rendered. Only filled pixels (no
+    measurement, a finite start other than the policy's) are touched; every other pixel was decided before."""
+    h, w = z_start.shape
+    for v in prange(h):
+        for u in range(w):
+            if robot_near[v, u] > 0.0 and invalid[v, u] and np.isfinite(z_start[v, u]) and \
+                    z_start[v, u] != policy_start:
+                _filter_robot_pixel(v, u, z_start, invalid, policy_start, robot_near, robot_far, has_far, tolerance,
+                                    m0, m1, m2, z_end, blind)
+
+
 @kernel(inline=True)
 def _filter_robot_pixel(v, u, z_start, invalid, policy_start, robot_near, robot_far, has_far, tolerance, m0, m1, m2,
                         z_end, blind):

@@ -129,6 +129,12 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
         _kernels.fill_small_holes(depth.data, float(depth.depth_scale), invalid_mask, int(hole_pixels), m0, m1, m2,
                                   z_start, z_end, blind, np.empty((h, w), dtype=np.uint8),
                                   np.empty(h * w, dtype=np.int64))
+        if robot_near is not None:
+            # A hole's fill stands for the measurement the pixel lost, and is self-filtered as one: a fill from a
+            # surface beside the robot (the pedestal round its base) that lies behind the robot's front along a
+            # pixel the robot covers shows the robot there, not a surface inside it.
+            _kernels.robot_filter_fills(z_start, invalid_mask, np.float32(invalid_start), near, far,
+                                        robot_far is not None, float(robot_tolerance), m0, m1, m2, z_end, blind)
     robot_pixels = 0 if robot_near is None else int(np.count_nonzero(np.isfinite(blind)))
     block = config.BLOCK_SIZE
     shape = ((h + block - 1) // block, (w + block - 1) // block)
