@@ -158,9 +158,12 @@ class StaticSolids:
             if not isinstance(box, Box):
                 raise InputError(f"static[{i}] must be a depthguard.scenes.Box (a solid box, world frame), got "
                                  f"{short_repr(box)}", field="static")
-            values = np.concatenate([np.ravel(np.asarray(box.center, dtype=np.float64)),
-                                     np.ravel(np.asarray(box.half_extents, dtype=np.float64)),
-                                     np.ravel(np.asarray(box.R_world_box, dtype=np.float64))])
+            try:
+                values = np.concatenate([np.ravel(np.asarray(box.center, dtype=np.float64)),
+                                         np.ravel(np.asarray(box.half_extents, dtype=np.float64)),
+                                         np.ravel(np.asarray(box.R_world_box, dtype=np.float64))])
+            except (TypeError, ValueError):
+                values = np.full(1, np.nan)  # not numbers: refused below
             if values.size != 15 or not np.all(np.isfinite(values)) or np.any(np.asarray(box.half_extents) <= 0) \
                     or np.any(np.abs(values) > config.COORDINATE_LIMIT):
                 raise InputError(f"static[{i}]: a box needs a finite centre (3,), half extents (3,) > 0 and a "

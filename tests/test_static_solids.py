@@ -206,7 +206,10 @@ def test_the_workcell_with_its_background_known_is_never_farther_than_the_truth(
                                     [Box((0.0, 0.0, 0.0), (1.0, 0.0, 1.0))],
                                     [Box((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), np.diag([1.0, 1.0, -1.0]))],
                                     [Box((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 2.0 * np.eye(3))],
-                                    [Box((0.0, 0.0), (1.0, 1.0, 1.0))]])
+                                    [Box((0.0, 0.0), (1.0, 1.0, 1.0))],
+                                    [Box(("a", 0.0, 0.0), (1.0, 1.0, 1.0))],
+                                    [Box((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), None)],
+                                    [Box((0.0, 0.0, 0.0), (1e300, 1.0, 1.0))]])
 def test_bad_static_solids_are_refused(static):
     rig = dg.Rig({"cam": _camera()})
     with pytest.raises(InputError) as info:
