@@ -37,6 +37,7 @@ KERNEL_MODULES = (
     "depthguard.depthgrid._kernels",
     "depthguard.depthspace._frustum",
     "depthguard.depthspace._kernels",
+    "depthguard.freespace._detectable",
     "depthguard.freespace._kernels",
     "depthguard.freespace._near",
     "depthguard.robots._capsule_kernels",

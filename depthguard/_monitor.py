@@ -67,6 +67,16 @@ class DistanceMonitor:
             they are known to be, stop counting as obstacles; the space they hide still counts
             (:class:`depthguard.self_filter.StaticSolids`). An object within ``self_filter_tolerance`` + the noise
             margin of such a surface is taken for it. None (default): everything the cameras see counts.
+        detection_capability: d, metres, or None (default): with a value, each set of frames also finds where in the
+            possibly occupied space a ball of diameter d fits (:class:`depthguard.freespace.DetectableSpace`, in
+            voxels of ``detectable_voxel`` over the rig's ``workspace``, which it needs), for speed and separation
+            monitoring: :meth:`PreparedSet.detectable_distances`. The space counted free there is what some usable
+            camera sees entirely free now (any camera, not only through a principal), what the memory remembers,
+            the robot's capsules grown by ``robot_zone`` (at every usable frame's joints; with ``robot_zone=0`` the
+            robot's own body counts as possibly occupied, so give one), and the inside of the
+            ``static`` solids. Those distances leave out regions thinner than d, so only a rule that counts ISO
+            13855's intrusion distance C for the same d may use them (SSM's S_p does); :meth:`query` never does.
+        detectable_voxel: metres, in (0, d / 2]: the voxels' side (default ``config.DETECTABLE_VOXEL``, 1 cm).
 
     Every argument is checked here, once: a wrong type or a value out of range raises
     :class:`~depthguard.errors.InputError` naming it.
@@ -86,7 +96,8 @@ class DistanceMonitor:
                  fusion_margin: float = config.DEFAULT_FUSION_MARGIN,
                  fusion_pixels: int = config.DEFAULT_FUSION_PIXELS, memory: bool = config.DEFAULT_MEMORY,
                  v_max: float = config.FREESPACE_V_MAX, memory_voxel: float = config.FREESPACE_VOXEL,
-                 robot_zone: float = config.DEFAULT_ROBOT_ZONE, static=None):
+                 robot_zone: float = config.DEFAULT_ROBOT_ZONE, static=None, detection_capability: float | None = None,
+                 detectable_voxel: float = config.DETECTABLE_VOXEL):
         if not isinstance(rig, Rig):
             raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}", field="rig")
         self.rig = rig
@@ -138,11 +149,74 @@ class DistanceMonitor:
             from depthguard.freespace import FreeSpaceMemory, VoxelBox
 
             self.memory = FreeSpaceMemory(VoxelBox(rig.workspace[0], rig.workspace[1], memory_voxel), v_max)
+        self.detectable = None
+        self._static_voxels = None
+        if detection_capability is not None:
+            self._detectable_space(static, detection_capability, detectable_voxel)
         self._remembered: set[int] = set()  # ids of the frames the memory has taken in
         self._seen_now = None  # voxels the frames of the last memory update saw free
         self._free_now = None  # (free, box, remembered only) behind the fused frames last built
         self._prepared: dict[str, tuple[object, _CameraFrame]] = {}
         self._fused_frames: dict[str, tuple[tuple, object]] = {}  # principal -> (its frames, their FusedFrames)
+
+    def _detectable_space(self, static, capability, voxel) -> None:
+        from depthguard.freespace import DetectableSpace, VoxelBox, solid_voxels
+
+        capability = check_real(capability, "detection_capability", minimum=0.0, above_minimum=True,
+                                maximum=config.COORDINATE_LIMIT, unit="metres", field="detection_capability")
+        voxel = check_real(voxel, "detectable_voxel", minimum=0.0, above_minimum=True, maximum=capability / 2,
+                           unit="metres", field="detectable_voxel")
+        if self.rig.workspace is None:
+            raise InputError("detection_capability needs the rig's workspace (the box whose voxels it looks at)",
+                             field="detection_capability")
+        try:
+            box = VoxelBox(self.rig.workspace[0], self.rig.workspace[1], voxel)
+        except InputError as error:
+            raise InputError(str(error), field="detectable_voxel") from None
+        self.detectable = DetectableSpace(box, capability)
+        if self._static is not None:
+            self._static_voxels = np.zeros(box.shape, dtype=bool)
+            solid_voxels(box, self._static.boxes, self._static_voxels)
+
+    def _find_detectable(self, usable: dict):
+        """A new DetectableSpace for the usable frames (None without detection_capability): the voxels some usable
+        camera sees entirely free now, the memory's, the robot's capsules grown by the robot zone at every usable
+        frame's joints (the space that is the robot at all of them) and the static solids' inside are free."""
+        if self.detectable is None:
+            return None
+        from depthguard.freespace import DetectableSpace, robot_voxels, seen_free_voxels
+
+        box = self.detectable.box
+        states = list(usable.values())
+        free = seen_free_voxels(box, [state.camera for state in states], [state.free for state in states],
+                                margin=self.fusion_margin, pad=self.fusion_pixels, check=False)
+        if self._static_voxels is not None:
+            free |= self._static_voxels
+        joints = {state._joints.tobytes(): state._joints for state in states if state._joints is not None}
+        if self.robot is not None and joints and self.robot_zone > 0.0:
+            robot = np.ones(box.shape, dtype=bool)
+            for q in joints.values():
+                mask = np.zeros(box.shape, dtype=bool)
+                capsules = [tuple(c.p0) + tuple(c.p1) + (c.radius,) for c in self.robot.capsules_world(q, check=False)]
+                robot_voxels(box, np.array(capsules), self.robot_zone, mask)
+                robot &= mask
+            free |= robot
+        if self.memory is not None and self.memory.time is not None:
+            free |= self._remembered_voxels(box)
+        space = DetectableSpace(box, self.detectable.capability)
+        space.update(free)
+        return space
+
+    def _remembered_voxels(self, box) -> np.ndarray:
+        """The memory's voxels certified free at its last update, on ``box``'s finer voxels (all False unless the
+        two boxes share their near corner and the memory's voxel is a whole number of ``box``'s)."""
+        ratio = self.memory.box.voxel / box.voxel
+        whole = int(round(ratio))
+        if whole < 1 or abs(whole - ratio) > 1e-9 or not np.allclose(self.memory.box.lo, box.lo, rtol=0, atol=1e-12):
+            return np.zeros(box.shape, dtype=bool)
+        coarse = self.memory.free_at(self.memory.time)
+        fine = coarse.repeat(whole, 0).repeat(whole, 1).repeat(whole, 2)
+        return np.ascontiguousarray(fine[:box.shape[0], :box.shape[1], :box.shape[2]])
 
     def _principals(self, principals) -> tuple[str, ...]:
         """The principal cameras' names: a list or tuple of names of the rig's cameras (a bare string is refused:
@@ -303,7 +377,7 @@ class DistanceMonitor:
         times = [state.occupancy.timestamp for state in usable.values() if state.occupancy.timestamp is not None]
         return PreparedSet(plan=plan, usable=dict(usable), fused=fused, free_now=self._free_now if fused else None,
                            rho=self.rho, aggregate=self.aggregate, unseen=self.unseen, method=self.method,
-                           time=max(times) if times else None)
+                           time=max(times) if times else None, detectable=self._find_detectable(usable))
 
     def _remember(self, usable: dict) -> None:
         """Take the usable frames the memory has not seen into it (SPEC section 8a), as of the earliest capture time
@@ -447,6 +521,23 @@ class PreparedSet:
     unseen: str
     method: str
     time: float | None
+    detectable: object = None
+
+    def detectable_distances(self, points_world, limit: float = math.inf, check: bool = True) -> np.ndarray:
+        """(n,) float64 metres, for speed and separation monitoring only: for each control point ((n, 3) float64,
+        metres, world frame), a lower bound of its distance to every ball of diameter d (the monitor's
+        ``detection_capability``) lying in the space these frames leave possibly occupied, or ``limit`` where it is
+        at least that (:class:`depthguard.freespace.DetectableSpace`). Regions thinner than d do not count, so use it
+        only with ISO 13855's intrusion distance C for that d counted (SSM's S_p). Every distance is 0 when no
+        camera had a usable frame. Raises :class:`InputError` (field ``detection_capability``) if the monitor has
+        none."""
+        if self.detectable is None:
+            raise InputError("this monitor has no detection_capability: pass DistanceMonitor(detection_capability="
+                             "...) for detectable distances", field="detection_capability")
+        points = check_points(points_world) if check else points_world
+        if not self.usable:
+            return np.zeros(len(points))
+        return self.detectable.distances(points, limit)
 
     def query(self, points_world, check: bool = True) -> DistanceResult:
         """Distances of control points ((n, 3) float64, metres, world frame) on these frames, as

@@ -7,7 +7,7 @@ two). The one honest way to reach every combination the product uses is to run t
 (each invalid-pixel policy, with and without a robot rendered, uint16 and float32 frames), single-camera queries
 of one point (the serial kernel) and of several (the parallel one), the depth grid's fusion of two cameras with and
 without a robot and with a blind secondary camera, the monitor, the frustum distance, the baselines, the capsule
-fit and the free-space memory. ``tests/test_warmup.py`` checks that after it the command line and the monitor compile
+fit, the free-space memory and SSM's detectable space. ``tests/test_warmup.py`` checks that after it the command line and the monitor compile
 nothing.
 
 Once the kernels are cached it takes a few seconds (mostly imports and loading the cached kernels).
@@ -154,6 +154,17 @@ def _run_workloads() -> None:
                    for name, camera in rig.cameras.items()}
         remembering.query(stamped, pts, now=0.1 * k)
     voxels_within(np.ones(box.shape, dtype=bool), box, several, np.full(len(several), 0.2))
+    # Where a ball of the detection capability fits (SSM), with the robot's and a solid's voxels free.
+    from depthguard.freespace import DetectableSpace, robot_voxels, solid_voxels
+    from depthguard.scenes import Box
+
+    fine = VoxelBox(box.lo, box.hi, 0.05)
+    free = np.zeros(fine.shape, dtype=bool)
+    robot_voxels(fine, np.array([[0.0, 0.0, 0.2, 0.0, 0.0, 0.5, 0.1]]), 0.05, free)
+    solid_voxels(fine, [Box((0.0, 0.0, 0.1), (0.3, 0.3, 0.1))], free)
+    space = DetectableSpace(fine, 0.1)
+    space.update(free)
+    space.distances(several)
     tangents = np.array([[-0.1, 0.1, -0.1, 0.1], [0.0, 0.2, 0.0, 0.2]])
     dg.frustum_distance([0.0, 0.0, 1.0], tangents, [0.5, np.inf])
     dg.paper_frustum_distance([0.0, 0.0, 1.0], tangents, [0.5, np.inf])

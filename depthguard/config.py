@@ -312,6 +312,11 @@ MAX_MESH_FILE_BYTES = 128 << 20
 #: person may be (ISO 13855's approach speed for hands). A body part moving faster is outside the guarantee.
 FREESPACE_V_MAX = 2.0
 
+#: DistanceMonitor(detection_capability=...): the side of the voxels in which it finds where a ball of that diameter
+#: fits in possibly occupied space, metres (depthguard.freespace.DetectableSpace). At most half the capability; 1 cm
+#: is a quarter of SSM's default 40 mm: bands thinner than 2 cm vanish, ones thicker than 7.5 cm stay.
+DETECTABLE_VOXEL = 0.01
+
 #: The monitor remembers free space (SPEC 8a) by default, in voxels of FREESPACE_VOXEL metres over the rig's workspace.
 DEFAULT_MEMORY = True
 #: DistanceMonitor(robot_zone=...), metres: fused answers may take space within this much of the robot's padded
@@ -333,9 +338,9 @@ LOOP_ROBOT_ZONE = 0.06
 FREESPACE_VOXEL = 0.04
 
 #: Largest free-space box, in voxels: its arrival times (float64), the distance transform's work space (int32) and a
-#: boolean mask take 13 bytes a voxel, about 210 MB at this size. A side of at most FREESPACE_MAX_SIDE voxels keeps
+#: boolean mask take 13 bytes a voxel, about 420 MB at this size. A side of at most FREESPACE_MAX_SIDE voxels keeps
 #: every squared distance (in voxels) within int32.
-FREESPACE_MAX_VOXELS = 16_000_000
+FREESPACE_MAX_VOXELS = 32_000_000
 FREESPACE_MAX_SIDE = 16384
 
 #: A box side within this many voxels of a whole number of voxels is not grown by a sliver voxel ((0.4 - 0.1) / 0.1

@@ -1,0 +1,243 @@
+"""Where a ball of the detection capability fits in possibly occupied space (depthguard.freespace.DetectableSpace),
+judged against exact geometry: balls and slabs whose distances are known in closed form, and an independent opening
+with scipy."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from depthguard.errors import InputError
+from depthguard.freespace import DetectableSpace, VoxelBox, robot_voxels, solid_voxels
+from depthguard.scenes import Box
+
+D = 0.04  # the detection capability, metres
+R = D / 2
+S = 0.01  # voxel side
+
+
+def _corners(box: VoxelBox) -> np.ndarray:
+    """(nx, ny, nz, 8, 3): every voxel's corners, metres."""
+    xs, ys, zs = (box.lo[a] + np.arange(box.shape[a] + 1) * box.voxel for a in range(3))
+    X, Y, Z = np.meshgrid(xs, ys, zs, indexing="ij")
+    grid = np.stack([X, Y, Z], -1)
+    return np.stack([grid[a:a + box.shape[0], b:b + box.shape[1], c:c + box.shape[2]]
+                     for a in (0, 1) for b in (0, 1) for c in (0, 1)], axis=3)
+
+
+def _free_outside_balls(box: VoxelBox, centres, radii) -> np.ndarray:
+    """The voxels entirely outside every ball (exactly: the cube's nearest point to each centre is beyond its
+    radius)."""
+    lo = box.lo + np.stack(np.meshgrid(*(np.arange(n) for n in box.shape), indexing="ij"), -1) * box.voxel
+    free = np.ones(box.shape, dtype=bool)
+    for c, r in zip(centres, radii):
+        gap = np.maximum(np.maximum(lo - c, 0.0), c - (lo + box.voxel))
+        free &= np.sqrt((gap ** 2).sum(-1)) > r
+    return free
+
+
+def test_every_ball_of_the_capability_in_occupied_space_is_kept():
+    """Possibly occupied space = random balls of radius >= d / 2 (each a place where a person's part at least d
+    thick could be): no point's reported distance exceeds its exact distance to any of them."""
+    rng = np.random.default_rng(3)
+    box = VoxelBox([-0.4, -0.4, -0.4], [0.4, 0.4, 0.4], S)
+    checked = 0
+    for _ in range(6):
+        n = 5
+        centres = rng.uniform(-0.3, 0.3, (n, 3))
+        radii = rng.uniform(R, 0.08, n)
+        space = DetectableSpace(box, D)
+        space.update(_free_outside_balls(box, centres, radii))
+        points = rng.uniform(-0.35, 0.35, (300, 3))
+        reported = space.distances(points)
+        exact = np.min(np.maximum(np.linalg.norm(points[:, None] - centres[None], axis=2) - radii, 0.0), axis=1)
+        assert np.all(reported <= exact + 1e-9), np.max(reported - exact)
+        checked += int(np.sum(exact > 0.05))
+        # and not far below either (the box's outside counts occupied): within the voxels' cost, s (1 + sqrt 3)
+        to_outside = np.minimum(points - box.lo, box.hi - points).min(1) - R
+        assert np.all(reported >= np.minimum(exact, to_outside) - S * (1 + math.sqrt(3)) - 1e-9)
+    assert checked > 500
+
+
+def test_a_band_thinner_than_the_capability_is_dropped_and_a_thick_one_is_kept():
+    box = VoxelBox([-0.5, -0.5, -0.5], [0.5, 0.5, 0.5], S)
+    z = box.lo[2] + (np.arange(box.shape[2]) + 0.5) * S
+    point = np.array([[0.0, 0.0, 0.0]])
+    for thickness, dropped in ((D - 2 * S, True), (D + 2 * S * math.sqrt(3) + S, False)):
+        # a slab of possibly occupied space round z = 0.2, as many voxels thick as it takes to cover it
+        occupied = np.abs(z - 0.2) < thickness / 2 + S / 2
+        free = np.broadcast_to(~occupied, box.shape).copy()
+        space = DetectableSpace(box, D)
+        space.update(free)
+        reported = space.distances(point)[0]
+        slab = 0.2 - np.max(np.abs(z[occupied] - 0.2)) - S / 2  # exact distance to the voxels' slab
+        border = 0.5 - R  # the box's faces count as occupied (a person may come from outside)
+        if dropped:
+            assert reported == pytest.approx(border), (thickness, reported)
+            assert reported > slab
+        else:
+            assert reported <= slab + 1e-9
+
+
+def test_the_opening_matches_scipys():
+    """E_vox is scipy's binary erosion of the possibly occupied voxels by the ball of offsets within d / 2 (outside
+    the box occupied), and the distances are the brute-force distances to its cubes minus d / 2."""
+    rng = np.random.default_rng(7)
+    box = VoxelBox([0.0, 0.0, 0.0], [0.3, 0.25, 0.2], S)
+    occupied = ndimage.binary_dilation(rng.random(box.shape) < 0.02, iterations=2)
+    space = DetectableSpace(box, D)
+    space.update(~occupied)
+    offsets = np.indices((5, 5, 5)) - 2
+    ball = (offsets ** 2).sum(0) <= 4
+    expected = ndimage.binary_erosion(occupied, structure=ball, border_value=1)
+    np.testing.assert_array_equal(space.fits, expected)
+    points = rng.uniform(box.lo, box.hi, (200, 3))
+    lo = box.lo + np.argwhere(expected) * S
+    gap = np.maximum(np.maximum(lo[None] - points[:, None], 0.0), points[:, None] - (lo[None] + S))
+    to_fits = np.sqrt((gap ** 2).sum(-1)).min(1)
+    to_outside = np.minimum(points - box.lo, box.hi - points).min(1)
+    np.testing.assert_allclose(space.distances(points), np.maximum(np.minimum(to_fits, to_outside) - R, 0.0),
+                               atol=1e-9)
+    limited = space.distances(points, limit=0.01)
+    np.testing.assert_allclose(limited, np.minimum(space.distances(points), 0.01), atol=1e-9)
+
+
+def test_robot_and_solid_voxels_lie_inside_what_they_stand_for():
+    box = VoxelBox([-0.3, -0.3, -0.3], [0.3, 0.3, 0.3], S)
+    corners = _corners(box)
+    p0, p1, radius, zone = np.array([-0.1, 0.0, 0.0]), np.array([0.12, 0.05, 0.02]), 0.05, 0.03
+    marked = np.zeros(box.shape, dtype=bool)
+    robot_voxels(box, np.concatenate([p0, p1, [radius]])[None], zone, marked)
+    axis = p1 - p0
+    t = np.clip(((corners - p0) @ axis) / (axis @ axis), 0.0, 1.0)
+    to_axis = np.linalg.norm(corners - (p0 + t[..., None] * axis), axis=-1).max(-1)
+    assert marked.sum() > 500
+    assert np.all(to_axis[marked] <= radius + zone + 1e-9)
+    assert np.all(marked[to_axis <= radius + zone - S * math.sqrt(3)])  # and nothing deep inside is left out
+
+    c, half = np.array([0.02, -0.01, 0.03]), np.array([0.15, 0.08, 0.1])
+    angle = 0.4
+    rotation = np.array([[math.cos(angle), -math.sin(angle), 0.0], [math.sin(angle), math.cos(angle), 0.0],
+                         [0.0, 0.0, 1.0]])
+    inside = np.zeros(box.shape, dtype=bool)
+    solid_voxels(box, [Box(tuple(c), tuple(half), rotation)], inside)
+    local = np.abs((corners - c) @ rotation)
+    assert inside.sum() > 500
+    assert np.all(np.all(local <= half + 1e-9, axis=-1).all(-1)[inside])
+
+
+@pytest.mark.parametrize("field, make", [
+    ("capability", lambda box: DetectableSpace(box, 0.0)),
+    ("capability", lambda box: DetectableSpace(box, float("nan"))),
+    ("capability", lambda box: DetectableSpace(box, "0.04")),
+    ("capability", lambda box: DetectableSpace(box, 0.015)),  # voxels coarser than d / 2
+    ("box", lambda box: DetectableSpace("box", 0.04)),
+    ("free", lambda box: DetectableSpace(box, 0.04).update(np.zeros((2, 2, 2), dtype=bool))),
+    ("free", lambda box: DetectableSpace(box, 0.04).update(np.zeros(box.shape, dtype=np.uint8))),
+    ("free", lambda box: DetectableSpace(box, 0.04).update(None)),
+    ("points_world", lambda box: DetectableSpace(box, 0.04).distances([[0.0, float("nan"), 0.0]])),
+    ("limit", lambda box: DetectableSpace(box, 0.04).distances([[0.0, 0.0, 0.0]], limit=-1.0)),
+])
+def test_bad_input_is_refused_naming_the_field(field, make):
+    box = VoxelBox([0.0, 0.0, 0.0], [0.1, 0.1, 0.1], S)
+    with pytest.raises(InputError) as caught:
+        make(box)
+    assert caught.value.field == field
+
+
+def test_before_any_update_and_outside_the_box_everything_counts_occupied():
+    box = VoxelBox([0.0, 0.0, 0.0], [0.2, 0.2, 0.2], S)
+    space = DetectableSpace(box, D)
+    assert np.all(space.distances([[0.1, 0.1, 0.1]]) == 0.0)
+    space.update(np.ones(box.shape, dtype=bool))
+    assert space.distances([[0.1, 0.1, 0.1]])[0] == pytest.approx(0.1 - R)
+    assert space.distances([[0.5, 0.1, 0.1]])[0] == 0.0
+
+
+def _workcell_frames(times):
+    """(workcell, [(t, q, frame)]) of scenario_b_reach.yaml in the four-camera layout at ``times``."""
+    from importlib import resources
+    from pathlib import Path
+
+    from depthguard.simulation import load_workcell
+    from depthguard.simulation._episode import SceneRenderer, sense
+    from depthguard.simulation._truth import TruthComputer
+
+    package = resources.files("depthguard.simulation")
+    workcell = load_workcell(Path(str(package / "scenario_b_reach.yaml")),
+                             layout=Path(str(package / "scenario_b_four.yaml")))
+    truth = TruthComputer(workcell.robot)
+    parts = {name: workcell.part_names(name) for name in workcell.obstacle_names}
+    scene = SceneRenderer(workcell, None)
+    try:
+        frames = []
+        for t in times:
+            q = workcell.joints_at(t)
+            frames.append((t, q, sense(workcell, scene, truth, parts, q.copy(), t, int(round(t * workcell.rate)), 0)))
+    finally:
+        scene.release()
+    return workcell, frames
+
+
+#: metres between the robot's meshes and the person for a frame to be judged: the loop's robot zone (6 cm) beyond
+#: the padded capsules (2 cm padding, and up to 5 cm between a link's mesh and its capsule).
+CLEAR = 0.15
+
+
+@pytest.mark.slow
+def test_the_monitors_detectable_distances_never_exceed_the_truth_to_a_person():
+    """Scenario B's person (every part at least 10 cm thick, so a ball of d fits everywhere in them) walking in and
+    reaching for the arm, four cameras: each control point's detectable distance is at most its exact distance to the
+    person (coal) plus 2.5 footprints of the farthest camera + 1 mm (the fused answers' tolerance,
+    tests/test_fusion_workcell.py). Judged while the person keeps CLEAR of the robot's meshes: nearer, the robot
+    zone takes the parts of the person within it for the robot (README, "Several cameras"), here as in the depth
+    grid. Known static solids (floor, walls, pedestal) are given too: what they hide still counts."""
+    import depthguard as dg
+    from depthguard import config
+
+    workcell, frames = _workcell_frames([1.3, 1.5, 1.6, 1.7, 1.8, 1.9, 3.3, 3.5])
+    robot = workcell.robot
+    static = [box for parts in workcell.background().values() for box in parts]
+    monitor = dg.DistanceMonitor(workcell.rig, rho=1.5, robot=robot, aggregate="min", invalid="neighbors",
+                                 robot_zone=config.LOOP_ROBOT_ZONE, static=static, detection_capability=D)
+    focal = min(camera.fx for camera in workcell.rig.cameras.values())
+    near, checked = 0, 0
+    for t, q, frame in frames:
+        prepared = monitor.prepare_set(frame.depth, joints=q, now=t)
+        points = robot.control_point_positions(q)
+        reported = prepared.detectable_distances(points)
+        far = max(np.linalg.norm(points - camera.T_world_camera[:3, 3], axis=1).max()
+                  for camera in workcell.rig.cameras.values())
+        tolerance = 2.5 * far / focal + 1e-3
+        truth = frame.truth.distance
+        if not frame.truth.clearance > CLEAR:
+            continue
+        assert np.all(reported <= truth + tolerance), (t, reported - truth)
+        checked += int(np.sum(np.isfinite(truth)))
+        near += int(np.sum(reported < 0.4))
+    assert checked >= 9 * 6 and near >= 5, (checked, near)  # the person was in the room and near the arm
+
+
+def test_the_monitor_refuses_a_detection_capability_it_cannot_use():
+    import depthguard as dg
+    from depthguard.cameras import Rig
+
+    workcell, _ = _workcell_frames([])
+    with pytest.raises(InputError) as caught:
+        dg.DistanceMonitor(workcell.rig, detection_capability=0.04, detectable_voxel=0.03)
+    assert caught.value.field == "detectable_voxel"
+    with pytest.raises(InputError) as caught:
+        dg.DistanceMonitor(workcell.rig, detection_capability=-1.0)
+    assert caught.value.field == "detection_capability"
+    no_workspace = Rig(cameras=workcell.rig.cameras, principal=workcell.rig.principal)
+    with pytest.raises(InputError) as caught:
+        dg.DistanceMonitor(no_workspace, detection_capability=0.04)
+    assert caught.value.field == "detection_capability"
+    monitor = dg.DistanceMonitor(workcell.rig)
+    prepared = monitor.prepare_set({})
+    with pytest.raises(InputError) as caught:
+        prepared.detectable_distances([[0.0, 0.0, 0.0]])
+    assert caught.value.field == "detection_capability"
