@@ -1,10 +1,11 @@
-"""Why speed and separation monitoring stops the robot for good in scenario B's workcell (issue 9), layout by layout.
+"""What speed and separation monitoring needs to let the robot move in scenario B's workcell (issue 9), layout by layout.
 
 With no person in the room (scenario_b_reach.yaml at 5.2 s, the person gone), SSM lets a control point move only when
 its distance from the link's surface to the nearest possibly occupied space is at least S_p at rest (0.90 m with the
 loop's defaults and robot zone). This probe prints, per layout, that distance for every control point and the nearest
 possibly occupied point (the monitor's ``min`` answer: the point minus distance times direction), so that what stands
-in the way can be read off:
+in the way can be read off; and the distances SSM may use with ``DistanceMonitor(detection_capability=0.04)``
+(possibly occupied regions thinner than the detection capability left out: ``depthguard.freespace.DetectableSpace``):
 
     .venv/bin/python benchmarks/probe_ssm_coverage.py [--time 5.2] [--rho 1.5]
 
@@ -15,7 +16,9 @@ Layouts (the variants are written from the packaged scene files into a temporary
   120 degrees, as a binned wide-field ToF), the workspace up to z = 2.2 m and 0.1 m wider;
 - ``... known``: the same with the floor, the walls and the pedestal given to the monitor as known static solids
   (``DistanceMonitor(static=...)``);
-- ``... wide pedestal``: a 0.5 m pedestal instead of 0.3 m.
+- ``... wide pedestal``: a 0.5 m pedestal instead of 0.3 m;
+- ``scenario_b_ssm.yaml``: the packaged SSM layout (the four and the ceiling camera, time-of-flight-class noise),
+  the solids known.
 """
 
 from __future__ import annotations
@@ -30,8 +33,7 @@ import numpy as np
 import depthguard as dg
 from depthguard import config
 from depthguard.simulation import load_workcell
-from depthguard.simulation._episode import SceneRenderer, sense
-from depthguard.simulation._truth import TruthComputer
+from depthguard.simulation._episode import sense_at
 
 PACKAGE = resources.files("depthguard.simulation")
 S_P_AT_REST = 0.90  # metres, the loop's defaults (LoopSettings docstring)
@@ -69,25 +71,24 @@ def _variant(directory: Path, name: str, ceiling: bool, wide_pedestal: bool) -> 
     return path
 
 
-def probe(path: Path, t: float, rho: float, known: bool) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """(distance from each link's surface, nearest point, names) at time t with the person gone."""
-    workcell = load_workcell(path)
+def probe(path: Path, t: float, rho: float, known: bool, layout: Path | None = None):
+    """At time t with the person gone: (the depth grid's distances from each link's surface, its nearest possibly
+    occupied point per control point, the detectable distances from each link's surface, names)."""
+    workcell = load_workcell(path, layout=layout)
     robot = workcell.robot
     static = [box for parts in workcell.background().values() for box in parts] if known else None
     monitor = dg.DistanceMonitor(workcell.rig, rho=rho, robot=robot, aggregate="min", invalid="neighbors",
-                                 robot_zone=config.LOOP_ROBOT_ZONE, static=static)
-    truth = TruthComputer(robot)
-    parts = {name: workcell.part_names(name) for name in workcell.obstacle_names}
-    scene = SceneRenderer(workcell, None)
-    try:
-        q = workcell.joints_at(t)
-        frame = sense(workcell, scene, truth, parts, q.copy(), t, int(round(t * workcell.rate)), 0)
-        points = robot.control_point_positions(q)
-        result = monitor.query(frame.depth, points, joints=q, now=t)
-    finally:
-        scene.release()
+                                 robot_zone=config.LOOP_ROBOT_ZONE, static=static,
+                                 detection_capability=config.SSM_DETECTION_CAPABILITY)
+    q = workcell.joints_at(t)
+    (frame,) = sense_at(workcell, [t])
+    points = robot.control_point_positions(q)
+    prepared = monitor.prepare_set(frame.depth, joints=q, now=t)
+    result = prepared.query(points)
+    detectable = prepared.detectable_distances(points, limit=rho)
     nearest = points - np.where(np.isfinite(result.distance), result.distance, 0.0)[:, None] * result.direction
-    return result.distance - robot.control_point_radii, nearest, list(robot.control_point_names)
+    radii = robot.control_point_radii
+    return result.distance - radii, nearest, detectable - radii, list(robot.control_point_names)
 
 
 def main(argv=None) -> None:
@@ -95,18 +96,23 @@ def main(argv=None) -> None:
     parser.add_argument("--time", type=float, default=5.2, help="seconds into scenario_b_reach.yaml (default 5.2)")
     parser.add_argument("--rho", type=float, default=1.5, help="the monitor's rho, metres (default 1.5)")
     args = parser.parse_args(argv)
-    rows = [("two", False, False, False), ("four", False, False, False), ("four+ceiling", True, False, False),
-            ("four+ceiling known", True, False, True), ("four+ceiling known wide pedestal", True, True, True)]
-    print(f"S_p at rest {S_P_AT_REST:.2f} m; distances from the links' surfaces, metres; t = {args.time} s\n")
+    ssm_layout = Path(str(PACKAGE / "scenario_b_ssm.yaml"))
+    rows = [("two", False, False, False, None), ("four", False, False, False, None),
+            ("four+ceiling", True, False, False, None), ("four+ceiling known", True, False, True, None),
+            ("four+ceiling known wide pedestal", True, True, True, None),
+            ("scenario_b_ssm.yaml known (ToF noise)", False, False, True, ssm_layout)]
+    print(f"S_p at rest {S_P_AT_REST:.2f} m; distances from the links' surfaces, metres; t = {args.time} s; "
+          f"detectable: d = {config.SSM_DETECTION_CAPABILITY * 1000:.0f} mm\n")
     with tempfile.TemporaryDirectory() as tmp:
-        for label, ceiling, wide, known in rows:
+        for label, ceiling, wide, known, layout in rows:
             base = "two" if label == "two" else "four"
-            path = _variant(Path(tmp), base, ceiling, wide)
-            distance, nearest, names = probe(path, args.time, args.rho, known)
+            path = _variant(Path(tmp), base, ceiling, wide) if layout is None else PACKAGE / "scenario_b_reach.yaml"
+            distance, nearest, detectable, names = probe(Path(str(path)), args.time, args.rho, known, layout)
             worst = int(np.argmin(distance))
-            cells = " ".join(f"{d:5.2f}" for d in distance)
-            print(f"{label:34s} {cells}   least {distance[worst]:.2f} ({names[worst]}), nearest possibly occupied "
-                  f"point {np.round(nearest[worst], 2).tolist()}")
+            print(f"{label:38s} grid       {' '.join(f'{d:5.2f}' for d in distance)}   least {distance[worst]:.2f} "
+                  f"({names[worst]}), nearest possibly occupied point {np.round(nearest[worst], 2).tolist()}")
+            print(f"{'':38s} detectable {' '.join(f'{d:5.2f}' for d in detectable)}   least "
+                  f"{detectable.min():.2f} ({names[int(np.argmin(detectable))]})")
     print("\ncolumns: " + " ".join(names))
 
 

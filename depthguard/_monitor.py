@@ -73,9 +73,12 @@ class DistanceMonitor:
             monitoring: :meth:`PreparedSet.detectable_distances`. The space counted free there is what some usable
             camera sees entirely free now (any camera, not only through a principal), what the memory remembers,
             the robot's capsules grown by ``robot_zone`` (at every usable frame's joints; with ``robot_zone=0`` the
-            robot's own body counts as possibly occupied, so give one), and the inside of the
-            ``static`` solids. Those distances leave out regions thinner than d, so only a rule that counts ISO
-            13855's intrusion distance C for the same d may use them (SSM's S_p does); :meth:`query` never does.
+            robot's own body counts as possibly occupied, so give one), and the inside of the ``static`` solids grown
+            by ``self_filter_tolerance`` (as their surfaces take an object that near them for them); outside the
+            workspace counts as possibly occupied, except as far as a static solid covering a whole face of it
+            reaches beyond it (the floor under it). Those distances leave out regions thinner than d, so only a rule
+            that counts ISO 13855's intrusion distance C for the same d may use them (SSM's S_p does);
+            :meth:`query` never does.
         detectable_voxel: metres, in (0, d / 2]: the voxels' side (default ``config.DETECTABLE_VOXEL``, 1 cm).
 
     Every argument is checked here, once: a wrong type or a value out of range raises
@@ -161,6 +164,7 @@ class DistanceMonitor:
 
     def _detectable_space(self, static, capability, voxel) -> None:
         from depthguard.freespace import DetectableSpace, VoxelBox, solid_voxels
+        from depthguard.freespace._detectable import closed_faces
 
         capability = check_real(capability, "detection_capability", minimum=0.0, above_minimum=True,
                                 maximum=config.COORDINATE_LIMIT, unit="metres", field="detection_capability")
@@ -173,10 +177,12 @@ class DistanceMonitor:
             box = VoxelBox(self.rig.workspace[0], self.rig.workspace[1], voxel)
         except InputError as error:
             raise InputError(str(error), field="detectable_voxel") from None
-        self.detectable = DetectableSpace(box, capability)
+        beyond = None if self._static is None else closed_faces(box, self._static.boxes)
+        self.detectable = DetectableSpace(box, capability, beyond)
         if self._static is not None:
+            # As the known solids' surfaces take an object within the self-filter's tolerance of them for them.
             self._static_voxels = np.zeros(box.shape, dtype=bool)
-            solid_voxels(box, self._static.boxes, self._static_voxels)
+            solid_voxels(box, self._static.boxes, self._static_voxels, grow=self.self_filter_tolerance)
 
     def _find_detectable(self, usable: dict):
         """A new DetectableSpace for the usable frames (None without detection_capability): the voxels some usable
@@ -202,21 +208,27 @@ class DistanceMonitor:
                 robot &= mask
             free |= robot
         if self.memory is not None and self.memory.time is not None:
-            free |= self._remembered_voxels(box)
-        space = DetectableSpace(box, self.detectable.capability)
+            times = [state.occupancy.timestamp for state in states if state.occupancy.timestamp is not None]
+            self._remembered_voxels(box, max(times + [self.memory.time]), free)
+        space = DetectableSpace(box, self.detectable.capability, self.detectable.beyond)
         space.update(free)
         return space
 
-    def _remembered_voxels(self, box) -> np.ndarray:
-        """The memory's voxels certified free at its last update, on ``box``'s finer voxels (all False unless the
-        two boxes share their near corner and the memory's voxel is a whole number of ``box``'s)."""
+    def _remembered_voxels(self, box, t: float, out: np.ndarray | None = None) -> np.ndarray:
+        """Mark in ``out`` (box.shape bool, a new all-False one if None) the memory's voxels certified free at time
+        ``t`` (the latest capture time of the frames, as the fused answers take them), on ``box``'s finer voxels
+        (none unless the two boxes share their near corner and the memory's voxel is a whole number of ``box``'s).
+        Returns ``out``."""
+        from depthguard.freespace._detectable import _or_coarse
+
+        out = np.zeros(box.shape, dtype=bool) if out is None else out
         ratio = self.memory.box.voxel / box.voxel
         whole = int(round(ratio))
-        if whole < 1 or abs(whole - ratio) > 1e-9 or not np.allclose(self.memory.box.lo, box.lo, rtol=0, atol=1e-12):
-            return np.zeros(box.shape, dtype=bool)
-        coarse = self.memory.free_at(self.memory.time)
-        fine = coarse.repeat(whole, 0).repeat(whole, 1).repeat(whole, 2)
-        return np.ascontiguousarray(fine[:box.shape[0], :box.shape[1], :box.shape[2]])
+        coarse = self.memory.box
+        if whole >= 1 and abs(whole - ratio) <= 1e-9 and np.allclose(coarse.lo, box.lo, rtol=0, atol=1e-12) and \
+                all(coarse.shape[a] * whole >= box.shape[a] for a in range(3)):
+            _or_coarse(out, self.memory.free_at(t), whole)
+        return out
 
     def _principals(self, principals) -> tuple[str, ...]:
         """The principal cameras' names: a list or tuple of names of the rig's cameras (a bare string is refused:

@@ -148,11 +148,12 @@ def _run_workloads() -> None:
     from depthguard.freespace._near import voxels_within
 
     remembering = dg.DistanceMonitor(dg.Rig(rig.cameras, principal="principal", workspace=[box.lo, box.hi]), rho=0.3,
-                                     memory_voxel=0.1)
+                                     memory_voxel=0.1, detection_capability=0.1, detectable_voxel=0.05)
     for k, (kind, pts) in enumerate([(kind, pts) for kind in ("uint16", "float32") for pts in (one, several)]):
         stamped = {name: dg.depth_image(frames[kind][name], camera, timestamp=0.1 * k)
                    for name, camera in rig.cameras.items()}
         remembering.query(stamped, pts, now=0.1 * k)
+        remembering.prepare_set(stamped, now=0.1 * k).detectable_distances(pts)
     voxels_within(np.ones(box.shape, dtype=bool), box, several, np.full(len(several), 0.2))
     # Where a ball of the detection capability fits (SSM), with the robot's and a solid's voxels free.
     from depthguard.freespace import DetectableSpace, robot_voxels, solid_voxels

@@ -5,6 +5,7 @@
     depthguard simulate [SCENE.yaml] --out DIR [--seed N] [--duration S] [--bag]
     depthguard replay RECORDING --out RESULTS.csv [--robot URDF|iiwa|panda] [--points POINTS] [--rho 0.4] ...
     depthguard demo [--out DIR] [--duration S] [--mode none|avoid|ssm ...] [--cameras 4|2] [--no-bag]
+                    [--ssm-in-layout]
     depthguard workcell [--out DIR] [--duration S]
     depthguard fusion-workcell [--out DIR] [--scene SCENE.yaml ...] [--all-frames]
     depthguard coverage --rig RIG.yaml [--robot URDF|iiwa|panda] [--trajectory joint_states.csv] [--rho 0.4] ...
@@ -179,7 +180,7 @@ def _build_parser() -> argparse.ArgumentParser:
                                             "with speed and separation monitoring, judged by exact geometry")
     demo.add_argument("--out", default="out/demo", help="output folder for plots and summary.json")
     demo.add_argument("--duration", type=_SECONDS, default=None,
-                      help="only the first S seconds, at least one frame (1/30 s) (default: all 4)")
+                      help="only the first S seconds, at least one frame (1/30 s) (default: the whole scene, 5.5 s)")
     demo.add_argument("--mode", action="append", choices=("none", "avoid", "ssm"),
                       help="run only this mode (repeatable; default: none, avoid and ssm)")
     demo.add_argument("--cameras", type=int, choices=(2, 4), default=4,
@@ -187,6 +188,9 @@ def _build_parser() -> argparse.ArgumentParser:
                            "two front ones (faster)")
     demo.add_argument("--no-bag", action="store_true",
                       help="do not write the avoid run as a recording (DIR/bag_avoid, an MCAP file of about 150 MB)")
+    demo.add_argument("--ssm-in-layout", action="store_true",
+                      help="run ssm in the other modes' camera layout (where it stops the robot for good) instead of "
+                           "scenario_b_ssm.yaml's five cameras, known solids and detectable distances")
 
     workcell = commands.add_parser("workcell", help="the simulated workcell of reference scenario B, each camera's "
                                                     "distances on its own against the truth")
@@ -285,7 +289,8 @@ def main(argv=None) -> int:
             from depthguard.experiments import avoidance_demo
 
             return avoidance_demo.main(out=args.out, duration=_duration(args.duration, config.SIM_RATE),
-                                       modes=args.mode, bag=not args.no_bag, cameras=args.cameras)
+                                       modes=args.mode, bag=not args.no_bag, cameras=args.cameras,
+                                       ssm_cell=not args.ssm_in_layout)
         if args.command == "workcell":
             from depthguard.experiments import workcell
 

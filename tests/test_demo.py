@@ -105,6 +105,24 @@ def test_demo_writes_one_summary_per_mode_and_plots(tmp_path, capsys):
     assert json.loads((tmp_path / "quiet" / "summary.json").read_text())["cameras"] == ["principal", "second"]
 
 
+def test_the_demos_ssm_runs_in_the_layout_it_needs_unless_asked_not_to(tmp_path, capsys):
+    """Mode ssm runs in scenario_b_ssm.yaml (five cameras, one in the ceiling), the others in the chosen layout;
+    --ssm-in-layout runs it there too."""
+    from depthguard import cli
+
+    assert cli.main(["demo", "--out", str(tmp_path), "--duration", "0.1", "--mode", "ssm", "--mode", "none",
+                     "--no-bag"]) == 0
+    assert avoidance_demo.SSM_LAYOUT in capsys.readouterr().out
+    modes = json.loads((tmp_path / "summary.json").read_text())["modes"]
+    assert modes["ssm"]["cameras"] == ["principal", "second", "third", "fourth", "ceiling"]
+    assert modes["none"]["cameras"] == ["principal", "second", "third", "fourth"]
+    assert modes["ssm"]["frames"] == 3 and modes["ssm"]["collisions"] == 0
+    assert cli.main(["demo", "--out", str(tmp_path / "same"), "--duration", "0.05", "--mode", "ssm", "--no-bag",
+                     "--ssm-in-layout", "--cameras", "2"]) == 0
+    same = json.loads((tmp_path / "same" / "summary.json").read_text())["modes"]["ssm"]
+    assert same["cameras"] == ["principal", "second"]
+
+
 def test_resumption_needs_the_obstacles_gone_and_the_task_back_for_a_while():
     """The demo's "resumed after" figure (issue 9): from when every control point is truly beyond 0.4 m for good,
     until the task error is below 1 cm and stays there for 0.1 s; a reference passing by a stopped robot does not

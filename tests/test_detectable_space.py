@@ -12,6 +12,7 @@ from scipy import ndimage
 
 from depthguard.errors import InputError
 from depthguard.freespace import DetectableSpace, VoxelBox, robot_voxels, solid_voxels
+from depthguard.freespace._detectable import closed_faces
 from depthguard.scenes import Box
 
 D = 0.04  # the detection capability, metres
@@ -122,11 +123,27 @@ def test_robot_and_solid_voxels_lie_inside_what_they_stand_for():
     angle = 0.4
     rotation = np.array([[math.cos(angle), -math.sin(angle), 0.0], [math.sin(angle), math.cos(angle), 0.0],
                          [0.0, 0.0, 1.0]])
-    inside = np.zeros(box.shape, dtype=bool)
-    solid_voxels(box, [Box(tuple(c), tuple(half), rotation)], inside)
-    local = np.abs((corners - c) @ rotation)
-    assert inside.sum() > 500
-    assert np.all(np.all(local <= half + 1e-9, axis=-1).all(-1)[inside])
+    for grow in (0.0, 0.02):
+        inside = np.zeros(box.shape, dtype=bool)
+        solid_voxels(box, [Box(tuple(c), tuple(half), rotation)], inside, grow=grow)
+        local = np.abs((corners - c) @ rotation)
+        assert inside.sum() > 500
+        assert np.all(np.all(local <= half + grow + 1e-9, axis=-1).all(-1)[inside])
+        assert np.all(inside[np.all(local <= half + grow - S * math.sqrt(3), axis=-1).all(-1)])
+
+
+def test_a_floor_under_the_box_closes_its_bottom_face_as_far_as_it_reaches():
+    box = VoxelBox([-1.0, -1.0, -0.5], [1.0, 1.0, 1.5], 0.02)
+    floor = Box.from_bounds([-3.0, -3.0, -1.0], [3.0, 3.0, -0.5])
+    small = Box.from_bounds([-0.5, -3.0, -1.0], [0.5, 3.0, -0.5])  # does not cover the whole face
+    tilted = Box((0.0, 0.0, -0.75), (3.0, 3.0, 0.25), np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))
+    np.testing.assert_allclose(closed_faces(box, [floor]), [0, 0, 0, 0, 0.5, 0], atol=1e-12)
+    np.testing.assert_allclose(closed_faces(box, [small, tilted]), np.zeros(6))
+    point = np.array([[0.0, 0.0, -0.3]])
+    for beyond, expected in ((None, 0.2), ([0, 0, 0, 0, 0.5, 0], 0.7)):
+        space = DetectableSpace(box, D, beyond)
+        space.update(np.ones(box.shape, dtype=bool))
+        assert space.distances(point)[0] == pytest.approx(expected - R)
 
 
 @pytest.mark.parametrize("field, make", [
@@ -140,6 +157,10 @@ def test_robot_and_solid_voxels_lie_inside_what_they_stand_for():
     ("free", lambda box: DetectableSpace(box, 0.04).update(None)),
     ("points_world", lambda box: DetectableSpace(box, 0.04).distances([[0.0, float("nan"), 0.0]])),
     ("limit", lambda box: DetectableSpace(box, 0.04).distances([[0.0, 0.0, 0.0]], limit=-1.0)),
+    ("beyond", lambda box: DetectableSpace(box, 0.04, beyond=[0.0] * 5)),
+    ("beyond", lambda box: DetectableSpace(box, 0.04, beyond=[0.0] * 5 + [-1.0])),
+    ("beyond", lambda box: DetectableSpace(box, 0.04, beyond=[0.0] * 5 + [float("inf")])),
+    ("beyond", lambda box: DetectableSpace(box, 0.04, beyond="floor")),
 ])
 def test_bad_input_is_refused_naming_the_field(field, make):
     box = VoxelBox([0.0, 0.0, 0.0], [0.1, 0.1, 0.1], S)
@@ -163,23 +184,12 @@ def _workcell_frames(times):
     from pathlib import Path
 
     from depthguard.simulation import load_workcell
-    from depthguard.simulation._episode import SceneRenderer, sense
-    from depthguard.simulation._truth import TruthComputer
+    from depthguard.simulation._episode import sense_at
 
     package = resources.files("depthguard.simulation")
     workcell = load_workcell(Path(str(package / "scenario_b_reach.yaml")),
                              layout=Path(str(package / "scenario_b_four.yaml")))
-    truth = TruthComputer(workcell.robot)
-    parts = {name: workcell.part_names(name) for name in workcell.obstacle_names}
-    scene = SceneRenderer(workcell, None)
-    try:
-        frames = []
-        for t in times:
-            q = workcell.joints_at(t)
-            frames.append((t, q, sense(workcell, scene, truth, parts, q.copy(), t, int(round(t * workcell.rate)), 0)))
-    finally:
-        scene.release()
-    return workcell, frames
+    return workcell, [(frame.time, frame.joints, frame) for frame in sense_at(workcell, times)]
 
 
 #: metres between the robot's meshes and the person for a frame to be judged: the loop's robot zone (6 cm) beyond
@@ -219,6 +229,12 @@ def test_the_monitors_detectable_distances_never_exceed_the_truth_to_a_person():
         checked += int(np.sum(np.isfinite(truth)))
         near += int(np.sum(reported < 0.4))
     assert checked >= 9 * 6 and near >= 5, (checked, near)  # the person was in the room and near the arm
+    # the memory's remembered voxels (4 cm) count free on the detectable space's 1 cm voxels, each inside its own
+    memory = monitor.memory
+    fine = monitor._remembered_voxels(monitor.detectable.box, memory.time)
+    i, j, k = np.indices(fine.shape, sparse=True)
+    np.testing.assert_array_equal(fine, memory.free_at(memory.time)[i // 4, j // 4, k // 4])
+    assert fine.any() and not fine.all()
 
 
 def test_the_monitor_refuses_a_detection_capability_it_cannot_use():

@@ -10,7 +10,11 @@ issue 8's reference layout (``scenario_b_four.yaml``: the scene's two front came
 - ``avoid``: the papers' avoidance (SPEC section 9: repulsive velocity at the end-effector, risk-shaped joint
   velocity bounds elsewhere, the task kept through redundancy);
 - ``ssm``: speed and separation monitoring (ISO/TS 15066): the task slowed so that the reported distance stays above
-  the protective separation distance.
+  the protective separation distance. It runs in the camera layout SSM needs (:data:`SSM_LAYOUT`,
+  ``scenario_b_ssm.yaml``: the four corners and a ceiling camera, time-of-flight-class noise), with the room's solids
+  known and distances that leave out what is thinner than its detection capability (``LoopSettings(ssm_capability=
+  True, known_solids=True)``): in the other modes' layouts nothing lets it move once it has seen the room
+  (``benchmarks/probe_ssm_coverage.py``). ``ssm_cell=False`` (``--ssm-in-layout``) runs it there anyway.
 
 The exact ground truth (coal: the robot's collision meshes against the person and everything else) judges every
 run. Per mode it reports (``summary.json``, one object per mode):
@@ -40,6 +44,7 @@ joint states, the robot's capsules and control points coloured by distance, the 
 :mod:`depthguard.simulation._loop_bag`; about 0.6 MB per depth image, 150 MB for the whole run).
 
     depthguard demo [--out DIR] [--duration S] [--mode none|avoid|ssm ...] [--cameras 4|2] [--no-bag]
+                    [--ssm-in-layout]
 """
 
 from __future__ import annotations
@@ -55,6 +60,8 @@ SCENE = "scenario_b_reach.yaml"
 #: The camera layouts by number of cameras: the scene's own two, or issue 8's four (its reference layout; neither
 #: reached issue 8's usefulness goal, and the issue asks for four then).
 LAYOUTS = {2: None, 4: "scenario_b_four.yaml"}
+#: The layout of mode ``ssm``: one that sees its protective separation distance round the arm.
+SSM_LAYOUT = "scenario_b_ssm.yaml"
 
 #: A repulsive velocity below this (m/s) counts as none (the papers' sigmoid never quite reaches 0).
 REPULSIVE_EPSILON = 1e-3
@@ -203,10 +210,21 @@ def plot(log, mode_summary: dict, path: Path, control_points, rho: float) -> Non
 BAG_MODE = "avoid"  # the run written as a recording
 
 
+def ssm_scene():
+    """(workcell, settings) of mode ``ssm`` in :data:`SSM_LAYOUT`."""
+    from depthguard.simulation import load_workcell
+    from depthguard.simulation._closed_loop import LoopSettings
+
+    folder = resources.files("depthguard.simulation")
+    workcell = load_workcell(Path(str(folder / SCENE)), layout=Path(str(folder / SSM_LAYOUT)))
+    return workcell, LoopSettings(ssm_capability=True, known_solids=True)
+
+
 def main(out="out/demo", duration: float | None = None, modes=None, progress: bool = True, bag: bool = True,
-         cameras: int = 4) -> int:
+         cameras: int = 4, ssm_cell: bool = True) -> int:
     """Run the scene once per mode, print a table, write the plots and summary.json into ``out`` (and, with
-    ``bag``, the ``avoid`` run as a recording in ``out/bag_avoid``, replacing an earlier one)."""
+    ``bag``, the ``avoid`` run as a recording in ``out/bag_avoid``, replacing an earlier one). ``ssm_cell``: mode
+    ``ssm`` in :data:`SSM_LAYOUT` (else in the others' layout)."""
     from depthguard.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
 
     modes = list(MODES) if not modes else list(dict.fromkeys(modes))
@@ -221,12 +239,19 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
           "and walks away; "
           f"{len(cameras)} simulated 640x480 depth cameras ({', '.join(cameras)}) at {workcell.rate:g} Hz fused "
           f"through the depth grid; control at {settings.control_rate:g} Hz; {span:g} s simulated per mode;\n"
-          "judged by the exact distances between the robot's meshes and the obstacles (coal).\n")
+          "judged by the exact distances between the robot's meshes and the obstacles (coal).")
+    if ssm_cell and "ssm" in modes:
+        ssm_workcell, ssm_settings = ssm_scene()
+        print(f"Mode ssm in {SSM_LAYOUT} ({', '.join(ssm_workcell.rig.cameras)}; time-of-flight noise), the room's "
+              "solids known, regions thinner than\nthe detection capability left out: the layout it needs to let the "
+              "arm move (--ssm-in-layout: in the one above).")
+    print()
     rho = {mode: settings.ssm_rho if mode == "ssm" else settings.avoidance.rho for mode in modes}
     results, logs, bags = {}, {}, []
     for mode in modes:
         record = bag and mode == BAG_MODE
-        log = run_closed_loop(workcell, mode, duration=span, settings=settings, progress=progress,
+        cell, cell_settings = (ssm_workcell, ssm_settings) if mode == "ssm" and ssm_cell else (workcell, settings)
+        log = run_closed_loop(cell, mode, duration=span, settings=cell_settings, progress=progress,
                               keep_frames=record)
         if record:
             import shutil
@@ -240,6 +265,7 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
             log = dataclasses.replace(log, captures=())
         logs[mode] = log
         results[mode] = summarize(log, dt)
+        results[mode]["cameras"] = list(cell.rig.cameras)
     for mode in modes:
         plot(logs[mode], results[mode], out / f"demo_{mode}.png", workcell.robot.control_point_names, rho[mode])
     summary = {"scene": SCENE, "cameras": cameras, "control_hz": settings.control_rate, "camera_hz": workcell.rate,

@@ -14,6 +14,11 @@ the possibly occupied set U by a ball of radius r = d / 2 is therefore enough:
 Every part of a person at least d thick lies in O(U), and a thinner part reaches at most C beyond it, which S_p
 counts. The papers' avoidance has no C: its distances must not use this (``DistanceMonitor.query`` does not).
 
+What it gives up, stated: an object thinner than d everywhere that is not part of a body (a sheet, a board seen
+edge-on by every camera, a rod) is left out too, as a sensor of detection capability d is not required to see it;
+C bounds how far a body part reaches, not a carried tool. What such an object hides from the cameras still counts
+(a sheet's shadow is as thick as the sheet is wide).
+
 In voxels. ``free`` marks the voxels of a :class:`~depthguard.freespace.VoxelBox` (side s <= r) certified free
 entirely (seen free by some camera, inside the robot's zone, inside a known solid); U is covered by the others and by
 everything outside the box (a person may come from outside). A voxel v is kept in E_vox unless some free voxel lies at
@@ -55,10 +60,15 @@ class DetectableSpace:
             ``SSMParams.detection_capability`` (its intrusion distance C must be counted by whoever uses these
             distances).
 
+        beyond: None, or 6 metres >= 0, for the box's faces at lo x, hi x, lo y, hi y, lo z, hi z: how far beyond each
+            face space is known to hold no person (the thickness of a known solid that covers the whole face, such
+            as the floor under the box's bottom face). The space beyond that counts as possibly occupied, as all
+            of the outside does with None (a person may come from outside).
+
     Call :meth:`update` with the voxels certified free, then :meth:`distances`. Memory: 1 byte a voxel twice.
     """
 
-    def __init__(self, box: VoxelBox, capability: float = config.SSM_DETECTION_CAPABILITY):
+    def __init__(self, box: VoxelBox, capability: float = config.SSM_DETECTION_CAPABILITY, beyond=None):
         self.box = _check_box(box)
         self.capability = check_real(capability, "capability", minimum=0.0, above_minimum=True,
                                      maximum=config.COORDINATE_LIMIT, unit="metres", field="capability")
@@ -72,6 +82,15 @@ class DetectableSpace:
         offsets = np.stack(np.meshgrid(grid, grid, grid, indexing="ij"), -1).reshape(-1, 3)
         keep = (offsets ** 2).sum(1) * box.voxel ** 2 <= self.radius ** 2 * (1.0 + 1e-9)
         self._offsets = np.ascontiguousarray(offsets[keep & np.any(offsets != 0, axis=1)], dtype=np.int64)
+        self.beyond = np.zeros(6)
+        if beyond is not None:
+            try:
+                self.beyond = np.array(beyond, dtype=np.float64).reshape(6)
+            except (TypeError, ValueError):
+                raise InputError(f"beyond must be 6 numbers of metres, got {beyond!r}", field="beyond") from None
+            if not np.all(np.isfinite(self.beyond) & (self.beyond >= 0.0)):
+                raise InputError(f"beyond must be 6 finite metres >= 0, got {self.beyond.tolist()}", field="beyond")
+        self.beyond.setflags(write=False)
         self._fits = np.zeros(box.shape, dtype=np.bool_)
         self._counts = np.zeros(tuple(-(-n // BLOCK) for n in box.shape), dtype=np.int32)
         self._updated = False
@@ -91,8 +110,7 @@ class DetectableSpace:
         if not isinstance(free, np.ndarray) or free.dtype != np.bool_ or free.shape != self.box.shape:
             got = f"dtype {free.dtype}, shape {free.shape}" if isinstance(free, np.ndarray) else type(free).__name__
             raise InputError(f"free must be a bool array of the box's shape {self.box.shape}, got {got}", field="free")
-        _erode(np.ascontiguousarray(free), self._offsets, self._fits)
-        _block_counts(self._fits, BLOCK, self._counts)
+        _erode(np.ascontiguousarray(free), self._offsets, BLOCK, self._fits, self._counts)
         self._updated = True
 
     def distances(self, points_world, limit: float = math.inf) -> np.ndarray:
@@ -108,7 +126,7 @@ class DetectableSpace:
         out = np.zeros(len(points))
         if self._updated and len(points):
             _nearest(self._fits, self._counts, BLOCK, np.asarray(self.box.lo, dtype=np.float64),
-                     float(self.box.voxel), points, float(limit) + self.radius, out)
+                     float(self.box.voxel), self.beyond, points, float(limit) + self.radius, out)
             out = np.minimum(np.maximum(out - self.radius, 0.0), limit)
         return out
 
@@ -122,54 +140,79 @@ def robot_voxels(box: VoxelBox, capsules: np.ndarray, zone: float, out: np.ndarr
     _mark_capsules(np.asarray(box.lo, dtype=np.float64), float(box.voxel), capsules, float(zone), out)
 
 
-def solid_voxels(box: VoxelBox, solids, out: np.ndarray) -> None:
+def solid_voxels(box: VoxelBox, solids, out: np.ndarray, grow: float = 0.0) -> None:
     """Mark in ``out`` (box.shape bool) the voxels that lie entirely inside one of ``solids``
-    (:class:`depthguard.scenes.Box`, world frame): a voxel is marked when its centre is at least s sqrt(3) / 2
-    inside every face."""
+    (:class:`depthguard.scenes.Box`, world frame) grown by ``grow`` metres along each of its axes: a voxel is marked
+    when its centre is at least s sqrt(3) / 2 inside every face of the grown box."""
     for solid in solids:
         _mark_box(np.asarray(box.lo, dtype=np.float64), float(box.voxel),
-                  np.asarray(solid.center, dtype=np.float64), np.asarray(solid.half_extents, dtype=np.float64),
+                  np.asarray(solid.center, dtype=np.float64), np.asarray(solid.half_extents, dtype=np.float64) + grow,
                   np.ascontiguousarray(solid.R_world_box, dtype=np.float64), out)
+
+
+def closed_faces(box: VoxelBox, solids) -> np.ndarray:
+    """(6,) metres: for each face of ``box`` (lo x, hi x, lo y, hi y, lo z, hi z), how far beyond it the solids
+    (:class:`depthguard.scenes.Box`; those not aligned with the world's axes are left out) reach while covering the
+    whole face: the ``beyond`` of :class:`DetectableSpace` (0 where none covers it)."""
+    out = np.zeros(6)
+    for solid in solids:
+        if not np.allclose(np.asarray(solid.R_world_box, dtype=np.float64), np.eye(3), rtol=0.0, atol=1e-12):
+            continue
+        low = np.asarray(solid.center, dtype=np.float64) - np.asarray(solid.half_extents, dtype=np.float64)
+        high = np.asarray(solid.center, dtype=np.float64) + np.asarray(solid.half_extents, dtype=np.float64)
+        for axis in range(3):
+            others = [a for a in range(3) if a != axis]
+            if not all(low[a] <= box.lo[a] and high[a] >= box.hi[a] for a in others):
+                continue
+            if low[axis] <= box.lo[axis] <= high[axis]:
+                out[2 * axis] = max(out[2 * axis], box.lo[axis] - low[axis])
+            if low[axis] <= box.hi[axis] <= high[axis]:
+                out[2 * axis + 1] = max(out[2 * axis + 1], high[axis] - box.hi[axis])
+    return out
 
 
 # -------------------------------------------------------------------------------------------------------- kernels
 
 
 @kernel(parallel=True)
-def _erode(free, offsets, fits):
+def _erode(free, offsets, block, fits, counts):
     """fits[v] = v is not free and no voxel at one of ``offsets`` ((k, 3) int64) from v is free (beyond the array:
-    not free)."""
+    not free); counts[block] = how many True voxels of ``fits`` it holds (blocks of ``block`` voxels a side)."""
+    nx, ny, nz = free.shape
+    bx, by, bz = counts.shape
+    for p in prange(bx * by * bz):
+        c0 = p % bz
+        b0 = (p // bz) % by
+        a0 = p // (bz * by)
+        n = 0
+        for i in range(a0 * block, min((a0 + 1) * block, nx)):
+            for j in range(b0 * block, min((b0 + 1) * block, ny)):
+                for k in range(c0 * block, min((c0 + 1) * block, nz)):
+                    keep = not free[i, j, k]
+                    if keep:
+                        for o in range(offsets.shape[0]):
+                            a = i + offsets[o, 0]
+                            b = j + offsets[o, 1]
+                            c = k + offsets[o, 2]
+                            if 0 <= a < nx and 0 <= b < ny and 0 <= c < nz and free[a, b, c]:
+                                keep = False
+                                break
+                    fits[i, j, k] = keep
+                    if keep:
+                        n += 1
+        counts[a0, b0, c0] = n
+
+
+@kernel(parallel=True)
+def _or_coarse(free, coarse, ratio):
+    """free[i, j, k] |= coarse[i // ratio, j // ratio, k // ratio] (a coarser box of voxels ``ratio`` times as big
+    with the same near corner)."""
     nx, ny, nz = free.shape
     for i in prange(nx):
         for j in range(ny):
             for k in range(nz):
-                keep = not free[i, j, k]
-                if keep:
-                    for o in range(offsets.shape[0]):
-                        a = i + offsets[o, 0]
-                        b = j + offsets[o, 1]
-                        c = k + offsets[o, 2]
-                        if 0 <= a < nx and 0 <= b < ny and 0 <= c < nz and free[a, b, c]:
-                            keep = False
-                            break
-                fits[i, j, k] = keep
-
-
-@kernel(parallel=True)
-def _block_counts(fits, block, counts):
-    """counts[block] = how many True voxels of ``fits`` it holds (blocks of ``block`` voxels a side)."""
-    nx, ny, nz = fits.shape
-    bx, by, bz = counts.shape
-    for a in prange(bx):
-        for b in range(by):
-            for c in range(bz):
-                n = 0
-                for i in range(a * block, min((a + 1) * block, nx)):
-                    for j in range(b * block, min((b + 1) * block, ny)):
-                        for k in range(c * block, min((c + 1) * block, nz)):
-                            if fits[i, j, k]:
-                                n += 1
-                counts[a, b, c] = n
+                if coarse[i // ratio, j // ratio, k // ratio]:
+                    free[i, j, k] = True
 
 
 @kernel(inline=True)
@@ -178,8 +221,9 @@ def _to_interval(x, lo, hi):
 
 
 @kernel(parallel=True)
-def _nearest(fits, counts, block, lo, voxel, points, limit, out):
-    """out[p] = min(distance from points[p] to the nearest True voxel's cube, to the outside of the box, limit)."""
+def _nearest(fits, counts, block, lo, voxel, beyond, points, limit, out):
+    """out[p] = min(distance from points[p] to the nearest True voxel's cube, to the outside of the box (beyond[f]
+    metres past face f), limit); 0 for a point outside the box."""
     nx, ny, nz = fits.shape
     bx, by, bz = counts.shape
     side = block * voxel
@@ -187,10 +231,11 @@ def _nearest(fits, counts, block, lo, voxel, points, limit, out):
         x = points[p, 0] - lo[0]
         y = points[p, 1] - lo[1]
         z = points[p, 2] - lo[2]
-        best = min(x, nx * voxel - x, y, ny * voxel - y, z, nz * voxel - z, limit)
-        if best <= 0.0:
+        if min(x, nx * voxel - x, y, ny * voxel - y, z, nz * voxel - z) <= 0.0:
             out[p] = 0.0
             continue
+        best = min(x + beyond[0], nx * voxel - x + beyond[1], y + beyond[2], ny * voxel - y + beyond[3],
+                   z + beyond[4], nz * voxel - z + beyond[5], limit)
         near = np.empty(bx * by * bz)
         index = np.empty(bx * by * bz, dtype=np.int64)
         m = 0
@@ -236,7 +281,7 @@ def _nearest(fits, counts, block, lo, voxel, points, limit, out):
         out[p] = best
 
 
-@kernel(parallel=True)
+@kernel()
 def _mark_capsules(lo, voxel, capsules, zone, out):
     """out[v] = True for the voxels whose centre lies within radius + zone - voxel sqrt(3) / 2 of a capsule's
     segment (capsules (n, 7): p0, p1, radius)."""
@@ -248,7 +293,9 @@ def _mark_capsules(lo, voxel, capsules, zone, out):
         reach = capsules[n, 6] + zone - half_diagonal
         if not reach > 0.0:
             continue
-        d = p1 - p0
+        d = np.empty(3)
+        for a in range(3):
+            d[a] = p1[a] - p0[a]
         length2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
         i0 = max(int(math.floor((min(p0[0], p1[0]) - reach - lo[0]) / voxel)), 0)
         i1 = min(int(math.ceil((max(p0[0], p1[0]) + reach - lo[0]) / voxel)), nx - 1)
@@ -256,7 +303,7 @@ def _mark_capsules(lo, voxel, capsules, zone, out):
         j1 = min(int(math.ceil((max(p0[1], p1[1]) + reach - lo[1]) / voxel)), ny - 1)
         k0 = max(int(math.floor((min(p0[2], p1[2]) - reach - lo[2]) / voxel)), 0)
         k1 = min(int(math.ceil((max(p0[2], p1[2]) + reach - lo[2]) / voxel)), nz - 1)
-        for i in prange(i0, i1 + 1):
+        for i in range(i0, i1 + 1):
             cx = lo[0] + (i + 0.5) * voxel - p0[0]
             for j in range(j0, j1 + 1):
                 cy = lo[1] + (j + 0.5) * voxel - p0[1]

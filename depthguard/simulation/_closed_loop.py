@@ -66,6 +66,14 @@ class LoopSettings:
             (with them, ``tests/test_closed_loop.py`` once found the end-effector approaching the person at 8 mm/s
             while truly inside S_p). False: every point moving within reach of S_p is slowed as if it approached at
             its whole speed.
+        ssm_capability: mode "ssm": SSM's distances leave out possibly occupied regions thinner than its detection
+            capability d (``DistanceMonitor(detection_capability=d)``, :class:`depthguard.freespace.DetectableSpace`):
+            a body part thinner than d reaches at most the intrusion distance C beyond the detected body, and S_p
+            counts C. Its space is what any camera sees entirely free (not only through the principal), in 1 cm
+            voxels over the rig's workspace: about 0.3-0.5 s of work per set of frames, so off by default.
+        known_solids: tell the monitor the workcell's known static boxes (``Workcell.background()``: floor, walls,
+            pedestal) as ``DistanceMonitor(static=...)``: they stop counting as possibly a person, what they hide
+            still counts.
         monitor: keyword arguments of :class:`~depthguard.DistanceMonitor` besides rig and robot. The default robot
             zone is ``config.LOOP_ROBOT_ZONE`` (the shell round the links that no depth camera can tell from them; see
             there): a stated tolerance (a distance may exceed the truth by up to its thickness), added to the
@@ -82,6 +90,8 @@ class LoopSettings:
     ssm: object = None
     ssm_rho: float = 1.2
     ssm_lookahead: bool = True
+    ssm_capability: bool = False
+    known_solids: bool = False
     monitor: dict = field(default_factory=lambda: dict(aggregate="hybrid", invalid="neighbors",
                                                        robot_zone=config.LOOP_ROBOT_ZONE))
 
@@ -92,8 +102,9 @@ class LoopSettings:
         check_real(self.posture_gain, "posture_gain", minimum=0.0, maximum=1e3, unit="1/s", field="posture_gain")
         if isinstance(self.truth_every, bool) or not isinstance(self.truth_every, int) or self.truth_every < 1:
             raise InputError("truth_every must be a whole number >= 1", field="truth_every")
-        if not isinstance(self.ssm_lookahead, bool):
-            raise InputError("ssm_lookahead must be True or False", field="ssm_lookahead")
+        for name in ("ssm_lookahead", "ssm_capability", "known_solids"):
+            if not isinstance(getattr(self, name), bool):
+                raise InputError(f"{name} must be True or False", field=name)
         check_real(self.ssm_rho, "ssm_rho", minimum=0.0, above_minimum=True, maximum=10.0, unit="metres",
                    field="ssm_rho")
         if not isinstance(self.monitor, dict):
@@ -190,8 +201,14 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
         ssm_params = SSMParams() if settings.ssm is None else settings.ssm
         ssm_params = replace(ssm_params, sensing_uncertainty=ssm_params.sensing_uncertainty + zone)
         ssm = SpeedSeparationMonitor(ssm_params, rho=settings.ssm_rho)
+    options = dict(settings.monitor)
+    if settings.known_solids:
+        options["static"] = [box for parts in workcell.background().values() for box in parts]
+    capability = mode == "ssm" and settings.ssm_capability
+    if capability:
+        options["detection_capability"] = ssm_params.detection_capability
     monitor = dg.DistanceMonitor(workcell.rig, rho=settings.ssm_rho if mode == "ssm" else params.rho, robot=robot,
-                                 **settings.monitor)
+                                 **options)
     truth = TruthComputer(robot)
     part_names = {name: workcell.part_names(name) for name in workcell.obstacle_names}
     m, n = len(robot.control_points), robot.n_joints
@@ -242,6 +259,9 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
             if current is None:
                 result = DistanceResult.blind(m, Flag.MISSING_CAMERA, {})  # nothing seen yet: distance 0
                 age = math.inf
+            elif capability:
+                result = replace(nothing, distance=_detectable(current[0], points, settings.ssm_rho))
+                age = t - current[1]
             else:
                 result = current[0].query(points, check=False)
                 age = t - current[1]
@@ -267,7 +287,7 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
                     # Nothing seen yet: no reaction time can be stated, and the robot stays.
                     scale = 0.0 if current is None else _ssm_factor(ssm, current[0], result.distance, points,
                                                                     jacobians, dq_new, age + dt, radii,
-                                                                    settings.ssm_lookahead)
+                                                                    settings.ssm_lookahead, capability)
                     # The robot brakes as hard as its joints allow: the stopping time T_s of SSM covers it.
                     low, high = reachable(np.minimum(dq_new * scale, 0.0), np.maximum(dq_new * scale, 0.0), dq,
                                           limits.acceleration * dt)
@@ -293,12 +313,20 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
                    captures=tuple(captures), **arrays)
 
 
-def _ssm_factor(ssm, prepared, distance, points, jacobians, dq, reaction_time, radii, lookahead) -> float:
+def _detectable(prepared, points, rho) -> np.ndarray:
+    """(m,) the detectable distances (``PreparedSet.detectable_distances``) of points (m, 3), inf where at least
+    rho (as the monitor's "nothing within rho")."""
+    distance = prepared.detectable_distances(points, limit=rho, check=False)
+    return np.where(distance >= rho, np.inf, distance)
+
+
+def _ssm_factor(ssm, prepared, distance, points, jacobians, dq, reaction_time, radii, lookahead,
+                capability=False) -> float:
     """SSM's speed factor for the command dq (n,) rad/s at the control points (m, 3) with Jacobians (m, 3, n) and
     monitor distances (m,) (inf: nothing within rho). Each point is a sphere of its link's radius (m,): distances
     count from the sphere (inf: at least rho minus the radius), and no direction is trusted. With ``lookahead``, the
     points that would slow the robot are asked again at the points looked ahead to (``prepared``: the set the
-    distances came from)."""
+    distances came from; ``capability``: its detectable distances, else its query's)."""
     rho = ssm.rho
 
     def from_spheres(d, r):
@@ -312,7 +340,9 @@ def _ssm_factor(ssm, prepared, distance, points, jacobians, dq, reaction_time, r
         asks = np.flatnonzero((verdict.approach_speed > verdict.allowed_speed) & (verdict.allowed_speed > 0.0))
         looked = points[asks] + ssm.lookahead_time(reaction_time) * (jacobians[asks] @ dq)
         ahead = np.zeros(len(surface))  # not asked: certifies nothing
-        ahead[asks] = from_spheres(prepared.query(looked, check=False).distance, radii[asks])
+        looked_distance = _detectable(prepared, looked, rho) if capability else \
+            prepared.query(looked, check=False).distance
+        ahead[asks] = from_spheres(looked_distance, radii[asks])
         verdict = ssm.speed_factor(surface, unknown, jacobians, dq, reaction_time, ahead=ahead, check=False)
     return verdict.factor
 

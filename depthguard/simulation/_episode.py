@@ -197,6 +197,22 @@ def sense(workcell: Workcell, scene: SceneRenderer, truth: TruthComputer, part_n
                     label=labels, truth=truth(q, obstacles, part_names))
 
 
+def sense_at(workcell: Workcell, times, seed: int = 0) -> list[SimFrame]:
+    """What every camera captures at each of ``times`` (seconds) with the robot where its script puts it (frame
+    index round(t * rate), the sensor noise of ``seed``): for probes and benchmarks that need a few moments of a
+    scene, not a whole episode."""
+    from depthguard.simulation._truth import TruthComputer
+
+    truth = TruthComputer(workcell.robot)
+    parts = {name: workcell.part_names(name) for name in workcell.obstacle_names}
+    scene = SceneRenderer(workcell, None)
+    try:
+        return [sense(workcell, scene, truth, parts, workcell.joints_at(t).copy(), t, int(round(t * workcell.rate)),
+                      seed) for t in times]
+    finally:
+        scene.release()
+
+
 def simulate(workcell: Workcell, seed: int | None = None, frames: Iterable[int] | None = None,
              renderer: Renderer | None = None) -> Iterator[SimFrame]:
     """Simulate the episode frame by frame: a generator of :class:`SimFrame`.
