@@ -382,6 +382,9 @@ SSM_STOPPING_TIME = 0.25
 SSM_STOPPING_DISTANCE_EXTRA = 0.0
 #: The sensors' detection capability d, metres: the smallest object they are sure to see (0.04 m: a hand).
 SSM_DETECTION_CAPABILITY = 0.04
+#: The loop's SSM asks the monitor again for a control point's distance on the same frames only once it has moved
+#: this many metres since it was asked (meanwhile: the distance then minus how far it moved, a lower bound).
+SSM_REQUERY = 0.005
 #: ISO 13855's intrusion distance: C = 8 (d - 14 mm) for 14 mm < d <= 40 mm, 0 for d <= 14 mm (a finger cannot
 #: reach in unseen), and 850 mm (an arm's reach) for coarser sensing.
 SSM_INTRUSION_SLOPE = 8.0

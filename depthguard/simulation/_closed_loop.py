@@ -66,6 +66,11 @@ class LoopSettings:
             (with them, ``tests/test_closed_loop.py`` once found the end-effector approaching the person at 8 mm/s
             while truly inside S_p). False: every point moving within reach of S_p is slowed as if it approached at
             its whole speed.
+        ssm_ramp: seconds, mode "ssm": the speed factor applied rises from 0 to 1 no faster than over this time (and
+            falls at once): where the factor SSM allows flickers between stopping and going, as a person's distance
+            crosses S_p at rest, the robot does not start and stop with it (measured in the SSM cell's elbow
+            scenario: 1.96 reversals a second without it). Applying less than SSM allows is always within its rule.
+            0: no ramp.
         ssm_capability: mode "ssm": SSM's distances leave out possibly occupied regions thinner than its detection
             capability d (``DistanceMonitor(detection_capability=d)``, :class:`depthguard.freespace.DetectableSpace`):
             a body part thinner than d reaches at most the intrusion distance C beyond the detected body, and S_p
@@ -90,6 +95,7 @@ class LoopSettings:
     ssm: object = None
     ssm_rho: float = 1.2
     ssm_lookahead: bool = True
+    ssm_ramp: float = 0.25
     ssm_capability: bool = False
     known_solids: bool = False
     monitor: dict = field(default_factory=lambda: dict(aggregate="hybrid", invalid="neighbors",
@@ -105,6 +111,7 @@ class LoopSettings:
         for name in ("ssm_lookahead", "ssm_capability", "known_solids"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(f"{name} must be True or False", field=name)
+        check_real(self.ssm_ramp, "ssm_ramp", minimum=0.0, maximum=10.0, unit="seconds", field="ssm_ramp")
         check_real(self.ssm_rho, "ssm_rho", minimum=0.0, above_minimum=True, maximum=10.0, unit="metres",
                    field="ssm_rho")
         if not isinstance(self.monitor, dict):
@@ -223,6 +230,11 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
     q = workcell.joints_at(start).copy()
     dq = np.zeros(n)
     requested_before = dq  # mode "ssm": the task's command at the step before, before SSM scaled it
+    ssm_scale = 0.0  # mode "ssm": the speed factor applied at the step before
+    if mode == "ssm":
+        ssm_distances = _MovedSince(
+            (lambda prepared, p: _detectable(prepared, p, settings.ssm_rho)) if capability else
+            (lambda prepared, p: prepared.query(p, check=False).distance), settings.ssm_rho, config.SSM_REQUERY)
     log = {key: [] for key in ("times", "q", "dq", "dq_requested", "ee", "ee_ref", "reported", "flags", "repulsive",
                                "scale", "data_age", "step_seconds")}
     truth_steps, truth_rows, clearance = [], [], []
@@ -259,8 +271,8 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
             if current is None:
                 result = DistanceResult.blind(m, Flag.MISSING_CAMERA, {})  # nothing seen yet: distance 0
                 age = math.inf
-            elif capability:
-                result = replace(nothing, distance=_detectable(current[0], points, settings.ssm_rho))
+            elif mode == "ssm":
+                result = replace(nothing, distance=ssm_distances(current[0], points))
                 age = t - current[1]
             else:
                 result = current[0].query(points, check=False)
@@ -288,6 +300,9 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
                     scale = 0.0 if current is None else _ssm_factor(ssm, current[0], result.distance, points,
                                                                     jacobians, dq_new, age + dt, radii,
                                                                     settings.ssm_lookahead, capability)
+                    if settings.ssm_ramp > 0.0:  # rises no faster than the ramp; falls at once
+                        scale = min(scale, ssm_scale + dt / settings.ssm_ramp)
+                    ssm_scale = scale
                     # The robot brakes as hard as its joints allow: the stopping time T_s of SSM covers it.
                     low, high = reachable(np.minimum(dq_new * scale, 0.0), np.maximum(dq_new * scale, 0.0), dq,
                                           limits.acceleration * dt)
@@ -311,6 +326,30 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
     return LoopLog(mode=mode, truth_steps=np.array(truth_steps, dtype=np.int64), truth=np.array(truth_rows),
                    clearance=np.array(clearance), frames=frames, wall_seconds=time.perf_counter() - wall,
                    captures=tuple(captures), **arrays)
+
+
+class _MovedSince:
+    """SSM's distances of the control points on one set of frames, asked again only for the points that moved more
+    than ``tolerance`` metres since they were asked. A distance to a fixed set is 1-Lipschitz in the point, so a
+    lower bound L(P) of the distance from P gives L(P) - |P' - P| for P' (inf: at least ``rho``); SSM needs only a
+    lower bound. ``ask(prepared, points (k, 3)) -> (k,)`` asks the set. Each new set asks every point."""
+
+    def __init__(self, ask, rho: float, tolerance: float):
+        self.ask, self.rho, self.tolerance = ask, rho, tolerance
+        self.prepared = None
+
+    def __call__(self, prepared, points: np.ndarray) -> np.ndarray:
+        if prepared is not self.prepared:
+            self.prepared, self.points, self.distance = prepared, points.copy(), self.ask(prepared, points)
+            return self.distance.copy()
+        moved = np.linalg.norm(points - self.points, axis=1)
+        stale = moved > self.tolerance
+        if stale.any():
+            self.points[stale] = points[stale]
+            self.distance[stale] = self.ask(prepared, points[stale])
+            moved[stale] = 0.0
+        bound = np.maximum(np.minimum(self.distance, self.rho) - moved, 0.0)
+        return np.where(moved > 0.0, bound, self.distance)
 
 
 def _detectable(prepared, points, rho) -> np.ndarray:
