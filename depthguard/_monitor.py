@@ -200,13 +200,14 @@ class DistanceMonitor:
             free |= self._static_voxels
         joints = {state._joints.tobytes(): state._joints for state in states if state._joints is not None}
         if self.robot is not None and joints and self.robot_zone > 0.0:
-            robot = np.ones(box.shape, dtype=bool)
+            robot = None  # the voxels that are the robot at every frame's joints (marked into free for one)
             for q in joints.values():
-                mask = np.zeros(box.shape, dtype=bool)
+                mask = free if len(joints) == 1 else np.zeros(box.shape, dtype=bool)
                 capsules = [tuple(c.p0) + tuple(c.p1) + (c.radius,) for c in self.robot.capsules_world(q, check=False)]
                 robot_voxels(box, np.array(capsules), self.robot_zone, mask)
-                robot &= mask
-            free |= robot
+                robot = mask if robot is None else robot & mask
+            if len(joints) > 1:
+                free |= robot
         if self.memory is not None and self.memory.time is not None:
             times = [state.occupancy.timestamp for state in states if state.occupancy.timestamp is not None]
             self._remembered_voxels(box, max(times + [self.memory.time]), free)
@@ -546,7 +547,10 @@ class PreparedSet:
         if self.detectable is None:
             raise InputError("this monitor has no detection_capability: pass DistanceMonitor(detection_capability="
                              "...) for detectable distances", field="detection_capability")
+        from depthguard.freespace._detectable import check_limit
+
         points = check_points(points_world) if check else points_world
+        limit = check_limit(limit)
         if not self.usable:
             return np.zeros(len(points))
         return self.detectable.distances(points, limit)

@@ -413,3 +413,37 @@ def test_the_loops_ssm_looks_ahead_from_the_links_surfaces():
     nearer = points - [[0.02, 0.0, 0.0], [0.0, 0.0, 0.0]]
     assert _ssm_factor(ssm, ExactSet(), ExactSet().query(nearer).distance, nearer, jacobians, dq_away, reaction,
                        radii, True) == 0.0
+
+
+def test_ssms_distances_between_asks_are_lower_bounds_and_only_moved_points_are_asked_again():
+    """The loop's SSM asks the monitor again on the same frames only for points that moved more than the tolerance;
+    meanwhile a point's distance is the one asked minus how far it moved: judged against exact distances to a fixed
+    cloud (inf beyond rho, as the monitor says "nothing within rho")."""
+    from depthguard.simulation._closed_loop import _MovedSince
+
+    rng = np.random.default_rng(11)
+    cloud = rng.uniform(-1.0, 1.0, (200, 3))
+    rho = 0.5
+    asked = []
+
+    def exact(points):
+        d = np.linalg.norm(points[:, None] - cloud[None], axis=2).min(1)
+        return np.where(d >= rho, np.inf, d)
+
+    def ask(prepared, points):
+        asked.append(len(points))
+        return exact(points)
+
+    cache = _MovedSince(ask, rho, tolerance=0.005)
+    frames = object()
+    points = rng.uniform(-1.2, 1.2, (9, 3))
+    for step in range(400):
+        if step == 200:
+            frames = object()  # a new set of frames asks every point
+        points = points + rng.normal(0.0, 0.0015, points.shape) * (rng.random((9, 1)) < 0.5)
+        got = cache(frames, points)
+        truth = exact(points)
+        assert np.all(np.minimum(got, rho) <= np.minimum(truth, rho) + 1e-12)
+        assert np.all(got >= np.minimum(truth, rho) - 2 * 0.005 - 1e-12)  # at most twice the tolerance below
+    assert asked[0] == 9 and 9 in asked[1:]  # the first and the new set asked all nine
+    assert sum(asked) < 400 * 9 / 2  # most steps asked no point or only a few

@@ -245,9 +245,14 @@ def test_the_monitor_refuses_a_detection_capability_it_cannot_use():
     with pytest.raises(InputError) as caught:
         dg.DistanceMonitor(workcell.rig, detection_capability=0.04, detectable_voxel=0.03)
     assert caught.value.field == "detectable_voxel"
-    with pytest.raises(InputError) as caught:
-        dg.DistanceMonitor(workcell.rig, detection_capability=-1.0)
-    assert caught.value.field == "detection_capability"
+    for bad in (-1.0, 0.0, float("nan"), float("inf"), "0.04", True, [0.04]):
+        with pytest.raises(InputError) as caught:
+            dg.DistanceMonitor(workcell.rig, detection_capability=bad)
+        assert caught.value.field == "detection_capability", bad
+    for bad in (0.0, -0.01, float("nan"), "0.01", 1e-6):  # 1e-6: far more voxels than a box may have
+        with pytest.raises(InputError) as caught:
+            dg.DistanceMonitor(workcell.rig, detection_capability=0.04, detectable_voxel=bad)
+        assert caught.value.field == "detectable_voxel", bad
     no_workspace = Rig(cameras=workcell.rig.cameras, principal=workcell.rig.principal)
     with pytest.raises(InputError) as caught:
         dg.DistanceMonitor(no_workspace, detection_capability=0.04)
@@ -257,3 +262,13 @@ def test_the_monitor_refuses_a_detection_capability_it_cannot_use():
     with pytest.raises(InputError) as caught:
         prepared.detectable_distances([[0.0, 0.0, 0.0]])
     assert caught.value.field == "detection_capability"
+    # with one: no usable frame gives 0 everywhere; bad points and limits are refused naming them
+    prepared = dg.DistanceMonitor(workcell.rig, detection_capability=0.04, detectable_voxel=0.02).prepare_set({})
+    assert np.all(prepared.detectable_distances([[0.0, 0.0, 0.5], [1.0, 0.0, 0.5]]) == 0.0)
+    for points in ([[0.0, float("nan"), 0.0]], [[0.0, 0.0]], "points"):
+        with pytest.raises(InputError):
+            prepared.detectable_distances(points)
+    for limit in (-1.0, float("nan"), "1"):
+        with pytest.raises(InputError) as caught:
+            prepared.detectable_distances([[0.0, 0.0, 0.5]], limit=limit)
+        assert caught.value.field == "limit"

@@ -121,14 +121,20 @@ class DetectableSpace:
         points = np.ascontiguousarray(points_world, dtype=np.float64).reshape(-1, 3)
         if not np.all(np.isfinite(points)):
             raise InputError("points_world must be finite", field="points_world")
-        if not (isinstance(limit, float) and limit == math.inf):
-            limit = check_real(limit, "limit", minimum=0.0, unit="metres", field="limit")
+        limit = check_limit(limit)
         out = np.zeros(len(points))
         if self._updated and len(points):
             _nearest(self._fits, self._counts, BLOCK, np.asarray(self.box.lo, dtype=np.float64),
                      float(self.box.voxel), self.beyond, points, float(limit) + self.radius, out)
             out = np.minimum(np.maximum(out - self.radius, 0.0), limit)
         return out
+
+
+def check_limit(limit) -> float:
+    """``limit`` (metres, >= 0, inf allowed) as a float, or :class:`InputError` naming ``limit``."""
+    if isinstance(limit, float) and limit == math.inf:
+        return limit
+    return check_real(limit, "limit", minimum=0.0, unit="metres", field="limit")
 
 
 def robot_voxels(box: VoxelBox, capsules: np.ndarray, zone: float, out: np.ndarray) -> None:
