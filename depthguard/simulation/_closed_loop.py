@@ -231,10 +231,9 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
     dq = np.zeros(n)
     requested_before = dq  # mode "ssm": the task's command at the step before, before SSM scaled it
     ssm_scale = 0.0  # mode "ssm": the speed factor applied at the step before
-    if mode == "ssm":
-        ssm_distances = _MovedSince(
-            (lambda prepared, p: _detectable(prepared, p, settings.ssm_rho)) if capability else
-            (lambda prepared, p: prepared.query(p, check=False).distance), settings.ssm_rho, config.SSM_REQUERY)
+    if mode == "ssm":  # where SSM's distances come from: the detectable space, or the monitor's query
+        ask = (lambda prepared, p: _detectable(prepared, p, settings.ssm_rho)) if capability else _query
+        ssm_distances = _MovedSince(ask, settings.ssm_rho, config.SSM_REQUERY)
     log = {key: [] for key in ("times", "q", "dq", "dq_requested", "ee", "ee_ref", "reported", "flags", "repulsive",
                                "scale", "data_age", "step_seconds")}
     truth_steps, truth_rows, clearance = [], [], []
@@ -299,7 +298,7 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
                     # Nothing seen yet: no reaction time can be stated, and the robot stays.
                     scale = 0.0 if current is None else _ssm_factor(ssm, current[0], result.distance, points,
                                                                     jacobians, dq_new, age + dt, radii,
-                                                                    settings.ssm_lookahead, capability)
+                                                                    settings.ssm_lookahead, ask)
                     if settings.ssm_ramp > 0.0:  # rises no faster than the ramp; falls at once
                         scale = min(scale, ssm_scale + dt / settings.ssm_ramp)
                     ssm_scale = scale
@@ -359,13 +358,18 @@ def _detectable(prepared, points, rho) -> np.ndarray:
     return np.where(distance >= rho, np.inf, distance)
 
 
+def _query(prepared, points) -> np.ndarray:
+    """(m,) the monitor's distances (``PreparedSet.query``) of points (m, 3), inf where nothing is within rho."""
+    return prepared.query(points, check=False).distance
+
+
 def _ssm_factor(ssm, prepared, distance, points, jacobians, dq, reaction_time, radii, lookahead,
-                capability=False) -> float:
+                ask=_query) -> float:
     """SSM's speed factor for the command dq (n,) rad/s at the control points (m, 3) with Jacobians (m, 3, n) and
     monitor distances (m,) (inf: nothing within rho). Each point is a sphere of its link's radius (m,): distances
     count from the sphere (inf: at least rho minus the radius), and no direction is trusted. With ``lookahead``, the
     points that would slow the robot are asked again at the points looked ahead to (``prepared``: the set the
-    distances came from; ``capability``: its detectable distances, else its query's)."""
+    distances came from; ``ask(prepared, points)``: where the distances come from, the set's query by default)."""
     rho = ssm.rho
 
     def from_spheres(d, r):
@@ -379,9 +383,7 @@ def _ssm_factor(ssm, prepared, distance, points, jacobians, dq, reaction_time, r
         asks = np.flatnonzero((verdict.approach_speed > verdict.allowed_speed) & (verdict.allowed_speed > 0.0))
         looked = points[asks] + ssm.lookahead_time(reaction_time) * (jacobians[asks] @ dq)
         ahead = np.zeros(len(surface))  # not asked: certifies nothing
-        looked_distance = _detectable(prepared, looked, rho) if capability else \
-            prepared.query(looked, check=False).distance
-        ahead[asks] = from_spheres(looked_distance, radii[asks])
+        ahead[asks] = from_spheres(ask(prepared, looked), radii[asks])
         verdict = ssm.speed_factor(surface, unknown, jacobians, dq, reaction_time, ahead=ahead, check=False)
     return verdict.factor
 
