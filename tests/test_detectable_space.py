@@ -272,3 +272,39 @@ def test_the_monitor_refuses_a_detection_capability_it_cannot_use():
         with pytest.raises(InputError) as caught:
             prepared.detectable_distances([[0.0, 0.0, 0.5]], limit=limit)
         assert caught.value.field == "limit"
+
+
+def test_the_robot_counts_free_only_where_it_is_at_every_frames_joints(monkeypatch):
+    """Frames captured at different joints: the space free as the robot is the robot's (grown) capsules at all of
+    them, not at any one. With nothing seen free (seen_free_voxels stubbed out), the voxels deep inside both poses'
+    capsules hold no ball, and those deep inside one pose's only do."""
+    import depthguard as dg
+    from depthguard import config, freespace
+
+    workcell, frames = _workcell_frames([1.3])
+    (t, q, frame), robot = frames[0], workcell.robot
+    moved = q.copy()
+    moved[0] += 0.8  # the arm swung about its base between two captures
+    monkeypatch.setattr(freespace, "seen_free_voxels", lambda box, *args, **kwargs: np.zeros(box.shape, dtype=bool))
+    monitor = dg.DistanceMonitor(workcell.rig, rho=1.2, robot=robot, robot_zone=config.LOOP_ROBOT_ZONE, memory=False,
+                                 detection_capability=D, detectable_voxel=0.02)
+    names = list(workcell.rig.cameras)
+    joints = {name: (q if i else moved) for i, name in enumerate(names)}
+    fits = monitor.prepare_set(frame.depth, camera_joints=joints, now=t).detectable.fits
+    box = monitor.detectable.box
+    centres = np.stack(np.meshgrid(*box.axis_centres(), indexing="ij"), -1)
+
+    def inside(pose, depth):  # voxels whose centre is at least depth inside the pose's capsules (without the zone)
+        out = np.zeros(box.shape, dtype=bool)
+        for c in robot.capsules_world(pose):
+            p0, p1 = np.asarray(c.p0), np.asarray(c.p1)
+            axis = p1 - p0
+            s = np.clip(((centres - p0) @ axis) / max(axis @ axis, 1e-12), 0.0, 1.0)
+            out |= np.linalg.norm(centres - (p0 + s[..., None] * axis), axis=-1) <= c.radius - depth
+        return out
+
+    both = inside(q, 0.0) & inside(moved, 0.0)
+    only_one = inside(q, 0.0) & ~inside(moved, -0.1)  # at q, and 0.1 m clear of the capsules at the other joints
+    assert both.sum() > 50 and only_one.sum() > 50
+    assert not fits[both].any()  # the robot at every frame: no person there
+    assert fits[only_one].all()  # the robot at one frame only: possibly a person now
