@@ -65,7 +65,8 @@ class DetectableSpace:
             as the floor under the box's bottom face). The space beyond that counts as possibly occupied, as all
             of the outside does with None (a person may come from outside).
 
-    Call :meth:`update` with the voxels certified free, then :meth:`distances`. Memory: 1 byte a voxel twice.
+    Call :meth:`update` with the voxels certified free, then :meth:`distances`. Memory: 1 byte a voxel from the first
+    update on (the voxels a ball's centre may be in; the free mask is the caller's).
     """
 
     def __init__(self, box: VoxelBox, capability: float = config.SSM_DETECTION_CAPABILITY, beyond=None):
@@ -91,15 +92,15 @@ class DetectableSpace:
             if not np.all(np.isfinite(self.beyond) & (self.beyond >= 0.0)):
                 raise InputError(f"beyond must be 6 finite metres >= 0, got {self.beyond.tolist()}", field="beyond")
         self.beyond.setflags(write=False)
-        self._fits = np.zeros(box.shape, dtype=np.bool_)
-        self._counts = np.zeros(tuple(-(-n // BLOCK) for n in box.shape), dtype=np.int32)
+        self._fits = None  # made by the first update (a space never updated holds nothing but its settings)
+        self._counts = None
         self._updated = False
 
     @property
     def fits(self) -> np.ndarray:
         """(nx, ny, nz) bool, read-only: E_vox, the voxels that may hold the centre of a ball of diameter d lying in
         possibly occupied space (all False before the first :meth:`update`)."""
-        view = self._fits.view()
+        view = np.zeros(self.box.shape, dtype=np.bool_) if self._fits is None else self._fits.view()
         view.setflags(write=False)
         return view
 
@@ -110,6 +111,9 @@ class DetectableSpace:
         if not isinstance(free, np.ndarray) or free.dtype != np.bool_ or free.shape != self.box.shape:
             got = f"dtype {free.dtype}, shape {free.shape}" if isinstance(free, np.ndarray) else type(free).__name__
             raise InputError(f"free must be a bool array of the box's shape {self.box.shape}, got {got}", field="free")
+        if self._fits is None:
+            self._fits = np.empty(self.box.shape, dtype=np.bool_)
+            self._counts = np.empty(tuple(-(-n // BLOCK) for n in self.box.shape), dtype=np.int32)
         _erode(np.ascontiguousarray(free), self._offsets, BLOCK, self._fits, self._counts)
         self._updated = True
 
