@@ -39,7 +39,7 @@ def main(argv=None) -> None:
     workcell = load_workcell(Path(str(package / "scenario_b_reach.yaml")),
                              layout=Path(str(package / "scenario_b_ssm.yaml")))
     robot = workcell.robot
-    static = [box for parts in workcell.background().values() for box in parts]
+    static = workcell.background_parts()
     options = dict(rho=1.2, robot=robot, aggregate="hybrid", invalid="neighbors", robot_zone=config.LOOP_ROBOT_ZONE,
                    static=static)
     monitors = {"without": dg.DistanceMonitor(workcell.rig, **options),

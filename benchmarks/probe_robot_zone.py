@@ -30,7 +30,7 @@ def probe(path, zones, step: int) -> dict:
     robot = workcell.robot
     monitors = {z: dg.DistanceMonitor(workcell.rig, memory=False, rho=fw.RHO, aggregate="hybrid",
                                       invalid="neighbors", robot=robot, robot_zone=z) for z in zones}
-    background = [p for parts in workcell.background().values() for p in parts]
+    background = workcell.background_parts()
     principal = workcell.rig.cameras[workcell.rig.principal]
     out = {z: [0, 0, 0, 0, -np.inf] for z in zones}
     for frame in simulate(workcell, seed=0, frames=fw.case_frames(workcell)[::step]):

@@ -76,7 +76,7 @@ def probe(path: Path, t: float, rho: float, known: bool, layout: Path | None = N
     occupied point per control point, the detectable distances from each link's surface, names)."""
     workcell = load_workcell(path, layout=layout)
     robot = workcell.robot
-    static = [box for parts in workcell.background().values() for box in parts] if known else None
+    static = workcell.background_parts() if known else None
     monitor = dg.DistanceMonitor(workcell.rig, rho=rho, robot=robot, aggregate="min", invalid="neighbors",
                                  robot_zone=config.LOOP_ROBOT_ZONE, static=static,
                                  detection_capability=config.SSM_DETECTION_CAPABILITY)

@@ -193,6 +193,9 @@ class DistanceMonitor:
         from depthguard.freespace import DetectableSpace, robot_voxels, seen_free_voxels
 
         box = self.detectable.box
+        space = DetectableSpace(box, self.detectable.capability, self.detectable.beyond)
+        if not usable:
+            return space  # never updated: every distance 0, as with no usable frame it must be
         states = list(usable.values())
         free = seen_free_voxels(box, [state.camera for state in states], [state.free for state in states],
                                 margin=self.fusion_margin, pad=self.fusion_pixels, check=False)
@@ -211,7 +214,6 @@ class DistanceMonitor:
         if self.memory is not None and self.memory.time is not None:
             times = [state.occupancy.timestamp for state in states if state.occupancy.timestamp is not None]
             self._remembered_voxels(box, max(times + [self.memory.time]), free)
-        space = DetectableSpace(box, self.detectable.capability, self.detectable.beyond)
         space.update(free)
         return space
 

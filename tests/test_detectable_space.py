@@ -210,7 +210,7 @@ def test_the_monitors_detectable_distances_never_exceed_the_truth_to_a_person():
 
     workcell, frames = _workcell_frames([1.3, 1.5, 1.6, 1.7, 1.8, 1.9, 3.3, 3.5])
     robot = workcell.robot
-    static = [box for parts in workcell.background().values() for box in parts]
+    static = workcell.background_parts()
     monitor = dg.DistanceMonitor(workcell.rig, rho=1.5, robot=robot, aggregate="min", invalid="neighbors",
                                  robot_zone=config.LOOP_ROBOT_ZONE, static=static, detection_capability=D)
     focal = min(camera.fx for camera in workcell.rig.cameras.values())

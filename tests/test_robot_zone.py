@@ -82,7 +82,7 @@ def answers():
     robot = workcell.robot
     monitors = {zone: dg.DistanceMonitor(workcell.rig, rho=RHO, aggregate="hybrid", invalid="neighbors", robot=robot,
                                          memory=False, robot_zone=zone) for zone in (0.0, ZONE)}
-    background = [p for parts in workcell.background().values() for p in parts]
+    background = workcell.background_parts()
     principal = workcell.rig.cameras[workcell.rig.principal]
     kinds = ("shadow", "hidden_hand")
     times = [t for s in workcell.timeline() if s.kind in kinds for t in np.linspace(s.hold_start, s.end - 0.1, 4)]

@@ -175,7 +175,7 @@ def test_the_workcell_with_its_background_known_is_never_farther_than_the_truth(
 
     workcell = load_workcell(resources.files("depthguard.simulation") / "scenario_b_reach.yaml")
     robot = workcell.robot
-    static = [box for parts in workcell.background().values() for box in parts]
+    static = workcell.background_parts()
     assert all(isinstance(box, Box) for box in static) and len(static) == 5
     kwargs = dict(rho=1.0, robot=robot, aggregate="min", invalid="neighbors", robot_zone=0.06)
     plain = dg.DistanceMonitor(workcell.rig, **kwargs)

@@ -119,7 +119,7 @@ def run(workcell=None, layout: str | None = None, frames=None, duration: float |
     monitors = {name: dg.DistanceMonitor(dg.Rig({name: workcell.rig.cameras[name]}), **options) for name in cameras}
     fused = dg.DistanceMonitor(workcell.rig, memory=False, **options)
     remembering = dg.DistanceMonitor(workcell.rig, memory=True, **options)
-    background = [p for parts in workcell.background().values() for p in parts]
+    background = workcell.background_parts()
     if duration is not None:
         frames = range(min(workcell.n_frames, int(round(duration * workcell.rate))))
     elif frames is None:

@@ -69,7 +69,7 @@ def run(workcell=None, duration: float | None = None, seed: int | None = None, p
     # "neighbors" fills such small holes from their surroundings; large holes stay occupied.
     monitors = {name: dg.DistanceMonitor(dg.Rig({name: workcell.rig.cameras[name]}), rho=RHO, aggregate="hybrid",
                                          invalid="neighbors", robot=robot) for name in cameras}
-    background = [p for parts in workcell.background().values() for p in parts]
+    background = workcell.background_parts()
     if frames is None:
         frames = range(workcell.n_frames if duration is None else
                        min(workcell.n_frames, int(round(duration * workcell.rate))))

@@ -59,7 +59,6 @@ class DetectableSpace:
         capability: d, metres, > 0: the smallest object the cameras are taken to detect; SSM's
             ``SSMParams.detection_capability`` (its intrusion distance C must be counted by whoever uses these
             distances).
-
         beyond: None, or 6 metres >= 0, for the box's faces at lo x, hi x, lo y, hi y, lo z, hi z: how far beyond each
             face space is known to hold no person (the thickness of a known solid that covers the whole face, such
             as the floor under the box's bottom face). The space beyond that counts as possibly occupied, as all

@@ -210,7 +210,7 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
         ssm = SpeedSeparationMonitor(ssm_params, rho=settings.ssm_rho)
     options = dict(settings.monitor)
     if settings.known_solids:
-        options["static"] = [box for parts in workcell.background().values() for box in parts]
+        options["static"] = workcell.background_parts()
     capability = mode == "ssm" and settings.ssm_capability
     if capability:
         options["detection_capability"] = ssm_params.detection_capability

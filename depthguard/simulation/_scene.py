@@ -226,10 +226,15 @@ class Workcell:
         """Static objects that are not obstacles (known background): name -> [primitive]."""
         return {obj.name: [obj.primitive] for obj in self.static_objects if not obj.obstacle}
 
+    def background_parts(self) -> list:
+        """The known background's primitives in one list (world frame): what ``DistanceMonitor(static=...)`` takes
+        when they are boxes."""
+        return [p for parts in self.background().values() for p in parts]
+
     def primitives_at(self, t: float) -> list:
         """Every rendered primitive at ``t`` except the robot (obstacles and background), world frame."""
         out = [p for parts in self.obstacles_at(t).values() for p in parts]
-        return out + [p for parts in self.background().values() for p in parts]
+        return out + self.background_parts()
 
     def carried_pose_at(self, name: str, t: float) -> tuple[np.ndarray, float] | None:
         """(center (3,), yaw) of carried object ``name`` at ``t``, or None when it is not in the scene."""
