@@ -1,4 +1,4 @@
-"""Reading files from outside, bounded: the one place depthguard opens a user's file.
+"""Reading files from outside, bounded, and writing files whole: the one place depthguard opens a user's file.
 
 Every reader here:
 
@@ -14,12 +14,21 @@ Text formats are parsed without running code and within bounds:
   ``config.MAX_NESTING``.
 - JSON (:func:`load_json`): numbers are read as floats (a 400-digit integer becomes inf, which the caller's range
   check refuses, instead of an integer no float can hold); nesting too deep for the parser is an error.
+
+Every file depthguard writes is written whole or not at all (:func:`atomic_write`, :func:`write_whole`,
+:func:`atomic_folder`): into a temporary file beside it, flushed to disk, then renamed over it in one step. A process
+stopped while writing leaves the older file or none, never a shorter one that a reader would take for valid (a rig
+with one camera fewer). The temporary name, ``.<name>.<pid>.<n>.partial``, is hidden and ends in ``.partial``: no
+reader looks for it, and no glob such as ``*.png`` or ``*.yaml`` matches it.
 """
 
 from __future__ import annotations
 
+import contextlib
+import itertools
 import json
 import os
+import shutil
 import stat
 from pathlib import Path
 
@@ -192,3 +201,103 @@ def load_json(text: str, *, source, error: type[DepthguardError] = InputError, *
 
 def _one_line(exc: Exception) -> str:
     return " ".join(str(exc).split())
+
+
+# ---------------------------------------------------------------------------------------------------------- writing
+
+_partial_numbers = itertools.count()  # tells apart the temporary files of one process's threads
+
+
+def _partial_path(path: Path) -> Path:
+    return path.with_name(f".{path.name}.{os.getpid()}.{next(_partial_numbers)}.partial")
+
+
+@contextlib.contextmanager
+def atomic_write(path, mode: str = "w", *, newline: str | None = None):
+    """Write the file ``path`` whole: ``with atomic_write(path) as f:`` gives a new temporary file beside ``path``
+    (text in UTF-8 for ``mode="w"``, bytes for ``"wb"``; ``newline`` as :func:`open`'s). When the block ends without
+    an error, the file is flushed to disk and renamed to ``path``, replacing an older file in one step. When it
+    raises, ``path`` is left as it was (the older file, or none) and the temporary file is removed.
+
+    An :class:`OSError` opening or renaming the file names ``path``, not the temporary name.
+    """
+    if mode not in ("w", "wb"):
+        raise ValueError(f"atomic_write writes a new file: mode 'w' or 'wb', got {mode!r}")
+    path = Path(path)
+    partial = _partial_path(path)
+    with _naming(path):
+        # "x": the temporary file is new, never an existing file or a link planted under its name.
+        file = open(partial, mode.replace("w", "x"), encoding=None if mode == "wb" else "utf-8", newline=newline)
+    try:
+        with file:
+            yield file
+            file.flush()
+            os.fsync(file.fileno())
+        with _naming(path):
+            os.replace(partial, path)
+    finally:
+        with contextlib.suppress(OSError):
+            partial.unlink(missing_ok=True)  # after an error; after the rename there is nothing left
+    _sync_folder(path.parent)
+
+
+def write_whole(path, data: str | bytes) -> None:
+    """Write ``data`` (text, as UTF-8, or bytes) to the file ``path`` whole (:func:`atomic_write`)."""
+    with atomic_write(path, "wb" if isinstance(data, bytes) else "w") as file:
+        file.write(data)
+
+
+@contextlib.contextmanager
+def atomic_folder(path):
+    """Write the new folder ``path`` whole: ``with atomic_folder(path) as folder:`` gives a path that does not exist
+    yet, for the block to create and fill (a library that writes a folder of its own, such as a ROS 2 bag). It lies in
+    a hidden temporary folder beside ``path`` and has ``path``'s name, so names written from it inside the folder are
+    the final ones. When the block ends without an error, every file in it is flushed to disk and the folder is
+    renamed to ``path``, which must not exist (or be an empty folder). When it raises, no ``path`` appears and the
+    temporary folder is removed. Missing folders above ``path`` are created."""
+    path = Path(path)
+    holder = _partial_path(path)
+    with _naming(path):
+        holder.mkdir(parents=True)
+    try:
+        folder = holder / path.name
+        yield folder
+        for file in sorted(folder.rglob("*")):
+            if file.is_file() and not file.is_symlink():
+                _sync_file(file)
+        with _naming(path):
+            os.replace(folder, path)
+    finally:
+        shutil.rmtree(holder, ignore_errors=True)
+    _sync_folder(path.parent)
+
+
+@contextlib.contextmanager
+def _naming(path: Path):
+    """An :class:`OSError` within names ``path`` (what the caller asked for), not a temporary name."""
+    try:
+        yield
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+
+
+def _sync_file(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _sync_folder(folder: Path) -> None:
+    """Make a rename in ``folder`` survive a power cut (POSIX; where a folder cannot be opened, nothing to do)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass  # a file system that cannot sync folders
+    finally:
+        os.close(fd)

@@ -12,6 +12,11 @@ and later processes load it from ``__pycache__/*.nbi|*.nbc`` beside its source.
   on its first call, which takes from a second to half a minute. Each such compile logs one warning line on the
   ``depthguard`` logger (standard error unless configured) that names the kernel. ``depthguard warmup``
   (:mod:`depthguard._warmup`) compiles every kernel ahead of time; ``./dev.sh setup`` runs it.
+- A damaged cache. A cache file that cannot be read (truncated by a full disk, garbled) is a cache miss: the kernel
+  compiles, the file is written afresh, and the compile's warning line names the cache and why it was not used. A
+  cache that cannot be written leaves the kernel compiled for this process, with one warning.
+- No writable cache folder (a read-only install, no writable ``NUMBA_CACHE_DIR`` or user cache folder): the kernels
+  run uncached, compiling on their first call in every process, and one warning says so when they are defined.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from pathlib import Path
 
 import numba
 from numba.core import caching, event
+from numba.core.dispatcher import Dispatcher
 
 #: The modules that define numba kernels, each decorated with :func:`kernel`.
 KERNEL_MODULES = (
@@ -58,7 +64,15 @@ def kernel(*, parallel: bool = False, inline: bool = False, error_model: str = "
     a half). LLVM still inlines small functions into their callers when it optimises.
     """
     _install()
-    return numba.njit(cache=True, parallel=parallel, error_model=error_model, inline="always" if inline else "never")
+    jit = numba.njit(parallel=parallel, error_model=error_model, inline="always" if inline else "never")
+
+    def decorate(py_func):
+        dispatcher = jit(py_func)
+        if isinstance(dispatcher, Dispatcher):  # not with NUMBA_DISABLE_JIT=1, which returns py_func
+            _enable_cache(dispatcher)
+        return dispatcher
+
+    return decorate
 
 
 def module_file(name: str) -> Path:
@@ -146,21 +160,80 @@ def _stamped(locator_class):
     return Stamped
 
 
+class _GuardedCache(caching.FunctionCache):
+    """numba's on-disk cache of one kernel, which a damaged file never stops: a cache that cannot be read is a cache
+    miss (the compile notice then says why), and one that cannot be written leaves the kernel compiled for this
+    process (one warning)."""
+
+    def load_overload(self, sig, target_context):
+        try:
+            return super().load_overload(sig, target_context)
+        except Exception as exc:  # noqa: BLE001 - whatever unpickling or rebuilding a damaged file raises
+            _NOTICE.unreadable[self._py_func] = f"its cache in {self.cache_path} cannot be read ({_one_line(exc)})"
+            return None
+
+    def save_overload(self, sig, data):
+        try:
+            super().save_overload(sig, data)
+        except Exception:  # noqa: BLE001 - an unreadable index cannot take a new entry: start it afresh
+            try:
+                self.flush()
+                super().save_overload(sig, data)
+            except Exception as exc:  # noqa: BLE001 - an unwritable folder, a full disk
+                if "unwritable" not in _warned:
+                    _warned.add("unwritable")
+                    _LOG.warning("depthguard: cannot write the cache of numba kernel %s in %s (%s): it compiles "
+                                 "again in every new process", _kernel_name(self._py_func), self.cache_path,
+                                 _one_line(exc))
+
+
+def _enable_cache(dispatcher) -> None:
+    """Cache ``dispatcher`` on disk, as numba's ``Dispatcher.enable_caching`` does, in a :class:`_GuardedCache`.
+    Where no folder can hold the cache (numba raises "no locator available"), the kernel runs uncached, and the first
+    such kernel of the process logs one warning."""
+    try:
+        dispatcher._cache = _GuardedCache(dispatcher.py_func)
+    except (RuntimeError, OSError) as exc:
+        _NOTICE.uncached.add(dispatcher.py_func)
+        if "uncached" not in _warned:
+            _warned.add("uncached")
+            _LOG.warning("depthguard: no writable folder for the numba kernel caches (%s): depthguard's kernels run "
+                         "uncached, compiling on their first call in every process. Set NUMBA_CACHE_DIR to a writable "
+                         "folder and run `depthguard warmup`.", _one_line(exc))
+
+
+def _kernel_name(py_func) -> str:
+    return f"{py_func.__module__}.{py_func.__qualname__}"
+
+
+def _one_line(exc: Exception) -> str:
+    text = " ".join(str(exc).split())[:200]
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
 class _CompileNotice(event.Listener):
-    """Logs a warning when a depthguard kernel compiles (it was not in the cache); nested compiles of the kernels it
-    calls are part of the same one."""
+    """Logs a warning when a depthguard kernel compiles (it was not in the cache, or its cache could not be read);
+    nested compiles of the kernels it calls are part of the same one. An uncached kernel compiles without one (the
+    warning that no cache folder is writable said so)."""
 
     def __init__(self):
         self.depth = 0
         self.quiet = 0  # > 0 while depthguard warmup compiles on purpose
+        self.unreadable = {}  # kernel (py_func) -> where its cache is and why it could not be read, until it compiles
+        self.uncached = set()  # kernels (py_func) without a cache folder
 
     def on_start(self, ev):
         self.depth += 1
-        if self.depth > 1 or self.quiet:
-            return
         dispatcher = ev.data["dispatcher"]
+        unreadable = self.unreadable.pop(dispatcher.py_func, None)
+        if self.depth > 1 or self.quiet or dispatcher.py_func in self.uncached:
+            return
         module = getattr(dispatcher.py_func, "__module__", "") or ""
         if module.split(".")[0] != "depthguard":
+            return
+        if unreadable is not None:
+            _LOG.warning("depthguard: compiling numba kernel %s: %s; it is written afresh once compiled.",
+                         _kernel_name(dispatcher.py_func), unreadable)
             return
         _LOG.warning("depthguard: compiling numba kernel %s.%s (not in the cache: first run after an install or an "
                      "upgrade; it is cached once compiled). `depthguard warmup` compiles every kernel ahead of time.",
@@ -172,6 +245,7 @@ class _CompileNotice(event.Listener):
 
 _NOTICE = _CompileNotice()
 _installed = False
+_warned: set[str] = set()  # the warnings given once per process: "uncached" (no cache folder), "unwritable"
 
 
 def _install() -> None:
@@ -194,6 +268,11 @@ def _install() -> None:
         if base is not None:
             ours.append(_stamped(base))
     classes[:0] = ours
+
+
+def uncached_kernels() -> int:
+    """How many kernels defined so far run uncached (no writable folder for their caches)."""
+    return len(_NOTICE.uncached)
 
 
 class quiet_compiles:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
@@ -11,11 +12,12 @@ import numpy as np
 from depthguard import config
 from depthguard.cameras import Rig
 from depthguard.depth import DepthImage, OccupancyImage, depth_image, prepare_depth
+from depthguard.depth._prepare import filled_space
 from depthguard.depth._image import checked_frame
 from depthguard.depthspace import check_points, single_camera_distances
 from depthguard.depthspace._distance import check_options
 from depthguard.errors import InputError, check_real, short_repr
-from depthguard.results import DistanceResult, Flag
+from depthguard.results import DetectableResult, DistanceResult, Flag
 
 
 class DistanceMonitor:
@@ -31,7 +33,9 @@ class DistanceMonitor:
         unseen: policy for space no camera observes: ``"occupied"`` (fail-safe) or ``"free"``.
         method: ``"exact"`` (SPEC) or ``"paper"`` (the 2015 paper's unsafe formulas, for comparison only).
         max_age: seconds, in (0, ``config.MAX_AGE_LIMIT``]; a frame older than this at query time (``now``) makes
-            its camera blind and the result flagged. None: frames do not go stale by age (see :meth:`query` for the
+            its camera blind and the result flagged, and so does a frame without a timestamp. ``"auto"`` (default):
+            ``config.DEFAULT_MAX_AGE`` (0.1 s, three frame periods at 30 Hz) for every frame that carries a
+            timestamp; frames without one cannot age. None: frames do not go stale by age (see :meth:`query` for the
             other rules of time).
         hole_pixels: largest hole filled by ``invalid="neighbors"``, pixels, in [0, ``config.MAX_HOLE_PIXELS``].
         robot: a :class:`depthguard.robots.RobotModel` to filter out of every frame (SPEC section 7); then each new
@@ -93,7 +97,7 @@ class DistanceMonitor:
 
     def __init__(self, rig: Rig, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
                  invalid: str = config.DEFAULT_INVALID, unseen: str = config.DEFAULT_UNSEEN,
-                 method: str = config.DEFAULT_METHOD, max_age: float | None = None,
+                 method: str = config.DEFAULT_METHOD, max_age: float | str | None = "auto",
                  hole_pixels: int = config.DEFAULT_NEIGHBOR_HOLE_PIXELS, robot=None, self_filter: str = "hulls",
                  self_filter_tolerance: float = config.SELF_FILTER_TOLERANCE, principals=None, maps=None,
                  fusion_margin: float = config.DEFAULT_FUSION_MARGIN,
@@ -109,6 +113,10 @@ class DistanceMonitor:
         self.unseen = unseen
         self.method = method
         self.invalid = _choice(invalid, "invalid", config.INVALID_POLICIES)
+        # Whether a frame without a timestamp is stale: only under a max_age the caller asked for.
+        self._untimed_stale = not (max_age is None or (isinstance(max_age, str) and max_age == "auto"))
+        if isinstance(max_age, str) and max_age == "auto":
+            max_age = config.DEFAULT_MAX_AGE
         self.max_age = None if max_age is None else check_real(
             max_age, "max_age", minimum=0.0, above_minimum=True, maximum=config.MAX_AGE_LIMIT, unit="seconds",
             field="max_age")
@@ -153,6 +161,7 @@ class DistanceMonitor:
 
             self.memory = FreeSpaceMemory(VoxelBox(rig.workspace[0], rig.workspace[1], memory_voxel), v_max)
         self.detectable = None
+        self.hidden_band = 0.0  # metres (detection_capability only): see _hidden_band
         self._static_voxels = None
         if detection_capability is not None:
             self._detectable_space(static, detection_capability, detectable_voxel)
@@ -168,21 +177,82 @@ class DistanceMonitor:
 
         capability = check_real(capability, "detection_capability", minimum=0.0, above_minimum=True,
                                 maximum=config.COORDINATE_LIMIT, unit="metres", field="detection_capability")
+        if capability > config.SSM_INTRUSION_LIMIT:
+            raise InputError(f"detection_capability {capability:g} m is coarser than ISO 13855's 70 mm: no intrusion "
+                             "distance C is defined for it", field="detection_capability")
         voxel = check_real(voxel, "detectable_voxel", minimum=0.0, above_minimum=True, maximum=capability / 2,
                            unit="metres", field="detectable_voxel")
         if self.rig.workspace is None:
             raise InputError("detection_capability needs the rig's workspace (the box whose voxels it looks at)",
                              field="detection_capability")
+        band, why = self._hidden_band()
+        if capability + band > config.SSM_INTRUSION_LIMIT * (1.0 + 1e-12):
+            raise InputError(f"detection_capability {capability:g} m plus the {band:.3f} m this monitor's concessions "
+                             f"can hide next to a surface ({why}) is {capability + band:.3f} m, coarser than ISO "
+                             "13855's 70 mm: no intrusion distance C covers it (a smaller robot_zone, "
+                             "invalid='occupied' or a smaller capability)", field="detection_capability")
         try:
             box = VoxelBox(self.rig.workspace[0], self.rig.workspace[1], voxel)
         except InputError as error:
             raise InputError(str(error), field="detectable_voxel") from None
         beyond = None if self._static is None else closed_faces(box, self._static.boxes)
         self.detectable = DetectableSpace(box, capability, beyond)
+        self.hidden_band = band
         if self._static is not None:
-            # As the known solids' surfaces take an object within the self-filter's tolerance of them for them.
+            # Only the solids' inside is free here, and the frames are taken as measured (not substituted): a
+            # known solid hides nothing from the detectable space.
             self._static_voxels = np.zeros(box.shape, dtype=bool)
-            solid_voxels(box, self._static.boxes, self._static_voxels, grow=self.self_filter_tolerance)
+            solid_voxels(box, self._static.boxes, self._static_voxels)
+
+    def query_hidden_band(self) -> tuple[float, str]:
+        """(metres, what): the thickest layer next to a surface in which :meth:`query` may not see an object, for
+        speed and separation monitoring on its distances (the effective detection capability, SPEC section 9):
+
+        - with a robot, the self-filter's shell: the padded rendered geometry (``robot.padding`` and the capsules'
+          gap to the meshes, ``RobotModel.capsule_gap``, which bounds the hulls' too) plus ``self_filter_tolerance``
+          plus twice the noise margin at the farthest depth at which a camera sees the workspace (a measurement that
+          near the robot is the robot); with a robot zone, the zone instead where it is thicker;
+        - known solids: the largest band a replaced measurement may hide (``StaticSolids.largest_band``);
+        - ``invalid="neighbors"``: the widest object a filled hole hides (as :meth:`_hidden_band`).
+        """
+        parts = {}
+        if self.robot is not None:
+            margin = max(float(camera.noise.margin(np.array([_farthest_depth(camera, self.rig.workspace)]))[0])
+                         for camera in self.rig.cameras.values())
+            body = self.robot.padding + self.robot.capsule_gap()
+            parts["the self-filter's shell"] = body + self.self_filter_tolerance + 2.0 * margin
+            if self.robot_zone > 0.0:
+                parts["robot zone + padding + the capsules' gap to the meshes"] = body + self.robot_zone
+        if self._static is not None:
+            parts["known solids"] = max(self._static.largest_band(camera) for camera in self.rig.cameras.values())
+        band, why = self._hidden_band()
+        if "filled holes" in why:
+            parts["filled holes"] = band
+        if not parts:
+            return 0.0, "none"
+        why = max(parts, key=parts.get)
+        return parts[why], f"{why}: {parts[why]:.3f} m"
+
+    def _hidden_band(self) -> tuple[float, str]:
+        """(metres, what): the thickest layer next to a surface that the detectable space counts free without a
+        camera seeing it free: the robot zone with the capsules' padding (the capsules are the robot's, padding
+        and zone included), and with ``invalid="neighbors"`` the widest object a filled hole can hide, 2
+        sqrt(hole_pixels / pi) pixels (the widest disc in the hole, at least the 2-pixel lines) at the farthest
+        depth at which a camera sees the workspace. The known solids add nothing (their inside only is free, and
+        the frames are used as measured)."""
+        parts = {}
+        if self.robot is not None and self.robot_zone > 0.0:
+            parts["robot zone + padding + the capsules' gap to the meshes"] = \
+                self.robot_zone + self.robot.padding + self.robot.capsule_gap()
+        if self.invalid == "neighbors" and self.hole_pixels:
+            pixels = max(2.0, 2.0 * math.sqrt(self.hole_pixels / math.pi))
+            widest = max(pixels * _farthest_depth(camera, self.rig.workspace) / min(camera.fx, camera.fy)
+                         for camera in self.rig.cameras.values())
+            parts["filled holes"] = widest
+        if not parts:
+            return 0.0, "none"
+        why = max(parts, key=parts.get)
+        return parts[why], f"{why}: {parts[why]:.3f} m"
 
     def _find_detectable(self, usable: dict):
         """A new DetectableSpace for the usable frames (None without detection_capability): the voxels some usable
@@ -197,7 +267,7 @@ class DistanceMonitor:
         if not usable:
             return space  # never updated: every distance 0, as with no usable frame it must be
         states = list(usable.values())
-        free = seen_free_voxels(box, [state.camera for state in states], [state.free for state in states],
+        free = seen_free_voxels(box, [state.camera for state in states], [state.measured_free for state in states],
                                 margin=self.fusion_margin, pad=self.fusion_pixels, check=False)
         if self._static_voxels is not None:
             free |= self._static_voxels
@@ -285,6 +355,10 @@ class DistanceMonitor:
         camera = self.rig.camera(name)
         cached = self._prepared.get(name)
         if cached is not None and cached[0] is frame:
+            if joints is not None and self.robot is not None:
+                # Checked like any other (NaN, a wrong count, an unknown name), though the frame keeps the joints it
+                # was filtered with: its capture time, not this call's, is when the robot was where they say.
+                self.robot.joint_vector(joints)
             return cached[1]
         if isinstance(frame, DepthImage):
             # A DepthImage is a plain dataclass: whoever built it may have bypassed depth_image. Its data is checked
@@ -292,8 +366,10 @@ class DistanceMonitor:
             image = checked_frame(frame, camera)
         else:
             image = depth_image(frame, camera)
+        solid_band = 0.0
+        measured = image
         if self._static is not None:
-            image = self._static.substitute(image, camera)
+            image, solid_band = self._static.substitute_band(image, camera)
         robot_near = robot_far = None
         if self._silhouette is not None:
             if joints is None:
@@ -311,6 +387,8 @@ class DistanceMonitor:
         occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels, robot_near=robot_near,
                                   robot_tolerance=self.self_filter_tolerance, robot_far=robot_far)
         state = _CameraFrame(self, camera, image, occupancy, joints, robot_near, robot_far)
+        state.solid_band = solid_band
+        state.measured = measured
         if self._static is not None and robot_far is not None and moved.any():
             state.resting = (moved, far_before)
         if isinstance(frame, DepthImage):
@@ -329,7 +407,9 @@ class DistanceMonitor:
             camera_joints: with a robot whose cameras captured their frames at different times: a mapping camera
                 name -> its joint positions at that camera's capture time (given instead of ``joints``).
             now: the current time in the frames' clock, seconds (a finite number), or None; needed when ``max_age``
-                is set.
+                is given explicitly. None under the default ``max_age="auto"``: the newest timestamp among
+                ``frames`` stands for it (a camera whose frame lags the others by more than max_age is stale; one
+                that froze alone is caught only with ``now``: pass it).
             check: validate the points (``False`` for a hot loop that passes a checked (n, 3) float64 array).
 
         Time (SPEC section 8): a frame is stale, and counts as blind (it clears nothing, results flag
@@ -338,7 +418,10 @@ class DistanceMonitor:
         - its timestamp is NaN or infinite (whatever ``max_age``);
         - ``now`` is given and it is stamped later than ``now + config.CLOCK_SKEW_TOLERANCE`` (its time is wrong;
           also without ``max_age``);
-        - ``max_age`` is set and it has no timestamp or is older than ``max_age`` at ``now``.
+        - it is older than ``max_age`` at ``now``, or it has no timestamp and ``max_age`` was given explicitly.
+
+        The answer is as old as the oldest usable frame (``DistanceResult.ages``; ``age``): a camera's free space is
+        what it saw when it captured its frame.
 
         Then :meth:`plan` decides, by one rule, which method answers: none (distance 0, with no usable frame), the
         single-camera method (one usable frame) or the depth grid (several); a stale or missing camera of the rig
@@ -371,17 +454,27 @@ class DistanceMonitor:
                 self.rig.camera(name)
         if now is not None:
             now = check_real(now, "now", unit="seconds", field="now")
-        if self.max_age is not None and now is None:
+        if self._untimed_stale and now is None:
             raise InputError("this monitor has max_age set: pass now= (seconds, the frames' clock) to query()",
                              field="now")
-        usable: dict[str, _CameraFrame] = {}
-        stale: dict[str, float | None] = {}
+        tick = time.perf_counter()
+        states: dict[str, _CameraFrame] = {}
         for name, frame in frames.items():
             if not isinstance(name, str):
                 raise InputError(f"frames must be keyed by camera name, got {short_repr(name)}", field="frames")
-            state = self._camera_frame(name, frame, joints if camera_joints is None else camera_joints.get(name))
+            states[name] = self._camera_frame(name, frame,
+                                              joints if camera_joints is None else camera_joints.get(name))
+        if now is None:  # the default max_age: the newest frame stands for now
+            times = [s.occupancy.timestamp for s in states.values() if s.occupancy.timestamp is not None
+                     and math.isfinite(s.occupancy.timestamp)]
+            clock = max(times) if times else None
+        else:
+            clock = now
+        usable: dict[str, _CameraFrame] = {}
+        stale: dict[str, float | None] = {}
+        for name, state in states.items():
             timestamp = state.occupancy.timestamp
-            if self.is_stale(timestamp, now):
+            if self.is_stale(timestamp, clock):
                 stale[name] = timestamp
             else:
                 usable[name] = state
@@ -390,9 +483,38 @@ class DistanceMonitor:
         plan = self.plan(usable, stale)
         fused = self._fused_frames_of(plan, usable) if plan.kind == "fused" else ()
         times = [state.occupancy.timestamp for state in usable.values() if state.occupancy.timestamp is not None]
+        detectable = self._find_detectable(usable)
+        concessions = self._concessions(plan, usable)
         return PreparedSet(plan=plan, usable=dict(usable), fused=fused, free_now=self._free_now if fused else None,
                            rho=self.rho, aggregate=self.aggregate, unseen=self.unseen, method=self.method,
-                           time=max(times) if times else None, detectable=self._find_detectable(usable))
+                           time=min(times) if times else None, detectable=detectable, now=clock,
+                           newest=max(times) if times else None, max_age=self.max_age,
+                           untimed_stale=self._untimed_stale, concessions=concessions,
+                           capability=None if self.detectable is None else (self.detectable.capability,
+                                                                            self.hidden_band),
+                           prepare_seconds=time.perf_counter() - tick)
+
+    def _concessions(self, plan: "QueryPlan", usable: dict) -> "Concessions":
+        """Where the concessions of this set of frames counted space free that no camera saw free (SPEC section
+        11a): the robot zone (fused answers and the detectable space), the known solids' bands, the filled holes."""
+        zone = None
+        zoned = (plan.kind == "fused" or self.detectable is not None) and self.robot is not None and self.robot_zone
+        if zoned:
+            joints = {s._joints.tobytes(): s._joints for s in usable.values() if s._joints is not None}
+            capsules = [tuple(c.p0) + tuple(c.p1) + (c.radius,) for q in joints.values()
+                        for c in self.robot.capsules_world(q, check=False)]
+            if capsules:
+                zone = (np.array(capsules, dtype=np.float64), self.robot_zone)
+        solids = None
+        if self._static is not None:
+            band = max([s.solid_band for s in usable.values()], default=0.0)
+            if self.detectable is not None:  # the detectable space counts the solids grown by the tolerance free
+                band = max(band, self.self_filter_tolerance)
+            if band > 0.0:
+                solids = (self._static.boxes, band)
+        fills = tuple(s.filled for s in usable.values() if s.occupancy.invalid_policy == "neighbors"
+                      and s.occupancy.invalid_pixels and s.filled is not None)
+        return Concessions(zone, solids, fills, zone_in_query=plan.kind == "fused")
 
     def _remember(self, usable: dict) -> None:
         """Take the usable frames the memory has not seen into it (SPEC section 8a), as of the earliest capture time
@@ -450,13 +572,7 @@ class DistanceMonitor:
 
     def is_stale(self, timestamp: float | None, now: float | None) -> bool:
         """Whether a frame stamped ``timestamp`` (seconds, or None) counts as blind at ``now`` (see :meth:`query`)."""
-        if timestamp is None:
-            return self.max_age is not None
-        if not math.isfinite(timestamp):
-            return True
-        if now is not None and timestamp > now + config.CLOCK_SKEW_TOLERANCE:
-            return True
-        return self.max_age is not None and now - timestamp > self.max_age
+        return _is_stale(timestamp, now, self.max_age, self._untimed_stale)
 
     def _fused_frames_of(self, plan: "QueryPlan", usable: dict) -> tuple:
         """The FusedFrames of each of the plan's principals on these frames (kept while the same frames come back,
@@ -524,8 +640,16 @@ class QueryPlan:
 class PreparedSet:
     """One set of frames as :meth:`DistanceMonitor.prepare_set` prepared it, ready for queries: the plan, the usable
     frames, the depth grid's fusion of each principal (fused plans), the free-space memory's remembered voxels (for
-    the flag), and ``time``, the latest capture time among the usable frames (seconds, or None). Queries change
-    only the fusion's cache of classified cells: query it from one thread at a time."""
+    the flag), where the concessions counted space free (:class:`Concessions`), and its times:
+
+    - ``time``: the OLDEST capture time among the usable frames (seconds, or None): the set is as old as that, since
+      each camera's free space is what it saw when it captured its frame (SPEC section 9, T_r);
+    - ``newest``: the newest capture time among them;
+    - ``now``: the clock the set was prepared at (the ``now`` given, else ``newest``);
+    - ``prepare_seconds``: wall-clock seconds :meth:`DistanceMonitor.prepare_set` took (SSM's reaction time counts
+      it: :meth:`reaction_time`).
+
+    Queries change only the fusion's cache of classified cells: query it from one thread at a time."""
 
     plan: QueryPlan
     usable: dict
@@ -537,15 +661,51 @@ class PreparedSet:
     method: str
     time: float | None
     detectable: object = None
+    now: float | None = None
+    newest: float | None = None
+    max_age: float | None = None
+    untimed_stale: bool = False
+    concessions: "Concessions | None" = None
+    prepare_seconds: float = 0.0
+    capability: tuple | None = None  # (d, hidden band) of the monitor's detectable space
 
-    def detectable_distances(self, points_world, limit: float = math.inf, check: bool = True) -> np.ndarray:
-        """(n,) float64 metres, for speed and separation monitoring only: for each control point ((n, 3) float64,
-        metres, world frame), a lower bound of its distance to every ball of diameter d (the monitor's
-        ``detection_capability``) lying in the space these frames leave possibly occupied, or ``limit`` where it is
-        at least that (:class:`depthguard.freespace.DetectableSpace`). Regions thinner than d do not count, so use it
-        only with ISO 13855's intrusion distance C for that d counted (SSM's S_p). Every distance is 0 when no
-        camera had a usable frame. Raises :class:`InputError` (field ``detection_capability``) if the monitor has
-        none."""
+    def ages(self, now: float | None = None) -> dict[str, float | None]:
+        """Camera name -> the age of its usable frame at ``now`` (seconds; default: the set's own clock), None for
+        a frame without a timestamp."""
+        clock = self.now if now is None else now
+        return {name: (None if state.occupancy.timestamp is None or clock is None
+                       else clock - state.occupancy.timestamp) for name, state in self.usable.items()}
+
+    def reaction_time(self, now: float, control_period: float) -> float:
+        """SSM's reaction time T_r at ``now`` (seconds, the frames' clock), SPEC section 9: the age of the oldest
+        usable frame at ``now`` + the measured preparation of this set (``prepare_seconds``) + one control period
+        (seconds, > 0). inf when no usable frame carries a timestamp (nothing says how old the answer is)."""
+        now = check_real(now, "now", unit="seconds", field="now")
+        control_period = check_real(control_period, "control_period", minimum=0.0, unit="seconds",
+                                    field="control_period")
+        if self.time is None:
+            return math.inf
+        return max(now - self.time, 0.0) + self.prepare_seconds + control_period
+
+    def _stale_at(self, now: float | None) -> dict | None:
+        """The usable frames' timestamps by camera when one of them is stale at ``now`` (None if none is)."""
+        if now is None:
+            return None
+        times = {name: state.occupancy.timestamp for name, state in self.usable.items()}
+        if any(_is_stale(t, now, self.max_age, self.untimed_stale) for t in times.values()):
+            return times
+        return None
+
+    def detectable_distances(self, points_world, limit: float = math.inf, check: bool = True,
+                             now: float | None = None) -> DetectableResult:
+        """For speed and separation monitoring only: for each control point ((n, 3) float64, metres, world frame), a
+        lower bound of its distance to every ball of diameter d (the monitor's ``detection_capability``) lying in the
+        space these frames leave possibly occupied, or ``limit`` where it is at least that
+        (:class:`depthguard.freespace.DetectableSpace`), with flags (:class:`DetectableResult`). Regions thinner than
+        d do not count, and the concessions of the monitor may hide a band next to a surface: use them only with
+        ISO 13855's intrusion distance C for the result's ``effective_capability`` counted (SSM's S_p does, and
+        refuses another). Every distance is 0 when no camera had a usable frame, or when a frame is stale at
+        ``now``. Raises :class:`InputError` (field ``detection_capability``) if the monitor has none."""
         if self.detectable is None:
             raise InputError("this monitor has no detection_capability: pass DistanceMonitor(detection_capability="
                              "...) for detectable distances", field="detection_capability")
@@ -553,22 +713,54 @@ class PreparedSet:
 
         points = check_points(points_world) if check else points_world
         limit = check_limit(limit)
-        if not self.usable:
-            return np.zeros(len(points))
-        return self.detectable.distances(points, limit)
+        if now is not None:
+            now = check_real(now, "now", unit="seconds", field="now")
+        d, band = self.capability
+        n = len(points)
+        stale = self._stale_at(now)
+        if not self.usable or stale is not None:
+            flag = self.plan.absent | (Flag.STALE_CAMERA if stale is not None else Flag(0))
+            return DetectableResult(np.zeros(n), tuple(flag or Flag.MISSING_CAMERA for _ in range(n)), d, band,
+                                    {}, self.prepare_seconds)
+        distance = self.detectable.distances(points, limit)
+        flags = [self.plan.absent | (Flag.DETECTION_OPENING if x > 0.0 else Flag(0)) for x in distance]
+        if self.concessions is not None:
+            flags, _ = self.concessions.flag(points, distance, min(limit, _FAR), flags, query=False)
+        flags = self._flag_remembered(points, distance, min(limit, _FAR), flags)
+        return DetectableResult(distance, tuple(flags), d, band, self.ages(now), self.prepare_seconds)
 
-    def query(self, points_world, check: bool = True) -> DistanceResult:
+    def _flag_remembered(self, points, distance, rho, flags):
+        """``flags`` with ``REMEMBERED`` added where space nearer than min(distance, rho) counts free only because
+        the memory remembers it (no frame of the last update saw it free)."""
+        from depthguard.freespace._near import voxels_within
+
+        if self.free_now is None:
+            return flags
+        rests = voxels_within(self.free_now[2], self.free_now[1], points, np.minimum(distance, rho))
+        return [f | Flag.REMEMBERED if r else f for f, r in zip(flags, rests)]
+
+    def query(self, points_world, check: bool = True, now: float | None = None) -> DistanceResult:
         """Distances of control points ((n, 3) float64, metres, world frame) on these frames, as
-        :meth:`DistanceMonitor.query` gives them."""
+        :meth:`DistanceMonitor.query` gives them. ``now`` (seconds, the frames' clock): when a usable frame is stale
+        at ``now`` (older than the monitor's ``max_age``), every point gets distance 0 and ``stale_camera``; the
+        result's ages are taken at ``now`` (default: the set's own clock)."""
         points = check_points(points_world) if check else points_world
+        if now is not None:
+            now = check_real(now, "now", unit="seconds", field="now")
         plan = self.plan
         if plan.kind == "blind":
             return DistanceResult.blind(len(points), plan.absent, plan.stale)
+        stale = self._stale_at(now)
+        if stale is not None:
+            return DistanceResult.blind(len(points), plan.absent | Flag.STALE_CAMERA, stale)
+        ages = self.ages(now)
         if plan.kind == "single":
             (name,) = plan.principals
             result = single_camera_distances(self.usable[name].occupancy, points, self.rho, self.aggregate,
                                              self.unseen, self.method, check=False)
-            return _with_flags(result, plan.absent) if plan.absent else result
+            flags = [f | plan.absent for f in result.flags]
+            flags, near = self.concessions.flag(points, result.distance, self.rho, flags, query=True)
+            return replace(result, flags=tuple(flags), ages=ages, concession_distance=near)
         results = [frames.distances(points, self.rho, self.aggregate, self.unseen, check=False)
                    for frames in self.fused]
         timestamps = {name: state.occupancy.timestamp for name, state in self.usable.items()}
@@ -583,21 +775,105 @@ class PreparedSet:
         # FusedFrames flags a blind secondary camera STALE_CAMERA; the plan knows whether it was stale or missing.
         flags = [(results[c].flags[i] & ~Flag.STALE_CAMERA) | plan.absent for i, c in enumerate(chosen)]
         distance = pick("distance")
-        if self.free_now is not None:
-            from depthguard.freespace._near import voxels_within
-
-            # An answer rests on memory when space nearer than it counts free only because it is remembered.
-            rests = voxels_within(self.free_now[2], self.free_now[1], points, np.minimum(distance, self.rho))
-            flags = [f | Flag.REMEMBERED if r else f for f, r in zip(flags, rests)]
+        # An answer rests on memory when space nearer than it counts free only because it is remembered.
+        flags = self._flag_remembered(points, distance, self.rho, flags)
+        flags, near = self.concessions.flag(points, distance, self.rho, flags, query=True)
         return DistanceResult(distance=distance, direction=pick("direction").reshape(-1, 3),
                               count=pick("count"), invalid_count=pick("invalid_count"), flags=tuple(flags),
                               blind_distance=pick("blind_distance"), timestamps=timestamps,
                               cameras=tuple(self.usable), invalid_pixels=invalid_pixels,
-                              principal=tuple(plan.principals[c] for c in chosen))
+                              principal=tuple(plan.principals[c] for c in chosen), ages=ages,
+                              concession_distance=near)
 
 
-def _with_flags(result: DistanceResult, extra: Flag) -> DistanceResult:
-    return replace(result, flags=tuple(f | extra for f in result.flags))
+#: A concession farther than this (metres) is not looked for when the query has no finite limit.
+_FAR = 1e3
+
+
+@dataclass(frozen=True)
+class Concessions:
+    """Where one set of frames' concessions (SPEC section 11a) counted space free that no camera saw free:
+
+    - ``zone``: None, or (capsules (n, 7) float64: p0, p1, radius with the padding, metres, world frame, at every
+      usable frame's joints; thickness, metres): the robot zone takes space within thickness of a capsule for the
+      robot. It applies to fused answers (``zone_in_query``) and to the detectable space.
+    - ``solids``: None, or (boxes, band metres): every replaced measurement, and the detectable space's grown
+      solids, lie within band of a known solid (``StaticSolids.substitute_band``).
+    - ``fills``: occupancy images of the space filled holes counted free (``depth._prepare.filled_space``).
+    """
+
+    zone: tuple | None
+    solids: tuple | None
+    fills: tuple
+    zone_in_query: bool = False
+
+    def distances(self, points: np.ndarray, rho: float, query: bool = True) -> dict:
+        """Flag -> (n,) float64 metres: each concession's distance from the points ((n, 3) world frame), a lower
+        bound (the zone: to the capsules grown by the thickness; a solid: to the box grown by the band; fills:
+        exact, to the filled frusta), inf where there is none within ``rho``."""
+        n = len(points)
+        out = {}
+        if self.zone is not None and (self.zone_in_query or not query) and n:
+            capsules, thickness = self.zone
+            p0, p1, radius = capsules[:, 0:3], capsules[:, 3:6], capsules[:, 6]
+            axis = p1 - p0
+            length2 = np.maximum((axis * axis).sum(1), 1e-300)
+            rel = points[:, None, :] - p0[None]
+            t = np.clip((rel * axis[None]).sum(2) / length2, 0.0, 1.0)
+            gap = np.linalg.norm(rel - t[..., None] * axis[None], axis=2) - (radius + thickness)[None]
+            out[Flag.ROBOT_ZONE] = np.maximum(gap.min(axis=1), 0.0)
+        if self.solids is not None and n:
+            boxes, band = self.solids
+            near = np.full(n, np.inf)
+            for box in boxes:
+                local = (points - np.asarray(box.center, dtype=np.float64)) @ np.asarray(box.R_world_box,
+                                                                                       dtype=np.float64)
+                outside = np.maximum(np.abs(local) - np.asarray(box.half_extents, dtype=np.float64), 0.0)
+                near = np.minimum(near, np.linalg.norm(outside, axis=1))
+            out[Flag.KNOWN_SOLID] = np.maximum(near - band, 0.0)
+        if self.fills and n:
+            near = np.full(n, np.inf)
+            for occupancy in self.fills:
+                result = single_camera_distances(occupancy, points, rho, "min", "free", "exact", check=False)
+                near = np.minimum(near, result.distance)
+            out[Flag.HOLE_FILLED] = near
+        return {flag: np.where(d < rho, d, np.inf) for flag, d in out.items()}
+
+    def flag(self, points, distance, rho, flags, query=True):
+        """(flags with each concession nearer than min(distance, rho) added, (n,) the nearest concession's distance
+        (inf: none within rho))."""
+        near = np.full(len(points), np.inf)
+        bound = np.minimum(distance, rho)
+        flags = list(flags)
+        for flag, d in self.distances(points, rho, query).items():
+            near = np.minimum(near, d)
+            flags = [f | flag if x < b else f for f, x, b in zip(flags, d, bound)]
+        return flags, near
+
+
+def _is_stale(timestamp, now, max_age, untimed_stale) -> bool:
+    """Whether a frame stamped ``timestamp`` (seconds, or None) counts as blind at ``now`` (seconds, or None) under
+    ``max_age`` (seconds, or None: no age limit); ``untimed_stale``: a frame without a timestamp is stale."""
+    if timestamp is None:
+        return max_age is not None and untimed_stale
+    if not math.isfinite(timestamp):
+        return True
+    if now is not None and timestamp > now + config.CLOCK_SKEW_TOLERANCE:
+        return True
+    return max_age is not None and now is not None and now - timestamp > max_age
+
+
+def _farthest_depth(camera, workspace) -> float:
+    """Metres: the largest optical depth at which ``camera`` sees a corner of ``workspace`` ((2, 3) world box, or
+    None: the camera's whole range), within its depth range (its largest finite depth when the range is open)."""
+    z_max = camera.depth_range[1]
+    if workspace is None:
+        return z_max if math.isfinite(z_max) else config.DEPTH_GRID_UNBOUNDED_END
+    lo, hi = np.asarray(workspace, dtype=np.float64)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    T_camera_world = np.linalg.inv(camera.T_world_camera)
+    depth = float(((corners @ T_camera_world[:3, :3].T) + T_camera_world[:3, 3])[:, 2].max())
+    return max(min(depth, z_max), 0.0)
 
 
 class _CameraFrame:
@@ -616,7 +892,32 @@ class _CameraFrame:
         self.robot_far = robot_far
         self._robot_exit = None
         self._free = None
+        self._filled = None
+        self._measured_free = None
+        self.measured = image  # the frame as measured, before a known solid replaced any pixel
         self.resting = None  # (pixels, robot_far before): where the robot's far end was moved through a known solid
+        self.solid_band = 0.0  # metres: how far from a known solid the replaced measurements reach (0: none)
+
+    @property
+    def measured_free(self) -> np.ndarray:
+        """:attr:`free` of the frame as measured, before known solids replaced any measurement (the detectable
+        space's, to which a known solid's band is no concession)."""
+        if self.measured is self.image:
+            return self.free
+        if self._measured_free is None:
+            from depthguard.depthgrid import seen_free
+
+            self._measured_free = seen_free(self.measured, self.occupancy)
+        return self._measured_free
+
+    @property
+    def filled(self) -> OccupancyImage | None:
+        """The space this frame's filled holes counted free (``invalid="neighbors"``), as an occupancy image whose
+        segments are that space: each filled pixel's frustum from the camera's minimum range to where its fill
+        starts the possibly occupied space. None when no hole was filled."""
+        if self._filled is None:
+            self._filled = (filled_space(self.occupancy),)
+        return self._filled[0]
 
     @property
     def robot_exit(self):

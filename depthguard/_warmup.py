@@ -148,7 +148,7 @@ def _run_workloads() -> None:
     from depthguard.freespace._near import voxels_within
 
     remembering = dg.DistanceMonitor(dg.Rig(rig.cameras, principal="principal", workspace=[box.lo, box.hi]), rho=0.3,
-                                     memory_voxel=0.1, detection_capability=0.1, detectable_voxel=0.05)
+                                     memory_voxel=0.1, detection_capability=0.06, detectable_voxel=0.03)
     for k, (kind, pts) in enumerate([(kind, pts) for kind in ("uint16", "float32") for pts in (one, several)]):
         stamped = {name: dg.depth_image(frames[kind][name], camera, timestamp=0.1 * k)
                    for name, camera in rig.cameras.items()}
@@ -244,6 +244,9 @@ def main() -> int:
         print(f"  compiling {kernel} ...", flush=True)
 
     report = warm_up(progress)
+    if _jit.uncached_kernels():
+        print(f"depthguard warmup: {_jit.uncached_kernels()} kernels have no writable cache folder: they were compiled "
+              "for this process only (see the warning above)")
     if not report.compiles:
         print(f"depthguard warmup: every kernel was already compiled and cached; checked in {report.seconds:.1f} s")
         return 0

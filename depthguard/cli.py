@@ -426,6 +426,7 @@ def _replay(args) -> int:
     from tqdm import tqdm
 
     from depthguard import DistanceMonitor
+    from depthguard._files import atomic_write
     from depthguard.errors import InputError
     from depthguard.recordings import open_recording
 
@@ -455,30 +456,24 @@ def _replay(args) -> int:
         point_names = list(robot.control_point_names)
     monitor = DistanceMonitor(recording.rig, rho=args.rho, aggregate=args.aggregate, invalid=args.invalid,
                               robot=robot, memory=not args.no_memory, v_max=args.v_max)
-    partial = out.with_name(out.name + ".partial")  # renamed to --out once every set is answered
     distances, flagged, answered = [], 0, 0
-    try:
-        with open(partial, "w", newline="") as f:
-            writer = csv.writer(f)
-            writer.writerow(["time", "frame", "control_point", "x", "y", "z", "distance", "blind_distance", "flags"])
-            for frame_set in tqdm(recording.frame_sets(), total=len(recording), unit="set", desc="replaying",
-                                  file=sys.stderr):
-                points = fixed if fixed is not None else \
-                    robot.control_point_positions(recording.joints_at(frame_set.time)[order])
-                camera_joints = {camera: q[order] for camera, q in frame_set.joints.items()}
-                result = monitor.query(frame_set.images, points, camera_joints=camera_joints, now=frame_set.time)
-                for i, name in enumerate(point_names):
-                    flags = result.flags[i].names
-                    writer.writerow([repr(float(frame_set.time)), frame_set.frame, name,
-                                     *(repr(float(c)) for c in points[i]), repr(float(result.distance[i])),
-                                     repr(float(result.blind_distance[i])), ";".join(flags)])
-                    flagged += bool(flags)
-                distances.append(np.asarray(result.distance, dtype=np.float64))
-                answered += 1
-        os.replace(partial, out)
-    finally:
-        if partial.exists():
-            partial.unlink()
+    with atomic_write(out, newline="") as f:  # --out appears once every set is answered
+        writer = csv.writer(f)
+        writer.writerow(["time", "frame", "control_point", "x", "y", "z", "distance", "blind_distance", "flags"])
+        for frame_set in tqdm(recording.frame_sets(), total=len(recording), unit="set", desc="replaying",
+                              file=sys.stderr):
+            points = fixed if fixed is not None else \
+                robot.control_point_positions(recording.joints_at(frame_set.time)[order])
+            camera_joints = {camera: q[order] for camera, q in frame_set.joints.items()}
+            result = monitor.query(frame_set.images, points, camera_joints=camera_joints, now=frame_set.time)
+            for i, name in enumerate(point_names):
+                flags = result.flags[i].names
+                writer.writerow([repr(float(frame_set.time)), frame_set.frame, name,
+                                 *(repr(float(c)) for c in points[i]), repr(float(result.distance[i])),
+                                 repr(float(result.blind_distance[i])), ";".join(flags)])
+                flagged += bool(flags)
+            distances.append(np.asarray(result.distance, dtype=np.float64))
+            answered += 1
     if args.json:
         values = np.concatenate(distances) if distances else np.zeros(0)
         finite = lambda x: None if not math.isfinite(x) else float(x)  # noqa: E731 - inf: nothing within rho

@@ -91,6 +91,13 @@ CAPSULE_RADIUS_SAMPLES = 64
 CAPSULE_AXIS_CANDIDATES = 64
 CAPSULE_REFINE_ITERATIONS = 200
 
+#: RobotModel.capsule_gap: configurations sampled (all zeros, then seeded random ones), samples of the meshes' surface
+#: per configuration and of each capsule's surface, and the seed.
+CAPSULE_GAP_CONFIGURATIONS = 4
+CAPSULE_GAP_MESH_SAMPLES = 300_000
+CAPSULE_GAP_SURFACE_SAMPLES = 4000
+CAPSULE_GAP_SEED = 20261126
+
 #: The default robot's 9 control points (the papers' count: Flacco et al. 2015 section 5, 2016 section VIII), as
 #: (name, link, offset (3,) metres in the link frame). They lie on the arm's centre line about 0.1 m apart: three on
 #: the upper arm, the elbow, three on the forearm, the wrist, and the end-effector at the flange (the top face of
@@ -259,10 +266,19 @@ MAX_IMAGE_SIDE = 16384
 MAX_AGE_LIMIT = 1e6
 CLOCK_SKEW_TOLERANCE = 0.01
 
+#: DistanceMonitor's default max_age, seconds: three frame periods of a 30 Hz camera. A frame that carries a
+#: timestamp and is older than this at the query's ``now`` makes its camera stale (blind, flagged): a camera that
+#: freezes stops clearing space within three frames. Frames without a timestamp cannot age and are not held to it.
+DEFAULT_MAX_AGE = 0.1
+
 #: Camera intrinsics, pixels: focal lengths fx, fy in [FOCAL_LENGTH_MIN, INTRINSICS_LIMIT], principal point
 #: |cx|, |cy| <= INTRINSICS_LIMIT (a pixel's frustum slopes (u - cx) / fx then stay far from overflow).
 FOCAL_LENGTH_MIN = 1e-3
 INTRINSICS_LIMIT = 1e7
+
+#: ROS distortion models whose coefficients, all zero, are the pinhole camera: a camera_info of an image that is not
+#: rectified must name one of them (or none). ``equidistant`` (fisheye) with zero coefficients is not a pinhole.
+PINHOLE_DISTORTION_MODELS = ("plumb_bob", "rational_polynomial")
 
 #: Largest depth_scale, metres per uint16 unit (ROS 16UC1 images use 0.001).
 DEPTH_SCALE_MAX = 1.0
@@ -385,12 +401,15 @@ SSM_DETECTION_CAPABILITY = 0.04
 #: The loop's SSM asks the monitor again for a control point's distance on the same frames only once it has moved
 #: this many metres since it was asked (meanwhile: the distance then minus how far it moved, a lower bound).
 SSM_REQUERY = 0.005
-#: ISO 13855's intrusion distance: C = 8 (d - 14 mm) for 14 mm < d <= 40 mm, 0 for d <= 14 mm (a finger cannot
-#: reach in unseen), and 850 mm (an arm's reach) for coarser sensing.
+#: ISO 13855's intrusion distance C for a detection capability d: C = 8 (d - 14 mm) for 14 mm < d <= 40 mm, 0 for
+#: d <= 14 mm (a finger cannot reach in unseen), 850 mm (an arm's reach) for 40 mm < d <= 70 mm. ISO 13855 gives C for
+#: no coarser d (a sensor that misses a 70 mm arm sees only the trunk, and needs another formula): d above
+#: SSM_INTRUSION_LIMIT is refused.
 SSM_INTRUSION_SLOPE = 8.0
 SSM_INTRUSION_FINGER = 0.014
 SSM_INTRUSION_HAND = 0.040
 SSM_INTRUSION_REACH = 0.85
+SSM_INTRUSION_LIMIT = 0.070
 #: The sensing uncertainty Z_d and the robot's position uncertainty Z_r, metres.
 SSM_SENSING_UNCERTAINTY = 0.05
 SSM_ROBOT_UNCERTAINTY = 0.01
@@ -402,7 +421,7 @@ SSM_ROUNDING = 1e-12
 SSM_UNIT_TOLERANCE = 1e-6
 #: Largest accepted value of each SSMParams field (a typo such as 16 for 1.6 is refused, not obeyed).
 SSM_MAXIMA = {"human_speed": 10.0, "human_speed_near": 10.0, "near_separation": 10.0, "stopping_time": 60.0,
-              "stopping_distance_extra": 10.0, "detection_capability": 1.0, "sensing_uncertainty": 10.0,
+              "stopping_distance_extra": 10.0, "detection_capability": SSM_INTRUSION_LIMIT, "sensing_uncertainty": 10.0,
               "robot_uncertainty": 10.0}
 
 #: Image-based collision test (SPEC 10): the range of the room light's gain (an image's brightness relative to the

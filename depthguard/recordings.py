@@ -18,8 +18,10 @@ Two layouts hold the same data:
   - ``/<camera>/depth/image_raw``: ``sensor_msgs/msg/Image``, encoding ``16UC1`` (units of the camera's depth_scale)
     or ``32FC1`` (metres);
   - ``/<camera>/depth/camera_info``: ``sensor_msgs/msg/CameraInfo``, which must agree with the rig (``width``,
-    ``height``, ``fx``, ``fy``, ``cx``, ``cy`` from ``k``; distortion ``d`` all zero; no binning or region of
-    interest);
+    ``height``, ``fx``, ``fy``, ``cx``, ``cy`` from ``k``, as for any ``image_raw``; distortion ``d`` all zero, of a
+    model whose zero is the pinhole (``plumb_bob``, ``rational_polynomial`` or none); ``r`` the identity; no binning
+    or region of interest; ``p`` describes the rectified image and is not used: as
+    :func:`~depthguard.cameras.load_camera_info` with ``rectified=False``);
   - ``/joint_states``: ``sensor_msgs/msg/JointState``, every message naming the same joints (in any order).
 
   Capture time = the message's header stamp. Frame number of an image = its index among that camera's images.
@@ -53,7 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from depthguard import config
-from depthguard._files import check_regular_file, load_yaml, read_text
+from depthguard._files import atomic_folder, check_regular_file, load_yaml, read_text
 from depthguard.cameras import PinholeCamera, Rig, load_rig, save_rig
 from depthguard.depth import DepthImage, depth_image, load_depth
 from depthguard.errors import DepthguardError, DepthImageError, InputError, check_path, short_repr
@@ -636,7 +638,8 @@ def _image_array(message, camera: PinholeCamera, source: str, index: int, check_
 
 
 def _check_camera_info(message, camera: PinholeCamera, source: str) -> None:
-    """A CameraInfo message agrees with the rig's camera: size, intrinsics, no distortion, binning or ROI."""
+    """A CameraInfo message of ``image_raw`` agrees with the rig's camera: size, intrinsics from k, zero distortion of
+    a pinhole model, r the identity, no binning or ROI (p, of the rectified image, is not used)."""
     name = camera.name
     context = {"source": source, "camera": name}
     for key in ("width", "height"):
@@ -658,12 +661,21 @@ def _check_camera_info(message, camera: PinholeCamera, source: str) -> None:
     if d.size and not (np.isfinite(d).all() and (d == 0.0).all()):
         raise InputError(f"camera_info has distortion {short_repr(d.tolist(), 80)}; depthguard needs rectified "
                          "images (all coefficients zero)", field="d", **context)
+    model = str(message.distortion_model)
+    if model and model not in config.PINHOLE_DISTORTION_MODELS:
+        raise InputError(f"camera_info has distortion_model {short_repr(model)}, which is not known to be a pinhole "
+                         f"camera with zero coefficients (equidistant's is a fisheye); image_raw is read only with "
+                         f"{' or '.join(config.PINHOLE_DISTORTION_MODELS)}", field="distortion_model", **context)
+    r = np.asarray(message.r, dtype=np.float64)
+    if r.shape != (9,) or not (np.abs(r - np.eye(3).ravel()) <= config.ROTATION_TOLERANCE).all():
+        raise InputError(f"camera_info r must be the identity, got {short_repr(r.tolist(), 80)}: depthguard cannot "
+                         "tell whether the rig's pose is that of the raw camera frame or of the rectified frame, which "
+                         "r turns", field="r", **context)
     if message.binning_x > 1 or message.binning_y > 1:
         raise InputError(f"camera_info has binning {message.binning_x}x{message.binning_y}; the rig's intrinsics "
                          "are of unbinned images", field="binning", **context)
     roi = message.roi
-    if roi.width and roi.height and (roi.x_offset, roi.y_offset, roi.width, roi.height) != \
-            (0, 0, camera.width, camera.height):
+    if (roi.x_offset, roi.y_offset, roi.width, roi.height) not in ((0, 0, 0, 0), (0, 0, camera.width, camera.height)):
         raise InputError("camera_info has a region of interest smaller than the image", field="roi", **context)
 
 
@@ -698,7 +710,7 @@ def write_bag(recording: Recording, path, storage: str = "mcap") -> Path:
     shortest decimal of each time, rounded: a time written with 6 decimals reads back as the same float).
 
     ``storage``: ``"mcap"`` or ``"sqlite3"``. Raises :class:`InputError` if ``path`` exists or a time is negative or
-    beyond a ROS time (2**31 s).
+    beyond a ROS time (2**31 s). The folder appears whole or not at all (:func:`depthguard._files.atomic_folder`).
     """
     from rosbags.rosbag2 import Writer
     from rosbags.rosbag2.enums import StoragePlugin
@@ -717,7 +729,10 @@ def write_bag(recording: Recording, path, storage: str = "mcap") -> Path:
     joint_ns = [ros_nanoseconds(t, "joint state time") for t in recording.joint_times]
     names = list(recording.joint_names)
     try:
-        with Writer(path, version=Writer.VERSION_LATEST, storage_plugin=plugins[storage]) as writer:
+        # Written beside path and renamed: the bag appears whole, rig.yaml included, or not at all.
+        with atomic_folder(path) as folder, Writer(folder, version=Writer.VERSION_LATEST,
+                                                   storage_plugin=plugins[storage]) as writer:
+            save_rig(rig, folder / "rig.yaml")
             joints_out = writer.add_connection(JOINT_STATES_TOPIC, _JOINT_STATE, typestore=store)
             images_out = {n: writer.add_connection(f"/{n}/depth/image_raw", _IMAGE, typestore=store)
                           for n in rig.cameras}
@@ -746,7 +761,6 @@ def write_bag(recording: Recording, path, storage: str = "mcap") -> Path:
     except Exception as exc:  # noqa: BLE001 - the bag library's errors, named with the bag
         reason = " ".join(str(exc).split())[:200] or type(exc).__name__
         raise InputError(f"cannot write the bag ({type(exc).__name__}: {reason})", source=str(path)) from None
-    save_rig(rig, path / "rig.yaml")
     return path
 
 

@@ -601,6 +601,171 @@ def test_camera_info_P_with_nan_is_refused(tmp_path):
     assert_names(exc_info, "depth", "projection_matrix")
 
 
+def _with(layout, field, value, **changes):
+    """The layout's file with one matrix (named by its camera_calibration name) replaced by ``value`` (9 or 12
+    numbers), under that layout's key."""
+    data = LAYOUTS[layout](**changes)
+    key = {"camera_calibration": field,
+           "CameraInfo": {"rectification_matrix": "r", "projection_matrix": "p", "camera_matrix": "k"}[field],
+           "CameraInfo ROS 1": {"rectification_matrix": "R", "projection_matrix": "P", "camera_matrix": "K"}[field]}
+    data[key[layout]] = {"rows": 3, "cols": len(value) // 3, "data": list(value)} if layout == "camera_calibration" \
+        else list(value)
+    return data
+
+
+# A rectification matrix that turns the rectified frame 2 degrees about y (a stereo pair's left camera): the rectified
+# image's rays are the raw camera's turned by R, so with R ignored every ray would be off by 2 degrees, 7 cm at 2 m.
+_ANGLE = math.radians(2.0)
+R_TURNED = [math.cos(_ANGLE), 0.0, math.sin(_ANGLE), 0.0, 1.0, 0.0, -math.sin(_ANGLE), 0.0, math.cos(_ANGLE)]
+
+
+@pytest.mark.parametrize("rectified", [False, True])
+@pytest.mark.parametrize("layout", LAYOUTS)
+@pytest.mark.parametrize("R", [R_TURNED, [0.0] * 9, [-1.0, 0, 0, 0, -1.0, 0, 0, 0, 1.0], [1, 0, 0, 0, 1, 0, 0, 0, 1.001]],
+                         ids=["2 degrees", "zeros (uncalibrated)", "half turn", "scaled"])
+def test_camera_info_rectification_other_than_identity_is_refused(tmp_path, layout, rectified, R):
+    path = tmp_path / "info.yaml"
+    path.write_text(yaml.safe_dump(_with(layout, "rectification_matrix", R)))
+    with pytest.raises(dg.RigError) as exc_info:
+        dg.load_camera_info(path, camera="depth", rectified=rectified)
+    assert_names(exc_info, "depth", "rectification_matrix")
+    assert "identity" in str(exc_info.value)
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+def test_camera_info_rectification_identity_within_tolerance_or_absent_is_accepted(tmp_path, layout):
+    path = tmp_path / "info.yaml"
+    nearly = [1.0 + 0.5e-6, 0.5e-6, 0, 0, 1.0, 0, 0, 0, 1.0]
+    path.write_text(yaml.safe_dump(_with(layout, "rectification_matrix", nearly)))
+    assert dg.load_camera_info(path, camera="depth")["fx"] == 518.0
+    data = LAYOUTS[layout]()
+    for key in ("rectification_matrix", "r", "R"):
+        data.pop(key, None)
+    path.write_text(yaml.safe_dump(data))
+    assert dg.load_camera_info(path, camera="depth", rectified=True)["fx"] == 500.0
+    path.write_text(yaml.safe_dump(_with(layout, "rectification_matrix", [1.0, 0, 0, 0, 1.0, 0, 0, 0])))
+    with pytest.raises(dg.RigError) as exc_info:  # 8 numbers: not a 3x3 matrix
+        dg.load_camera_info(path, camera="depth")
+    assert_names(exc_info, "depth", "rectification_matrix")
+
+
+def test_rig_with_a_turned_rectification_is_refused_naming_the_camera(tmp_path):
+    for distortion, rectified in (((0.0,) * 5, False), ((0.1, 0, 0, 0, 0), True)):
+        info = _with("CameraInfo", "rectification_matrix", R_TURNED, distortion=distortion)
+        with pytest.raises(dg.RigError) as exc_info:
+            dg.load_rig(_rig_with_camera_info(tmp_path, info, rectified=rectified))
+        assert_names(exc_info, "depth", "rectification_matrix")
+        assert "rig.yaml" in str(exc_info.value)
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+def test_camera_info_K_for_raw_images_P_for_rectified_ones(tmp_path, layout):
+    """K and P differ (P was chosen for the rectified image): each image gets its own matrix, never the other's."""
+    path = tmp_path / "info.yaml"
+    path.write_text(yaml.safe_dump(LAYOUTS[layout]()))
+    assert dg.load_camera_info(path, camera="depth") == dict(width=640, height=480, fx=518.0, fy=519.0, cx=325.5,
+                                                             cy=253.5)
+    assert dg.load_camera_info(path, camera="depth", rectified=True) == dict(width=640, height=480, fx=500.0,
+                                                                             fy=501.0, cx=320.0, cy=240.0)
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+@pytest.mark.parametrize("index, value", [(3, -38.0), (7, 5.0), (1, 0.5), (8, 0.1), (10, 2.0), (11, 1.0)],
+                         ids=["Tx (stereo baseline)", "Ty", "skew", "last row x", "last row z", "last row w"])
+def test_camera_info_projection_that_is_not_a_pinhole_is_refused_when_used(tmp_path, layout, index, value):
+    bad = list(P)
+    bad[index] = value
+    path = tmp_path / "info.yaml"
+    path.write_text(yaml.safe_dump(_with(layout, "projection_matrix", bad)))
+    with pytest.raises(dg.RigError) as exc_info:
+        dg.load_camera_info(path, camera="depth", rectified=True)
+    assert_names(exc_info, "depth", "projection_matrix")
+    assert dg.load_camera_info(path, camera="depth")["fx"] == 518.0  # an image that is not rectified: K, P unused
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+@pytest.mark.parametrize("model, count", [("plumb_bob", 5), ("rational_polynomial", 8), ("equidistant", 4),
+                                          ("fisheye", 4), ("", 5), ("my_model", 3)])
+def test_camera_info_non_zero_distortion_is_refused_for_every_model(tmp_path, layout, model, count):
+    for index in range(count):
+        distortion = [0.0] * count
+        distortion[index] = 1e-9
+        path = tmp_path / "info.yaml"
+        path.write_text(yaml.safe_dump(LAYOUTS[layout](distortion=distortion, distortion_model=model)))
+        with pytest.raises(dg.RigError) as exc_info:
+            dg.load_camera_info(path, camera="depth")
+        assert_names(exc_info, "depth", "distortion_coefficients")
+        # A rectified image: the distortion was undone, whatever its model; the intrinsics are P's.
+        assert dg.load_camera_info(path, camera="depth", rectified=True)["fx"] == 500.0
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+@pytest.mark.parametrize("model, accepted", [("plumb_bob", True), ("rational_polynomial", True), ("", True),
+                                             ("equidistant", False), ("fisheye", False), ("none", False),
+                                             ("Plumb_Bob", False), ("my_model", False)])
+def test_camera_info_zero_distortion_is_a_pinhole_only_for_plumb_bob_and_rational_polynomial(tmp_path, layout, model,
+                                                                                            accepted):
+    """Zero coefficients of equidistant (fisheye) still map the angle, not its tangent, to the pixel: r = f theta. A
+    pinhole reading of such an image would put a ray at 60 degrees off axis at 1.73 f instead of 1.05 f."""
+    path = tmp_path / "info.yaml"
+    path.write_text(yaml.safe_dump(LAYOUTS[layout](distortion=[0.0] * 4, distortion_model=model)))
+    if accepted:
+        assert dg.load_camera_info(path, camera="depth")["fx"] == 518.0
+    else:
+        with pytest.raises(dg.RigError) as exc_info:
+            dg.load_camera_info(path, camera="depth")
+        assert_names(exc_info, "depth", "distortion_model")
+        assert repr(model) in str(exc_info.value)
+    assert dg.load_camera_info(path, camera="depth", rectified=True)["fx"] == 500.0
+    data = LAYOUTS[layout](distortion=[0.0] * 4)
+    data.pop("distortion_model")  # no model given: zero coefficients are no distortion
+    path.write_text(yaml.safe_dump(data))
+    assert dg.load_camera_info(path, camera="depth")["fx"] == 518.0
+
+
+@pytest.mark.parametrize("layout", ["CameraInfo", "CameraInfo ROS 1"])
+@pytest.mark.parametrize("rectified", [False, True])
+def test_camera_info_binning_is_refused_naming_its_axis(tmp_path, layout, rectified):
+    path = tmp_path / "info.yaml"
+    for key in ("binning_x", "binning_y"):
+        for value in (0, 1):
+            path.write_text(yaml.safe_dump(LAYOUTS[layout](**{key: value})))
+            assert dg.load_camera_info(path, camera="depth", rectified=rectified)["width"] == 640
+        path.write_text(yaml.safe_dump(LAYOUTS[layout](**{key: 2})))
+        with pytest.raises(dg.RigError) as exc_info:
+            dg.load_camera_info(path, camera="depth", rectified=rectified)
+        assert_names(exc_info, "depth", key)
+
+
+def _roi(x_offset=0, y_offset=0, width=0, height=0, do_rectify=False) -> dict:
+    return dict(x_offset=x_offset, y_offset=y_offset, width=width, height=height, do_rectify=do_rectify)
+
+
+@pytest.mark.parametrize("roi", [_roi(), _roi(width=640, height=480), _roi(do_rectify=True)],
+                         ids=["zero", "whole image", "do_rectify"])
+def test_camera_info_roi_of_the_whole_image_is_accepted(tmp_path, roi):
+    path = tmp_path / "info.yaml"
+    path.write_text(yaml.safe_dump(camera_info_message(roi=roi)))
+    assert dg.load_camera_info(path, camera="depth")["fx"] == 518.0
+
+
+@pytest.mark.parametrize(
+    "roi, rectified",
+    [(_roi(x_offset=1), False), (_roi(y_offset=3, width=640, height=480), False), (_roi(width=320, height=240), False),
+     (_roi(width=640), False), (_roi(width=641, height=480), False), (_roi(x_offset=10, width=320, height=240), True),
+     (_roi(do_rectify=True), True), (_roi(width=640, height=480, do_rectify=True), True)],
+    ids=["offset, zero size", "offset, whole size", "smaller", "width only", "wider than the image", "rectified smaller",
+         "rectified do_rectify", "rectified do_rectify whole"],
+)
+def test_camera_info_roi_smaller_than_the_image_or_rectified_is_refused(tmp_path, roi, rectified):
+    path = tmp_path / "info.yaml"
+    path.write_text(yaml.safe_dump(camera_info_message(distortion=(0.1, 0, 0, 0, 0) if rectified else (0,) * 5,
+                                                       roi=roi)))
+    with pytest.raises(dg.RigError) as exc_info:
+        dg.load_camera_info(path, camera="depth", rectified=rectified)
+    assert_names(exc_info, "depth", "roi")
+
+
 @pytest.mark.parametrize(
     "content",
     [

@@ -433,6 +433,51 @@ def test_joints_must_be_finite(text):
     assert "--joints" in str(exc_info.value) and "finite" in str(exc_info.value)
 
 
+TINY_URDF = """<?xml version="1.0"?>
+<robot name="tiny">
+  <link name="base"><collision><geometry><box size="0.1 0.1 0.1"/></geometry></collision></link>
+  <joint name="turn" type="revolute">
+    <parent link="base"/><child link="arm"/><origin xyz="0 0 0.1" rpy="0 0 0"/><axis xyz="0 0 1"/>
+    <limit effort="1" lower="-1" upper="1" velocity="1"/>
+  </joint>
+  <link name="arm">
+    <inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>
+    <collision><origin xyz="0 0 0.2"/><geometry><mesh filename="arm.stl" scale="1 1 1"/></geometry></collision>
+    <collision><geometry><sphere radius="0.05"/></geometry></collision>
+  </link>
+</robot>
+"""
+
+#: (text of TINY_URDF, its replacement, what the error names). Before URDF numbers were checked, the first was an
+#: internal error (exit 3), the next two were accepted, the others printed pinocchio's parser's errors on stderr.
+BAD_URDF_NUMBERS = [
+    ('radius="0.05"', 'radius="inf"', "link 'arm' <collision> <geometry> <sphere radius>"),
+    ('scale="1 1 1"', 'scale="0 0 0"', "link 'arm' <collision>: <mesh scale>"),
+    ('<origin xyz="0 0 0.2"/>', '<origin xyz="1e300 0 0.2"/>', "link 'arm' <collision> <origin xyz>"),
+    ('<origin xyz="0 0 0.1"', '<origin xyz="0 nan 0.1"', "joint 'turn' <origin xyz>"),
+    ('upper="1"', 'upper="1e400"', "joint 'turn' <limit upper>"),
+    ('<mass value="1"/>', '<mass value="inf"/>', "link 'arm' <inertial> <mass value>"),
+]
+
+
+@pytest.mark.parametrize("old, new, words", BAD_URDF_NUMBERS, ids=[new for _, new, _ in BAD_URDF_NUMBERS])
+def test_a_urdf_number_out_of_range_exits_2_with_one_line(work, capfd, tmp_path, old, new, words):
+    """capfd, not capsys: pinocchio's parser writes its complaints to file descriptor 2 itself."""
+    import trimesh
+
+    from depthguard.robots import RobotModel
+
+    trimesh.creation.box(extents=(0.05, 0.05, 0.3)).export(tmp_path / "arm.stl")
+    (tmp_path / "good.urdf").write_text(TINY_URDF)
+    assert RobotModel.from_urdf(tmp_path / "good.urdf").joint_names == ("turn",)  # the URDF but for the edit is good
+    assert old in TINY_URDF
+    urdf = tmp_path / "bad.urdf"
+    urdf.write_text(TINY_URDF.replace(old, new, 1))
+    capfd.readouterr()
+    assert_refused(["distance", "--rig", work["rig"], "--depth", f"front={work['png']}", "--points", work["csv"],
+                    "--robot", urdf, "--joints", "0"], capfd, "bad.urdf", words)
+
+
 def test_edges_of_the_ranges_are_accepted(work, capsys):
     for rho in (config.RHO_MIN, config.RHO_MAX):
         assert len(distance_json(work, capsys, "--rho", repr(rho))) == len(POINTS)

@@ -192,49 +192,70 @@ def _workcell_frames(times):
     return workcell, [(frame.time, frame.joints, frame) for frame in sense_at(workcell, times)]
 
 
-#: metres between the robot's meshes and the person for a frame to be judged: the loop's robot zone (6 cm) beyond
-#: the padded capsules (2 cm padding, and up to 5 cm between a link's mesh and its capsule).
-CLEAR = 0.15
-
-
 @pytest.mark.slow
 def test_the_monitors_detectable_distances_never_exceed_the_truth_to_a_person():
     """Scenario B's person (every part at least 10 cm thick, so a ball of d fits everywhere in them) walking in and
-    reaching for the arm, four cameras: each control point's detectable distance is at most its exact distance to the
-    person (coal) plus 2.5 footprints of the farthest camera + 1 mm (the fused answers' tolerance,
-    tests/test_fusion_workcell.py). Judged while the person keeps CLEAR of the robot's meshes: nearer, the robot
-    zone takes the parts of the person within it for the robot (README, "Several cameras"), here as in the depth
-    grid. Known static solids (floor, walls, pedestal) are given too: what they hide still counts."""
+    reaching for the arm, four cameras: at points round the arm (not on it: with no robot zone the robot's own body
+    is possibly occupied, so the detectable space counts it as an obstacle), the detectable distance is at most the
+    exact distance to the person plus 2.5 footprints of the farthest camera + 1 mm (the fused answers' tolerance,
+    tests/test_fusion_workcell.py). Known static solids (floor, walls, pedestal) are given too: their inside is free,
+    what they hide still counts."""
     import depthguard as dg
-    from depthguard import config
 
     workcell, frames = _workcell_frames([1.3, 1.5, 1.6, 1.7, 1.8, 1.9, 3.3, 3.5])
     robot = workcell.robot
     static = workcell.background_parts()
-    monitor = dg.DistanceMonitor(workcell.rig, rho=1.5, robot=robot, aggregate="min", invalid="neighbors",
-                                 robot_zone=config.LOOP_ROBOT_ZONE, static=static, detection_capability=D)
+    monitor = dg.DistanceMonitor(workcell.rig, rho=1.5, robot=robot, aggregate="min", static=static,
+                                 detection_capability=D)
     focal = min(camera.fx for camera in workcell.rig.cameras.values())
+    rng = np.random.default_rng(5)
     near, checked = 0, 0
     for t, q, frame in frames:
         prepared = monitor.prepare_set(frame.depth, joints=q, now=t)
-        points = robot.control_point_positions(q)
-        reported = prepared.detectable_distances(points)
+        points = rng.uniform([-1.0, -1.0, 0.2], [1.0, 1.0, 1.8], (300, 3))
+        capsules = robot.capsules_world(q)
+        off_robot = np.min([c.distance(points) for c in capsules], axis=0) > 0.1
+        points = points[off_robot]
+        parts = workcell.obstacles_at(t)[workcell.people[0].name]
+        truth = np.min([part.distance(points) for part in parts], axis=0)
+        reported = prepared.detectable_distances(points).distance
         far = max(np.linalg.norm(points - camera.T_world_camera[:3, 3], axis=1).max()
                   for camera in workcell.rig.cameras.values())
         tolerance = 2.5 * far / focal + 1e-3
-        truth = frame.truth.distance
-        if not frame.truth.clearance > CLEAR:
-            continue
-        assert np.all(reported <= truth + tolerance), (t, reported - truth)
-        checked += int(np.sum(np.isfinite(truth)))
-        near += int(np.sum(reported < 0.4))
-    assert checked >= 9 * 6 and near >= 5, (checked, near)  # the person was in the room and near the arm
+        assert np.all(reported <= truth + tolerance), (t, np.max(reported - truth))
+        checked += len(points)
+        near += int(np.sum((truth < 0.4) & (reported > 0.05)))
+    assert checked >= 1000 and near >= 20, (checked, near)  # the person was near points the space saw round
     # the memory's remembered voxels (4 cm) count free on the detectable space's 1 cm voxels, each inside its own
     memory = monitor.memory
     fine = monitor._remembered_voxels(monitor.detectable.box, memory.time)
     i, j, k = np.indices(fine.shape, sparse=True)
     np.testing.assert_array_equal(fine, memory.free_at(memory.time)[i // 4, j // 4, k // 4])
     assert fine.any() and not fine.all()
+
+
+def test_the_monitor_refuses_a_capability_whose_concessions_hide_more_than_iso_13855_covers():
+    """ISO 13855 gives C for detection capabilities up to 70 mm only. The monitor adds to d the band its concessions
+    count free next to a surface (the robot zone with the capsules' padding and gap to the meshes; with
+    invalid="neighbors" the widest object a filled hole hides) and refuses the sum above 70 mm: a forearm 45 mm
+    thick lying in a 60 mm zone would otherwise be left out with C taken for a hand."""
+    import depthguard as dg
+    from depthguard import config
+
+    workcell, _ = _workcell_frames([])
+    robot = workcell.robot
+    for options in (dict(robot=robot, robot_zone=config.LOOP_ROBOT_ZONE), dict(invalid="neighbors"),
+                    dict(robot=robot, robot_zone=0.005)):
+        with pytest.raises(InputError) as caught:
+            dg.DistanceMonitor(workcell.rig, detection_capability=D, **options)
+        assert caught.value.field == "detection_capability" and "70 mm" in str(caught.value), options
+    for d in (0.0701, 0.1, 0.3):
+        with pytest.raises(InputError) as caught:
+            dg.DistanceMonitor(workcell.rig, detection_capability=d)
+        assert caught.value.field == "detection_capability"
+    # Nothing that hides: d itself (no robot zone, holes occupied).
+    monitor = dg.DistanceMonitor(workcell.rig, robot=robot, detection_capability=0.07, detectable_voxel=0.03)
+    assert monitor.hidden_band == 0.0
 
 
 def test_the_monitor_refuses_a_detection_capability_it_cannot_use():
@@ -264,7 +285,7 @@ def test_the_monitor_refuses_a_detection_capability_it_cannot_use():
     assert caught.value.field == "detection_capability"
     # with one: no usable frame gives 0 everywhere; bad points and limits are refused naming them
     prepared = dg.DistanceMonitor(workcell.rig, detection_capability=0.04, detectable_voxel=0.02).prepare_set({})
-    assert np.all(prepared.detectable_distances([[0.0, 0.0, 0.5], [1.0, 0.0, 0.5]]) == 0.0)
+    assert np.all(prepared.detectable_distances([[0.0, 0.0, 0.5], [1.0, 0.0, 0.5]]).distance == 0.0)
     for points in ([[0.0, float("nan"), 0.0]], [[0.0, 0.0]], "points"):
         with pytest.raises(InputError):
             prepared.detectable_distances(points)
@@ -286,6 +307,9 @@ def test_the_robot_counts_free_only_where_it_is_at_every_frames_joints(monkeypat
     moved = q.copy()
     moved[0] += 0.8  # the arm swung about its base between two captures
     monkeypatch.setattr(freespace, "seen_free_voxels", lambda box, *args, **kwargs: np.zeros(box.shape, dtype=bool))
+    # The mechanism only: with the iiwa's capsules (2 cm padding, up to 6.7 cm from its meshes) any robot zone makes
+    # the monitor refuse d = 4 cm (the test above). Here the band is taken as 0 to look at the zone's voxels.
+    monkeypatch.setattr(dg.DistanceMonitor, "_hidden_band", lambda self: (0.0, "none"))
     monitor = dg.DistanceMonitor(workcell.rig, rho=1.2, robot=robot, robot_zone=config.LOOP_ROBOT_ZONE, memory=False,
                                  detection_capability=D, detectable_voxel=0.02)
     names = list(workcell.rig.cameras)

@@ -308,7 +308,7 @@ def test_replay_errors_are_one_line(episode, tmp_path, capsys):
     ]
     for argv, words in cases:
         assert_refused(argv, capsys, *words)
-        assert not (tmp_path / "r.csv").exists() and not (tmp_path / "r.csv.partial").exists()
+        assert not (tmp_path / "r.csv").exists() and not list(tmp_path.glob(".r.csv.*"))  # nor a temporary file
 
 
 # ---------------------------------------------------------------------------- a small hand-made recording
@@ -461,10 +461,10 @@ def test_not_a_recording(tmp_path):
 
 
 def custom_bag(path: Path, rig: dg.Rig, *, encoding="16UC1", fx_offset=0.0, distortion=0.0, skip=(),
-               stamps=(0.0, 0.05, 0.1), extra_camera=None) -> Path:
+               stamps=(0.0, 0.05, 0.1), extra_camera=None, info=None) -> Path:
     """A bag written with rosbags directly (not with write_bag): 'left' and 'right' images stamped ``stamps`` and
-    logged at 0, 0.05, 0.1 s, camera infos, joint states at 0 and 0.2 s; with the given faults. rig.yaml beside
-    it."""
+    logged at 0, 0.05, 0.1 s, camera infos (with the fields in ``info`` changed), joint states at 0 and 0.2 s; with
+    the given faults. rig.yaml beside it."""
     from rosbags.rosbag2 import Writer
     from rosbags.rosbag2.enums import StoragePlugin
     from rosbags.typesys import Stores, get_typestore
@@ -506,12 +506,13 @@ def custom_bag(path: Path, rig: dg.Rig, *, encoding="16UC1", fx_offset=0.0, dist
                     writer.write(images, logged, store.serialize_cdr(message, message.__msgtype__))
                 if infos is not None:
                     k = [camera.fx + fx_offset, 0, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1]
-                    message = T["sensor_msgs/msg/CameraInfo"](
-                        header=header(t), height=camera.height, width=camera.width, distortion_model="plumb_bob",
-                        d=np.array([distortion, 0, 0, 0, 0.0]), k=np.array(k, float), r=np.eye(3).ravel(),
-                        p=np.zeros(12), binning_x=0, binning_y=0,
-                        roi=T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0,
-                                                                  do_rectify=False))
+                    fields = dict(distortion_model="plumb_bob", d=np.array([distortion, 0, 0, 0, 0.0]),
+                                  k=np.array(k, float), r=np.eye(3).ravel(), p=np.zeros(12), binning_x=0, binning_y=0,
+                                  roi=dict(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))
+                    fields.update(info or {})
+                    fields["roi"] = T["sensor_msgs/msg/RegionOfInterest"](**fields["roi"])
+                    message = T["sensor_msgs/msg/CameraInfo"](header=header(t), height=camera.height,
+                                                              width=camera.width, **fields)
                     writer.write(infos, logged, store.serialize_cdr(message, message.__msgtype__))
     dg.save_rig(rig, path / "rig.yaml")
     return path
@@ -524,6 +525,22 @@ def test_a_bag_written_by_another_tool_reads(tmp_path):
     assert [s.frame for s in sets] == [0, 1, 2] and [s.time for s in sets] == [0.0, 0.05, 0.1]
     np.testing.assert_allclose(sets[1].joints["right"], [0.25, -0.5], rtol=0, atol=1e-15)
     assert sets[2].images["left"].data.dtype == np.uint16 and (sets[2].images["left"].data == 1000).all()
+
+
+@pytest.mark.parametrize("info", [dict(distortion_model="rational_polynomial", d=np.zeros(8)),
+                                  dict(distortion_model="", d=np.zeros(0)), dict(binning_x=1, binning_y=1),
+                                  dict(p=np.arange(12.0))],
+                         ids=["rational_polynomial", "no model", "binning 1", "p (of image_rect)"])
+def test_camera_info_fields_that_leave_image_raw_a_pinhole_are_accepted(tmp_path, info):
+    assert len(open_recording(custom_bag(tmp_path / "bag", small_rig(), info=info))) == 3
+
+
+def test_camera_info_roi_of_the_whole_image_is_accepted(tmp_path):
+    rig = small_rig()
+    width, height = rig.cameras["left"].width, rig.cameras["left"].height
+    assert rig.cameras["right"].width == width and rig.cameras["right"].height == height
+    roi = dict(x_offset=0, y_offset=0, height=height, width=width, do_rectify=True)
+    assert len(open_recording(custom_bag(tmp_path / "bag", rig, info=dict(roi=roi)))) == 3
 
 
 def test_float_images_in_metres(tmp_path):
@@ -540,6 +557,18 @@ BAD_BAGS = {
     "no images": (dict(skip=("/left/depth/image_raw",)), ["camera 'left'", "field 'topic'", "image_raw"]),
     "camera_info fx": (dict(fx_offset=2.0), ["camera 'left'", "field 'fx'", "says fx 12.0, the rig 10.0"]),
     "distortion": (dict(distortion=0.1), ["camera 'left'", "field 'd'", "rectified"]),
+    "equidistant without distortion": (dict(info=dict(distortion_model="equidistant", d=np.zeros(4))),
+                                       ["camera 'left'", "field 'distortion_model'", "'equidistant'"]),
+    "unknown distortion model": (dict(info=dict(distortion_model="kannala_brandt")),
+                                 ["camera 'left'", "field 'distortion_model'", "'kannala_brandt'"]),
+    "rectification turned": (dict(info=dict(r=np.array([0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]))),
+                             ["camera 'left'", "field 'r'", "identity"]),
+    "rectification zeros": (dict(info=dict(r=np.zeros(9))), ["camera 'left'", "field 'r'", "identity"]),
+    "binning": (dict(info=dict(binning_y=2)), ["camera 'left'", "field 'binning'"]),
+    "roi offset": (dict(info=dict(roi=dict(x_offset=4, y_offset=0, height=0, width=0, do_rectify=False))),
+                   ["camera 'left'", "field 'roi'"]),
+    "roi smaller": (dict(info=dict(roi=dict(x_offset=0, y_offset=0, height=2, width=2, do_rectify=False))),
+                    ["camera 'left'", "field 'roi'"]),
     "encoding": (dict(encoding="mono16"), ["camera 'left'", "field 'encoding'", "mono16"]),
     "camera not in the rig": (dict(extra_camera="top"), ["camera 'top'", "field 'topic'"]),
     "stamps go back": (dict(stamps=(0.0, 0.1, 0.05)), ["camera 'left'", "field 'time'", "frame 1"]),

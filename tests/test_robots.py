@@ -864,7 +864,10 @@ def test_missing_urdf_is_named(tmp_path):
         (lambda s: s.replace('lower="-0.1" upper="0.2"', 'lower="0.3" upper="0.2"'), "joint 'slide': <limit> needs"),
         (lambda s: s.replace('<child link="carriage"/>', '<child link="nothing"/>'),
          "joint 'slide': its child link 'nothing' is not defined"),
-        (lambda s: s.replace('radius="0.04"', 'radius="-0.04"'), "link 'carriage' <collision>: <sphere radius>"),
+        (lambda s: s.replace('radius="0.04"', 'radius="-0.04"'),
+         r"link 'carriage' <collision> <geometry> <sphere radius> must be a finite number in \[0, 10000\]"),
+        (lambda s: s.replace('radius="0.04"', 'radius="0"'), "link 'carriage' <collision>: <sphere radius> must be "
+                                                             "positive"),
         (lambda s: s.replace('<sphere radius="0.04"/>', '<capsule radius="0.04" length="0.1"/>'),
          "link 'carriage' <collision>: unsupported geometry <capsule>"),
         (lambda s: s.replace('xyz="0.02 0 0"', 'xyz="0.02 zero 0"'), "link 'carriage' <collision> <origin xyz>"),
@@ -878,6 +881,90 @@ def test_malformed_urdfs_are_refused_naming_file_and_element(tmp_path, edit, mes
     with pytest.raises(RobotError, match=message) as info:
         RobotModel.from_urdf(path)
     assert str(path) in str(info.value)
+
+
+# Every number of the URDF: (text of SYNTHETIC, its replacement, what the error names). Before these were checked,
+# an infinite sphere radius was an internal error (exit 3), an infinite cylinder radius or a mesh scale of 0 gave a
+# capsule of the padding alone, a huge origin a NaN capsule, and numbers only pinocchio's parser reads (joint origins,
+# inertias) an error from it printed on standard error.
+BAD_NUMBERS = [
+    ('<origin xyz="0.1 0 0.3"', '<origin xyz="nan 0 0.3"', "joint 'slide' <origin xyz>"),
+    ('<origin xyz="0.1 0 0.3"', '<origin xyz="1e400 0 0.3"', "joint 'slide' <origin xyz>"),
+    ('<origin xyz="0.1 0 0.3"', '<origin xyz="1e300 0 0.3"', "joint 'slide' <origin xyz>"),
+    ('<origin xyz="0.1 0 0.3"', '<origin xyz="10000.5 0 0.3"', "joint 'slide' <origin xyz>"),
+    ('<origin xyz="0.1 0 0.3"', '<origin xyz="0.1 0"', "joint 'slide' <origin xyz>"),
+    ('<origin xyz="0.1 0 0.3"', '<origin xyz="0x1p-3 0 0.3"', "joint 'slide' <origin xyz>"),
+    ('<origin xyz="0.1 0 0.3"', '<origin xyz="1_0 0 0.3"', "joint 'slide' <origin xyz>"),
+    ('rpy="0.2 -0.4 0.1"', 'rpy="inf -0.4 0.1"', "joint 'slide' <origin rpy>"),
+    ('lower="-0.1"', 'lower="-inf"', "joint 'slide' <limit lower>"),
+    ('upper="0.2"', 'upper="1e300"', "joint 'slide' <limit upper>"),
+    ('effort="10" lower', 'effort="nan" lower', "joint 'slide' <limit effort>"),
+    ('effort="10" lower', 'effort="-1" lower', "joint 'slide' <limit effort>"),
+    ('velocity="0.5"', 'velocity="1e400"', "joint 'slide' <limit velocity>"),
+    ('xyz="0.6 0.8 0"', 'xyz="nan 0.8 0"', "joint 'slide' <axis xyz>"),
+    ('<limit effort="10" velocity="1.5"/>', '<limit effort="10" velocity="1.5" lower="nan"/>',
+     "joint 'spin' <limit lower>"),
+    ('<axis xyz="0 1 0"/>', '<axis xyz="0 1 0"/><dynamics damping="nan"/>', "joint 'wrist' <dynamics damping>"),
+    ('<axis xyz="0 1 0"/>', '<axis xyz="0 1 0"/><mimic joint="slide" multiplier="inf"/>',
+     "joint 'wrist' <mimic multiplier>"),
+    ('xyz="0.02 0 0"', 'xyz="1e5 0 0"', "link 'carriage' <collision> <origin xyz>"),
+    ('size="0.3 0.2 0.1"', 'size="1e400 0.2 0.1"', "link 'base' <collision> <geometry> <box size>"),
+    ('size="0.3 0.2 0.1"', 'size="1e300 0.2 0.1"', "link 'base' <collision> <geometry> <box size>"),
+    ('radius="0.05"', 'radius="inf"', "link 'column' <collision> <geometry> <cylinder radius>"),
+    ('length="0.4"', 'length="1e300"', "link 'column' <collision> <geometry> <cylinder length>"),
+    ('radius="0.04"', 'radius="inf"', "link 'carriage' <collision> <geometry> <sphere radius>"),
+    ('radius="0.04"', 'radius="1e300"', "link 'carriage' <collision> <geometry> <sphere radius>"),
+    ('scale="0.5 0.5 0.5"', 'scale="1e400 1 1"', "link 'tool' <collision> <geometry> <mesh scale>"),
+    ('scale="0.5 0.5 0.5"', 'scale="0 0 0"', "link 'tool' <collision>: <mesh scale> must be 3 positive"),
+    ('scale="0.5 0.5 0.5"', 'scale="0.5 0 0.5"', "link 'tool' <collision>: <mesh scale> must be 3 positive"),
+    ('scale="0.5 0.5 0.5"', 'scale="-0.5 0.5 0.5"', "link 'tool' <collision>: <mesh scale> must be 3 positive"),
+    ('scale="0.5 0.5 0.5"', 'scale="1e300 1 1"', "link 'tool': collision mesh reaches"),
+    ('<mass value="1"/>', '<mass value="nan"/>', "link 'base' <inertial> <mass value>"),
+    ('<mass value="1"/>', '<mass value="-1"/>', "link 'base' <inertial> <mass value>"),
+    ('ixx="0.01"', 'ixx="1e400"', "link 'base' <inertial> <inertia ixx>"),
+    ('<link name="flange">', '<link name="flange"><visual><geometry><sphere radius="inf"/></geometry></visual>',
+     "link 'flange' <visual> <geometry> <sphere radius>"),
+]
+
+
+@pytest.mark.parametrize("old, new, words", BAD_NUMBERS, ids=[f"{new} ({words})" for _, new, words in BAD_NUMBERS])
+def test_every_urdf_number_is_finite_in_range_and_named(tmp_path, capfd, old, new, words):
+    path = write_synthetic(tmp_path)
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new, 1))
+    capfd.readouterr()
+    with pytest.raises(RobotError) as info:
+        RobotModel.from_urdf(path)
+    message = str(info.value)
+    assert words in message and str(path) in message and "\n" not in message, message
+    assert "Error:" not in capfd.readouterr().err  # refused before pinocchio's parser could complain on stderr
+
+
+def test_unusual_but_valid_urdf_numbers_are_read_as_pinocchio_reads_them(tmp_path):
+    """Signs, missing digits and exponents, mirrored or flat visuals (depthguard does not use visuals) and angles
+    beyond a turn are accepted, and read the same by depthguard's parser and by pinocchio's."""
+    (tmp_path / "plain").mkdir()
+    (tmp_path / "unusual").mkdir()
+    plain = RobotModel.from_urdf(write_synthetic(tmp_path / "plain"), padding=0.01)
+    path = write_synthetic(tmp_path / "unusual")
+    text = path.read_text()
+    for old, new in [('<origin xyz="0.1 0 0.3" rpy="0.2 -0.4 0.1"/>',
+                      f'<origin xyz="+.1 0. 3E-1" rpy="{0.2 + 4 * math.pi!r} -0.4 0.1"/>'),
+                     ('<collision><origin xyz="0.02 0 0" rpy="0.5 0 0"/>',
+                      '<collision><origin xyz="2e-2 -0 0" rpy=".5 0 0"/>'),
+                     ('<link name="flange">', '<link name="flange"><visual><geometry><mesh filename="nowhere.dae" '
+                                              'scale="-1 1 1"/></geometry></visual><visual><geometry><sphere '
+                                              'radius="0"/></geometry></visual>')]:
+        assert old in text
+        text = text.replace(old, new, 1)
+    path.write_text(text)
+    robot = RobotModel.from_urdf(path, padding=0.01)
+    q = np.array([0.3, 0.1, -0.2])
+    for link, pose in plain.link_poses(q).items():
+        np.testing.assert_allclose(robot.link_poses(q)[link], pose, rtol=0, atol=1e-12, err_msg=link)
+    np.testing.assert_allclose(robot.collision_meshes["carriage"].vertices, plain.collision_meshes["carriage"].vertices,
+                               rtol=0, atol=1e-15)
 
 
 def test_unreadable_mesh_is_named(tmp_path):

@@ -52,8 +52,8 @@ def distance_for_speed(p, v, T_r):
 # ------------------------------------------------------------------------------------------------ C and S_p
 
 
-@pytest.mark.parametrize("d, C", [(0.0, 0.0), (0.014, 0.0), (0.03, 0.128), (0.04, 0.208), (0.05, 0.85),
-                                  (0.3, 0.85)])
+@pytest.mark.parametrize("d, C", [(0.0, 0.0), (0.014, 0.0), (0.03, 0.128), (0.04, 0.208), (0.0401, 0.85),
+                                  (0.05, 0.85), (0.07, 0.85)])
 def test_intrusion_distance(d, C):
     assert intrusion_distance(d) == pytest.approx(C, abs=1e-12)
     assert SSMParams(detection_capability=d).intrusion == pytest.approx(C, abs=1e-12)
@@ -259,7 +259,7 @@ def random_params(rng) -> SSMParams:
     human = rng.uniform(0.0, 2.0)
     return SSMParams(human_speed=human, human_speed_near=human + rng.uniform(0.0, 1.0),
                      near_separation=rng.uniform(0.0, 1.0), stopping_time=rng.uniform(0.01, 1.0),
-                     stopping_distance_extra=rng.uniform(0.0, 0.1), detection_capability=rng.uniform(0.0, 0.08),
+                     stopping_distance_extra=rng.uniform(0.0, 0.1), detection_capability=rng.uniform(0.0, 0.07),
                      sensing_uncertainty=rng.uniform(0.0, 0.1), robot_uncertainty=rng.uniform(0.0, 0.05))
 
 
@@ -525,10 +525,14 @@ def test_bad_params_relations():
     assert info.value.field == "params"
 
 
-@pytest.mark.parametrize("d", [math.nan, -0.01, 2.0, "0.04"])
+@pytest.mark.parametrize("d", [math.nan, -0.01, 2.0, "0.04", 0.0701, 0.3, math.inf])
 def test_bad_detection_capability(d):
+    """ISO 13855 defines C up to d = 70 mm only: a coarser detection capability is refused, never given C = 0.85 m."""
     with pytest.raises(InputError) as info:
         intrusion_distance(d)
+    assert info.value.field == "detection_capability"
+    with pytest.raises(InputError) as info:
+        SSMParams(detection_capability=d)
     assert info.value.field == "detection_capability"
 
 

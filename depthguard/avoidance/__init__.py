@@ -16,6 +16,8 @@ from depthguard.avoidance._ssm import (
     SSMParams,
     SSMVerdict,
     allowed_approach_speed,
+    brake_along_path,
+    check_capability,
     intrusion_distance,
     protective_separation_distance,
 )
@@ -29,6 +31,8 @@ __all__ = [
     "SSMVerdict",
     "SpeedSeparationMonitor",
     "allowed_approach_speed",
+    "brake_along_path",
+    "check_capability",
     "damped_pinv",
     "intrusion_distance",
     "protective_separation_distance",

@@ -30,7 +30,9 @@ import numpy as np
 
 from depthguard import config
 from depthguard.avoidance._limits import JointLimits, reachable
+from depthguard.avoidance._ssm import brake_along_path
 from depthguard.errors import InputError, check_real, real_vector, short_repr
+from depthguard.results import DistanceResult
 
 
 def repulsive_speed(distance, rho: float, v_max: float, alpha: float) -> np.ndarray:
@@ -80,6 +82,12 @@ class AvoidanceParams:
         tolerance: metres taken off every distance (at least 0 is left) before the repulsion and the risk: how much a
             reported distance may exceed the truth (the monitor's robot zone, ``DistanceMonitor(robot_zone=...)``),
             so that the avoidance acts on the nearest the obstacle may truly be. 0 in the papers.
+        on_blind: what a blind answer (no camera could see: ``DistanceResult.is_blind``) makes the command:
+            ``"stop"`` (default): brake to rest along the path (every joint in proportion, within its acceleration
+            limit); ``"papers"``: the papers' rule, the risk f(0) of every point (0.993 with alpha 5), which scales
+            the joint bounds to 0.7 % and lets the arm creep (measured: 2.8 cm/s). The papers' avoidance is a
+            reactive controller, not a protective stop: even with ``"stop"`` it does not bring the approach speed to
+            0 at contact when it sees (f(0) < 1), and nothing it commands is a safety function.
     """
 
     rho: float = config.DEFAULT_RHO
@@ -88,6 +96,7 @@ class AvoidanceParams:
     posture_gain: float = 0.0
     from_surface: bool = True
     tolerance: float = 0.0
+    on_blind: str = "stop"
 
     def __post_init__(self):
         check_real(self.rho, "rho", minimum=0.0, maximum=config.RHO_MAX, above_minimum=True, unit="metres",
@@ -98,6 +107,8 @@ class AvoidanceParams:
         check_real(self.tolerance, "tolerance", minimum=0.0, maximum=config.RHO_MAX, unit="metres", field="tolerance")
         if not isinstance(self.from_surface, bool):
             raise InputError("from_surface must be True or False", field="from_surface")
+        if not isinstance(self.on_blind, str) or self.on_blind not in ("stop", "papers"):
+            raise InputError(f"on_blind must be 'stop' or 'papers', got {self.on_blind!r}", field="on_blind")
 
 
 @dataclass(frozen=True, eq=False)
@@ -176,6 +187,13 @@ class AvoidanceController:
             if len(result.distance) != m:
                 raise InputError(f"the result holds {len(result.distance)} points, the robot has {m} control points",
                                  field="result")
+        if params.on_blind == "stop" and isinstance(result, DistanceResult) and result.is_blind:
+            # Nothing could be seen: brake to rest along the path, every joint in proportion.
+            dq = brake_along_path(dq_previous, limits.acceleration, dt)
+            zero = np.zeros(3)
+            return AvoidanceCommand(dq=dq, low=np.minimum(dq, 0.0), high=np.maximum(dq, 0.0), velocity=zero,
+                                    repulsive=zero, scale=0.0, risk=np.ones(len(result.distance)),
+                                    saturated=np.zeros(n, dtype=bool))
         if jacobians is None:
             jacobians = self.robot.control_point_jacobians(q, check=False)
         distance = np.asarray(result.distance, dtype=np.float64)

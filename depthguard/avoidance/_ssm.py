@@ -56,6 +56,7 @@ from depthguard.config import (  # the SSM defaults (ISO/TS 15066, ISO 13855)
     SSM_HUMAN_SPEED_NEAR,
     SSM_INTRUSION_FINGER,
     SSM_INTRUSION_HAND,
+    SSM_INTRUSION_LIMIT,
     SSM_INTRUSION_REACH,
     SSM_INTRUSION_SLOPE,
     SSM_MAXIMA,
@@ -68,7 +69,7 @@ from depthguard.config import (  # the SSM defaults (ISO/TS 15066, ISO 13855)
     SSM_UNIT_TOLERANCE,
 )
 from depthguard.errors import InputError, check_real
-from depthguard.results import DistanceResult
+from depthguard.results import DetectableResult, DistanceResult
 
 _UNITS = {"human_speed": "m/s", "human_speed_near": "m/s", "stopping_time": "seconds"}
 
@@ -76,9 +77,16 @@ _UNITS = {"human_speed": "m/s", "human_speed_near": "m/s", "stopping_time": "sec
 def intrusion_distance(detection_capability: float) -> float:
     """ISO 13855's intrusion distance C, metres, for sensors of detection capability d (metres, the smallest object
     they are sure to detect): 0 for d <= 14 mm; 8 (d - 14 mm) for 14 mm < d <= 40 mm (0.208 m at 40 mm); 0.85 m (an
-    arm's reach) for d > 40 mm."""
-    d = check_real(detection_capability, "detection_capability", minimum=0.0,
-                   maximum=SSM_MAXIMA["detection_capability"], unit="metres", field="detection_capability")
+    arm's reach) for 40 mm < d <= 70 mm. The standard gives no C for a coarser d (such a sensor detects only the
+    trunk, and needs another formula): d > 70 mm (``SSM_INTRUSION_LIMIT``) is refused with :class:`InputError`
+    naming ``detection_capability``."""
+    if isinstance(detection_capability, (int, float, np.floating, np.integer)) and \
+            not isinstance(detection_capability, bool) and detection_capability > SSM_INTRUSION_LIMIT:
+        raise InputError(f"detection_capability {float(detection_capability):g} m is coarser than ISO 13855's 70 mm: "
+                         "no intrusion distance C is defined for it (the sensors would detect only the trunk)",
+                         field="detection_capability")
+    d = check_real(detection_capability, "detection_capability", minimum=0.0, maximum=SSM_INTRUSION_LIMIT,
+                   unit="metres", field="detection_capability")
     if d <= SSM_INTRUSION_FINGER:
         return 0.0
     if d <= SSM_INTRUSION_HAND:
@@ -132,31 +140,33 @@ class SSMParams:
 # ------------------------------------------------------------------------------------------------- the formula
 
 
-def _fixed_part(params: SSMParams, reaction_time: float, separation) -> np.ndarray:
-    """S_p at v_r = 0: v_h (T_r + T_s) + extra + C + Z_d + Z_r, with v_h chosen by ``separation`` (None: near)."""
+def _fixed_part(params: SSMParams, reaction_time: float, separation, stopping_time=None) -> np.ndarray:
+    """S_p at v_r = 0: v_h (T_r + T_s) + extra + C + Z_d + Z_r, with v_h chosen by ``separation`` (None: near) and
+    T_s = ``stopping_time`` (None: ``params.stopping_time``)."""
     if separation is None:
         v_h = params.human_speed_near
     else:
         v_h = np.where(separation <= params.near_separation, params.human_speed_near, params.human_speed)
-    return (v_h * (reaction_time + params.stopping_time) + params.stopping_distance_extra + params.intrusion
+    t_s = params.stopping_time if stopping_time is None else stopping_time
+    return (v_h * (reaction_time + t_s) + params.stopping_distance_extra + params.intrusion
             + params.sensing_uncertainty + params.robot_uncertainty)
 
 
-def _speed_slope(params: SSMParams, reaction_time: float) -> float:
+def _speed_slope(params: SSMParams, reaction_time: float, stopping_time=None) -> float:
     """dS_p / dv_r, seconds: T_r (travel while reacting) + T_s / 2 (uniform deceleration)."""
-    return reaction_time + 0.5 * params.stopping_time
+    return reaction_time + 0.5 * (params.stopping_time if stopping_time is None else stopping_time)
 
 
-def _protective(params, approach_speed, reaction_time, separation) -> np.ndarray:
-    return _fixed_part(params, reaction_time, separation) + \
-        np.maximum(approach_speed, 0.0) * _speed_slope(params, reaction_time)
+def _protective(params, approach_speed, reaction_time, separation, stopping_time=None) -> np.ndarray:
+    return _fixed_part(params, reaction_time, separation, stopping_time) + \
+        np.maximum(approach_speed, 0.0) * _speed_slope(params, reaction_time, stopping_time)
 
 
-def _allowed(params, distance, reaction_time) -> np.ndarray:
+def _allowed(params, distance, reaction_time, stopping_time=None) -> np.ndarray:
     finite = np.isfinite(distance)
     d = np.where(finite, distance, 0.0)
-    room = d - _fixed_part(params, reaction_time, distance) - SSM_ROUNDING * np.maximum(d, 1.0)
-    return np.where(finite, np.maximum(room, 0.0) / _speed_slope(params, reaction_time), np.inf)
+    room = d - _fixed_part(params, reaction_time, distance, stopping_time) - SSM_ROUNDING * np.maximum(d, 1.0)
+    return np.where(finite, np.maximum(room, 0.0) / _speed_slope(params, reaction_time, stopping_time), np.inf)
 
 
 # ------------------------------------------------------------------------------------------------- validation
@@ -263,6 +273,7 @@ class SSMVerdict:
         limiting: index of the point that set ``factor``, or -1 when the factor is 1.
         certified: (m,) bool, the points that the distance looked ahead to showed approach nothing faster than its
             distance allows (see the module's docstring); they impose nothing. All False without ``ahead``.
+        stopping_time: T_s, seconds, as this verdict took it (:meth:`SpeedSeparationMonitor.stopping_time`).
     """
 
     factor: float
@@ -271,6 +282,7 @@ class SSMVerdict:
     protective_distance: np.ndarray
     limiting: int
     certified: np.ndarray
+    stopping_time: float = 0.0
 
 
 class SpeedSeparationMonitor:
@@ -282,17 +294,56 @@ class SpeedSeparationMonitor:
             within rho, so it counts as rho, with an unknown direction. Choose rho above the protective separation
             distance at the robot's speed, or the robot is slowed whenever it moves. ``inf`` only for distances
             known at any range (such as exact ones).
+        braking: None, or (n,) float64, > 0: the deceleration every joint is sure to reach when stopping, rad/s^2
+            (m/s^2 for a prismatic joint), as the robot model declares it (:class:`~depthguard.avoidance.JointLimits`
+            ``acceleration``). Then T_s is not ``params.stopping_time`` but the time the commanded joint velocities
+            take to stop with every joint braking in proportion, the slowest at its limit: T_s = max_i |dq_i| /
+            braking_i (:meth:`stopping_time`); the robot keeps its path while it brakes, so each point decelerates
+            uniformly and S_s = v_r T_s / 2 holds (a controller that brakes so: ``brake_along_path``) while the
+            Jacobians hold still.
+        reaches: None, or (n,) float64 metres per radian (``RobotModel.joint_reaches``): how fast any point of the
+            robot moves per unit of each joint's velocity, at any configuration. With it, S_s also counts the change
+            of the Jacobians along the braking path: a point travels at most V T_s / 2 with V = sum_i reaches_i
+            |dq_i|, so (V - |v|) T_s / 2 is added (from full speed the iiwa's points travel up to 1.5 times
+            |v| T_s / 2).
     """
 
-    def __init__(self, params: SSMParams | None = None, *, rho: float):
+    def __init__(self, params: SSMParams | None = None, *, rho: float, braking=None, reaches=None):
         self.params = _params(SSMParams() if params is None else params)
         self.rho = check_real(rho, "rho", minimum=0.0, above_minimum=True, unit="metres", field="rho") \
             if not (isinstance(rho, (int, float)) and rho == math.inf) else math.inf
+        self.braking = None
+        if braking is not None:
+            braking = _array(braking, "braking", shape=(None,))
+            if not np.all(braking > 0.0):
+                raise InputError("braking must be decelerations > 0 (rad/s^2 or m/s^2), one per joint",
+                                 field="braking")
+            self.braking = braking
+        self.reaches = None
+        if reaches is not None:
+            reaches = _array(reaches, "reaches", shape=(None,), nonnegative=True)
+            if self.braking is not None and reaches.shape != self.braking.shape:
+                raise InputError(f"reaches has {reaches.shape[0]} joints, braking {self.braking.shape[0]}",
+                                 field="reaches")
+            self.reaches = reaches
 
-    def lookahead_time(self, reaction_time: float) -> float:
+    def stopping_time(self, dq) -> float:
+        """T_s, seconds, for the commanded joint velocities ``dq`` (n,): max_i |dq_i| / braking_i with ``braking``,
+        else ``params.stopping_time``."""
+        if self.braking is None:
+            return self.params.stopping_time
+        dq = np.asarray(dq, dtype=np.float64)
+        if dq.shape != self.braking.shape:
+            raise InputError(f"dq has {dq.shape} joints, braking {self.braking.shape}", field="dq")
+        return float(np.max(np.abs(dq) / self.braking)) if dq.size else 0.0
+
+    def lookahead_time(self, reaction_time: float, dq=None) -> float:
         """T = T_r + T_s / 2, seconds: look ahead to P + T v (v: the point's velocity, m/s) for ``ahead`` of
-        :meth:`speed_factor` (see the module's docstring)."""
-        return _speed_slope(self.params, _reaction_time(reaction_time))
+        :meth:`speed_factor` (see the module's docstring); ``dq``: the command, needed with ``braking``."""
+        if self.braking is not None and dq is None:
+            raise InputError("with braking, T_s depends on the command: pass dq", field="dq")
+        t_s = None if self.braking is None else self.stopping_time(dq)
+        return _speed_slope(self.params, _reaction_time(reaction_time), t_s)
 
     def speed_factor(self, result_or_distances, directions, jacobians, dq, reaction_time: float, *,
                      ahead=None, check: bool = True) -> SSMVerdict:
@@ -333,6 +384,11 @@ class SpeedSeparationMonitor:
                 raise InputError("directions must be None when a DistanceResult is given (its direction is used)",
                                  field="directions")
             distances, directions = result_or_distances.distance, result_or_distances.direction
+        elif isinstance(result_or_distances, DetectableResult):
+            check_capability(params, result_or_distances)
+            distances = result_or_distances.distance
+            if directions is None:
+                directions = np.zeros((len(distances), 3))
         else:
             distances = result_or_distances
         if check:
@@ -357,20 +413,56 @@ class SpeedSeparationMonitor:
         unknown = finite & ~directions.any(axis=1)
         approach = np.where(unknown, np.linalg.norm(velocity, axis=1), approach)
 
-        allowed = _allowed(params, distances, reaction_time)
+        if self.braking is not None and dq.shape != self.braking.shape:
+            raise InputError(f"dq has {dq.shape[0]} joints, braking {self.braking.shape[0]}", field="dq")
+        t_s = self.stopping_time(dq)  # for the unscaled command: k dq stops within k T_s <= T_s
+        allowed = _allowed(params, distances, reaction_time, t_s)
+        speed = np.linalg.norm(velocity, axis=1)
+        # While the robot brakes along its path the Jacobians change: a point travels at most V T_s / 2, V the
+        # bound of every point's speed (reaches), rather than |v| T_s / 2; the difference is added to S_s.
+        curve = np.zeros(len(distances)) if self.reaches is None else \
+            np.maximum(float(self.reaches @ np.abs(dq)) - speed, 0.0) * 0.5 * t_s
         certified = np.zeros(len(distances), dtype=bool)
         if ahead is not None:
             ahead = np.where(np.isfinite(ahead), ahead, self.rho)  # nothing within rho: at least rho
             with np.errstate(invalid="ignore"):  # inf - inf where rho is inf: certified below by the comparison
                 room = ahead - SSM_ROUNDING * np.maximum(ahead, 1.0)
-            speed = np.linalg.norm(velocity, axis=1)
-            certified = np.where(np.isinf(ahead), True, room >= _fixed_part(params, reaction_time, distances)
-                                 + _speed_slope(params, reaction_time) * speed)
+            certified = np.where(np.isinf(ahead), True, room >= _fixed_part(params, reaction_time, distances, t_s)
+                                 + _speed_slope(params, reaction_time, t_s) * speed + curve)
         approaching = finite & (approach > 0.0) & ~certified
-        with np.errstate(divide="ignore", over="ignore"):
-            ratio = np.where(approaching, allowed / np.where(approaching, approach, 1.0), np.inf)
+        with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+            # k approach (T_r + T_s / 2) + k curve <= room, i.e. k <= allowed slope / (slope approach + curve)
+            slope = _speed_slope(params, reaction_time, t_s)
+            ratio = np.where(approaching, allowed * slope / np.where(approaching, approach * slope + curve, 1.0),
+                             np.inf)
         limiting = int(np.argmin(ratio)) if len(ratio) and ratio.min() < 1.0 else -1
         factor = float(ratio[limiting]) if limiting >= 0 else 1.0
-        protective = _protective(params, factor * approach, reaction_time, distances)
+        protective = _protective(params, factor * approach, reaction_time, distances, t_s) + factor * curve
         return SSMVerdict(factor=factor, approach_speed=approach, allowed_speed=allowed,
-                          protective_distance=protective, limiting=limiting, certified=certified)
+                          protective_distance=protective, limiting=limiting, certified=certified,
+                          stopping_time=t_s)
+
+
+def check_capability(params: SSMParams, result: DetectableResult) -> None:
+    """Refuse detectable distances whose effective detection capability (the monitor's d plus the band its
+    concessions can hide, :attr:`DetectableResult.effective_capability`) is not SSM's ``detection_capability``: C
+    is taken for SSM's d, and one smaller than the monitor's would not cover what the monitor leaves out (SPEC
+    section 9: one d). Raises :class:`InputError` naming ``detection_capability``."""
+    if abs(result.effective_capability - params.detection_capability) > 1e-9:
+        raise InputError(f"SSM's detection_capability ({params.detection_capability:g} m) is not the detectable "
+                         f"distances' ({result.capability:g} m + a {result.hidden_band:g} m band the monitor's "
+                         f"concessions can hide = {result.effective_capability:g} m): C must be taken for that one "
+                         "(SSMParams(detection_capability=result.effective_capability))",
+                         field="detection_capability")
+
+
+def brake_along_path(dq, braking, dt: float):
+    """(n,) the joint velocities one control period ``dt`` (seconds) later when the robot brakes from ``dq`` (n,)
+    keeping its path: every joint slows in proportion, the one that needs longest at its deceleration limit
+    (``braking`` (n,), > 0), so that the robot stops after T_s = max_i |dq_i| / braking_i with every point
+    decelerating uniformly (:meth:`SpeedSeparationMonitor.stopping_time`)."""
+    dq = np.asarray(dq, dtype=np.float64)
+    t_s = float(np.max(np.abs(dq) / braking)) if dq.size else 0.0
+    if t_s <= dt:
+        return np.zeros_like(dq)
+    return dq * (1.0 - dt / t_s)

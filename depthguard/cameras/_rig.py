@@ -17,9 +17,11 @@ A ``camera_info`` file (ROS) holds the keys of the ``camera_calibration`` layout
 ``image_height``, ``camera_name``, ``camera_matrix``, ``distortion_model``, ``distortion_coefficients``,
 ``rectification_matrix``, ``projection_matrix``) or of a ``sensor_msgs/CameraInfo`` message (``header``,
 ``height``, ``width``, ``distortion_model``, ``d``, ``k``, ``r``, ``p``, ``binning_x``, ``binning_y``, ``roi``,
-and ROS 1's ``D``, ``K``, ``R``, ``P``); any other key is an error. Binning and a region of interest smaller than the
-image are refused (the intrinsics would not be those of the images), and so are a skewed camera matrix and a
-projection matrix with a stereo baseline.
+and ROS 1's ``D``, ``K``, ``R``, ``P``); any other key is an error. Every field is applied or refused, never
+ignored where it would change the geometry (:func:`load_camera_info` lists them): the intrinsics come from K (images
+not rectified, zero distortion of a model whose zero is the pinhole) or from P (rectified images), and a
+rectification matrix R other than the identity, binning, a region of interest smaller than the image, a skewed
+camera matrix and a projection matrix with a stereo baseline are refused.
 
 Files are read through :mod:`depthguard._files`: regular files only, at most ``config.MAX_TEXT_FILE_BYTES``, YAML
 without anchors, aliases or duplicate keys.
@@ -39,7 +41,7 @@ import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError
 
 from depthguard import config
-from depthguard._files import read_yaml
+from depthguard._files import read_yaml, write_whole
 from depthguard.cameras._noise import NoiseModel
 from depthguard.cameras._pinhole import PinholeCamera
 from depthguard.errors import RigError, check_path, short_repr
@@ -232,10 +234,11 @@ _RigDumper.add_representer(list, _represent_list)
 
 
 def save_rig(rig: Rig, path) -> None:
-    """Write ``rig`` as a YAML file that :func:`load_rig` reads back to an equal rig."""
+    """Write ``rig`` as a YAML file that :func:`load_rig` reads back to an equal rig; written whole or not at all
+    (a process stopped while writing leaves the older file or none, never a rig with a camera cut off)."""
     if not isinstance(rig, Rig):
         raise RigError(f"save_rig needs a Rig, got {type(rig).__name__}")
-    check_path(path, "rig file", RigError).write_text(yaml.dump(rig.to_dict(), Dumper=_RigDumper, sort_keys=False))
+    write_whole(check_path(path, "rig file", RigError), yaml.dump(rig.to_dict(), Dumper=_RigDumper, sort_keys=False))
 
 
 def rig_from_dict(data, base_dir=".") -> Rig:
@@ -454,6 +457,8 @@ _SYNONYMS = {
     "projection_matrix": ("projection_matrix", "p", "P"),
 }
 _FIELD_OF_KEY = {key: field for field, keys in _SYNONYMS.items() for key in keys}
+#: The identity rotation, row-major: the only rectification matrix R accepted (load_camera_info).
+_IDENTITY = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
 
 
 def load_camera_info(path, camera: str | None = None, rectified: bool = False) -> dict:
@@ -464,13 +469,32 @@ def load_camera_info(path, camera: str | None = None, rectified: bool = False) -
     ``sensor_msgs/CameraInfo`` message as YAML (``width``, ``k``, ``d``, ``p``, or ROS 1's ``K``, ``D``, ``P``).
     Other keys are refused, and so is one quantity given under two keys.
 
-    With ``rectified=False`` the intrinsics come from K and the distortion coefficients must all be zero: depthguard
-    never silently ignores distortion. With ``rectified=True`` the images are taken to be rectified (ROS
-    ``image_rect``) and the intrinsics come from the projection matrix P.
+    ``rectified`` says which image the depth images are, as in ROS, and so which matrix holds their intrinsics:
+
+    - ``rectified=False`` (ROS ``image_raw``): K. The distortion coefficients must all be zero and the model one whose
+      zero is the pinhole camera: ``plumb_bob``, ``rational_polynomial`` (or none given). Any other model is refused
+      even with zero coefficients: ``equidistant`` (fisheye) with zero coefficients still maps angles, not their
+      tangents, to pixels, and an unknown model cannot be judged. P describes the rectified image and is not used.
+    - ``rectified=True`` (ROS ``image_rect``): P's fx', fy', cx', cy' (K and the distortion describe the raw image,
+      which rectification has undone; any model is accepted). P must be [fx' 0 cx' 0; 0 fy' cy' 0; 0 0 1 0]: a skew
+      or a stereo baseline (Tx, Ty) is refused, and so is ``roi.do_rectify: true`` (the rectified image would be cut
+      to a rectified region of interest, whose offset depthguard does not compute).
+
+    In both cases:
+
+    - R (rectification matrix), when given, must be the identity within ``config.ROTATION_TOLERANCE`` (a missing R
+      is the identity). A rectified image lies in the camera frame turned by R, and a depth image computed by a
+      stereo pair lies in that rectified frame whatever its topic is called; which frame the rig's T_world_camera
+      is of, the file cannot say, so R is refused rather than applied or ignored (applying it to a camera whose pose
+      was measured in the rectified frame, or ignoring it where the pose is the raw camera's, turns every ray by R).
+    - binning_x, binning_y: 0 or 1 (no binning); more is refused (the intrinsics would be those of the full-size
+      image, not of the binned one).
+    - roi: all zero or the whole image; a smaller region of interest is refused.
+    - header and camera_name are not used.
 
     Returns a dict with width, height (int) and fx, fy, cx, cy (float, pixels). Raises :class:`RigError` naming
     ``camera`` and the field (matrices by their camera_calibration names: camera_matrix, distortion_coefficients,
-    projection_matrix).
+    rectification_matrix, projection_matrix).
     """
     path = check_path(path, "camera_info file", RigError, camera=camera, field="camera_info")
     where = f"camera_info {path}"
@@ -500,6 +524,19 @@ def load_camera_info(path, camera: str | None = None, rectified: bool = False) -
     if roi is not None and (roi.x_offset or roi.y_offset or (roi.width, roi.height) not in ((0, 0), (width, height))):
         raise RigError(f"{where}: a region of interest smaller than the image is not supported ({roi.width}x"
                        f"{roi.height} at {roi.x_offset}, {roi.y_offset})", camera=camera, field="roi")
+    if rectified and roi is not None and roi.do_rectify:
+        raise RigError(f"{where}: roi.do_rectify is true: the rectified image would be cut to a rectified region of "
+                       "interest, whose offset depthguard does not compute; give the whole rectified image and "
+                       "do_rectify: false", camera=camera, field="roi")
+    if values["rectification_matrix"] is not None:
+        R = _matrix(values["rectification_matrix"], 9, f"{where}: needs a 3x3 rectification matrix R", camera,
+                    "rectification_matrix")
+        if max(abs(r - i) for r, i in zip(R, _IDENTITY)) > config.ROTATION_TOLERANCE:
+            raise RigError(f"{where}: rectification matrix R must be the identity, got {R}: depthguard cannot tell "
+                           "whether the rig's T_world_camera is the pose of the raw camera frame or of the rectified "
+                           "frame, which R turns; give fx, fy, cx, cy in the rig entry instead of 'camera_info', "
+                           "with T_world_camera the pose of the depth image's own frame", camera=camera,
+                           field="rectification_matrix")
     if rectified:
         P = _matrix(values["projection_matrix"], 12, f"{where}: 'rectified' needs a 3x4 projection matrix P", camera,
                     "projection_matrix")
@@ -515,6 +552,12 @@ def load_camera_info(path, camera: str | None = None, rectified: bool = False) -
                            camera=camera, field="camera_matrix")
         if values["distortion_coefficients"] is not None:
             _refuse_distortion(values["distortion_coefficients"].data, camera=camera, field="distortion_coefficients")
+        model = info.distortion_model
+        if model not in (None, "") and model not in config.PINHOLE_DISTORTION_MODELS:
+            raise RigError(f"{where}: distortion_model {short_repr(model)} with zero coefficients is not known to be a "
+                           f"pinhole camera (equidistant's is a fisheye); an image that is not rectified is read only "
+                           f"with {' or '.join(config.PINHOLE_DISTORTION_MODELS)}: rectify the images and set "
+                           "'rectified: true' to use P", camera=camera, field="distortion_model")
         fx, fy, cx, cy = K[0], K[4], K[2], K[5]
     return dict(width=width, height=height, fx=fx, fy=fy, cx=cx, cy=cy)
 

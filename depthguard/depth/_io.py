@@ -30,7 +30,7 @@ import numpy.lib.format as npy_format
 from PIL import Image, PngImagePlugin, TiffImagePlugin
 
 from depthguard import config
-from depthguard._files import read_bytes
+from depthguard._files import atomic_write, read_bytes
 from depthguard.errors import DepthguardError, DepthImageError
 
 #: Suffix -> format. Nothing else is read.
@@ -110,19 +110,21 @@ def read_intensity_png(path, camera=None) -> np.ndarray:
 
 
 def write_depth_png(path, depth_u16: np.ndarray) -> None:
-    """Write a (height, width) ``uint16`` depth image as a 16-bit grayscale PNG (ROS ``16UC1``)."""
+    """Write a (height, width) ``uint16`` depth image as a 16-bit grayscale PNG (ROS ``16UC1``), whole or not at
+    all."""
     depth_u16 = np.asarray(depth_u16)
     if depth_u16.dtype != np.uint16 or depth_u16.ndim != 2:
         raise DepthImageError(f"write_depth_png needs a 2-D uint16 array, got {depth_u16.dtype} {depth_u16.shape}",
                               source=str(path))
-    Image.fromarray(depth_u16).save(path, format="PNG")
+    with atomic_write(path, "wb") as f:
+        Image.fromarray(depth_u16).save(f, format="PNG")
 
 
 def write_depth_pgm(path, depth_u16: np.ndarray) -> None:
-    """Write a (height, width) ``uint16`` depth image as a binary 16-bit PGM (big-endian)."""
+    """Write a (height, width) ``uint16`` depth image as a binary 16-bit PGM (big-endian), whole or not at all."""
     depth_u16 = np.asarray(depth_u16, dtype=np.uint16)
     h, w = depth_u16.shape
-    with open(path, "wb") as f:
+    with atomic_write(path, "wb") as f:
         f.write(f"P5\n{w} {h}\n65535\n".encode("ascii"))
         f.write(depth_u16.astype(">u2").tobytes())
 

@@ -46,6 +46,10 @@ class OccupancyImage:
         timestamp: the frame's capture time in seconds, or None.
         invalid_pixels: number of pixels without a valid measurement.
         robot_pixels: number of pixels that show the robot (0 without self-filtering).
+        filled: None, or (height, width) float32 metres: where ``invalid="neighbors"`` filled a hole, the depth up to
+            which the fill counted the pixel's frustum free although nothing was measured there (the fill's start,
+            or the rendered robot where the fill was taken for the robot), 0 elsewhere: the space the concession
+            counted free (SPEC section 11a, flag ``hole_filled``). None when no hole was filled.
     """
 
     camera: PinholeCamera
@@ -59,6 +63,7 @@ class OccupancyImage:
     timestamp: float | None
     invalid_pixels: int
     robot_pixels: int = 0
+    filled: np.ndarray | None = None
 
 
 def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = config.DEFAULT_INVALID,
@@ -125,16 +130,24 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
         far = near if robot_far is None else _robot_image(robot_far, camera, "robot_far")
         _kernels.robot_filter(z_start, invalid_mask, np.float32(invalid_start), near, far, robot_far is not None,
                               float(robot_tolerance), m0, m1, m2, z_end, blind)
+    filled = None
     if invalid == "neighbors" and n_invalid:
+        before = z_start.copy()
         _kernels.fill_small_holes(depth.data, float(depth.depth_scale), invalid_mask, int(hole_pixels), m0, m1, m2,
                                   z_start, z_end, blind, np.empty((h, w), dtype=np.uint8),
                                   np.empty(h * w, dtype=np.int64))
+        changed = (z_start != before) & (invalid_mask != 0)
+        if changed.any():  # a hole filled from the robot is free up to the robot (z_start inf, blind there)
+            filled = np.where(changed, np.where(np.isfinite(z_start), z_start, blind), np.float32(0.0))
+            filled = filled.astype(np.float32)
         if robot_near is not None:
             # A hole's fill stands for the measurement the pixel lost, and is self-filtered as one: a fill from a
             # surface beside the robot (the pedestal round its base) that lies behind the robot's front along a
             # pixel the robot covers shows the robot there, not a surface inside it.
             _kernels.robot_filter_fills(z_start, invalid_mask, np.float32(invalid_start), near, far,
                                         robot_far is not None, float(robot_tolerance), m0, m1, m2, z_end, blind)
+            if filled is not None:  # a fill taken for the robot counts its pixel free up to the robot
+                filled = np.where((filled > 0) & ~np.isfinite(z_start), blind, filled).astype(np.float32)
     robot_pixels = 0 if robot_near is None else int(np.count_nonzero(np.isfinite(blind)))
     block = config.BLOCK_SIZE
     shape = ((h + block - 1) // block, (w + block - 1) // block)
@@ -143,11 +156,36 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
     blind_block_min = np.full(shape, np.inf, dtype=np.float32)
     if robot_pixels:
         _kernels.block_minimum(blind, block, blind_block_min)
-    for array in (z_start, z_end, blind, invalid_mask, block_min, blind_block_min):
+    for array in (z_start, z_end, blind, invalid_mask, block_min, blind_block_min) + \
+            (() if filled is None else (filled,)):
         array.setflags(write=False)
     return OccupancyImage(camera=camera, z_start=z_start, z_end=z_end, blind=blind, invalid=invalid_mask,
                           block_min=block_min, blind_block_min=blind_block_min, invalid_policy=invalid,
-                          timestamp=depth.timestamp, invalid_pixels=n_invalid, robot_pixels=robot_pixels)
+                          timestamp=depth.timestamp, invalid_pixels=n_invalid, robot_pixels=robot_pixels,
+                          filled=filled)
+
+
+def filled_space(occupancy: OccupancyImage) -> OccupancyImage | None:
+    """The space ``occupancy``'s filled holes counted free (:attr:`OccupancyImage.filled`) as an occupancy image of
+    the same camera whose only segments are that space: each filled pixel's frustum from the camera's minimum range
+    up to where its fill starts. Distances to it (``single_camera_distances``, ``unseen="free"``) say how near the
+    concession comes to a point. None when no hole was filled."""
+    if occupancy.filled is None:
+        return None
+    camera = occupancy.camera
+    filled = occupancy.filled > 0
+    z_start = np.where(filled, np.float32(camera.depth_range[0]), np.float32(np.inf)).astype(np.float32)
+    z_end = np.where(filled, occupancy.filled, np.float32(np.inf)).astype(np.float32)
+    block = config.BLOCK_SIZE
+    h, w = camera.shape
+    shape = ((h + block - 1) // block, (w + block - 1) // block)
+    block_min = np.empty(shape, dtype=np.float32)
+    _kernels.block_minimum(z_start, block, block_min)
+    none = np.full((h, w), np.inf, dtype=np.float32)
+    return OccupancyImage(camera=camera, z_start=z_start, z_end=z_end, blind=none,
+                          invalid=np.zeros((h, w), dtype=np.uint8), block_min=block_min,
+                          blind_block_min=np.full(shape, np.inf, dtype=np.float32), invalid_policy="occupied",
+                          timestamp=occupancy.timestamp, invalid_pixels=0)
 
 
 def _robot_image(image, camera: PinholeCamera, field: str) -> np.ndarray:

@@ -41,7 +41,6 @@ import io
 import json
 import math
 import numbers
-import os
 import re
 import zipfile
 from dataclasses import dataclass
@@ -50,7 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from depthguard import config
-from depthguard._files import read_bytes
+from depthguard._files import atomic_write, read_bytes
 from depthguard.cameras import Rig
 from depthguard.depth._io import npy_header
 from depthguard.errors import DepthguardError, InputError, short_repr
@@ -313,15 +312,8 @@ def save_map(grid: DepthGridMap, path) -> None:
     offsets = np.ascontiguousarray(grid.offsets, dtype="<f8")
     fields["sha256"] = _digest(fields, corners, offsets)
     header = np.frombuffer(json.dumps(fields).encode("utf-8"), dtype=np.uint8)
-    path = Path(path)
-    partial = path.with_name(f".{path.name}.{os.getpid()}.partial")
-    try:
-        with open(partial, "wb") as f:
-            np.savez(f, header=header, corners=corners, offsets=offsets)
-        os.replace(partial, path)
-    finally:
-        if partial.exists():
-            partial.unlink()
+    with atomic_write(path, "wb") as f:
+        np.savez(f, header=header, corners=corners, offsets=offsets)
 
 
 def load_map(path, rig: Rig | None = None) -> DepthGridMap:

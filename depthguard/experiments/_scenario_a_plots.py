@@ -12,6 +12,7 @@ import numpy as np  # noqa: E402
 from matplotlib.ticker import FuncFormatter  # noqa: E402
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: E402
 
+from depthguard._files import atomic_write  # noqa: E402
 from depthguard.experiments import scenario_a as sa  # noqa: E402
 
 COLORS = {"point cloud": "tab:orange", "min": "tab:blue", "mean": "tab:green", "hybrid": "tab:purple",
@@ -37,7 +38,8 @@ def write_all(out, scene, points, truth, truth_direction, exact, noisy, medians,
 
 def _save(fig, out, name) -> str:
     path = os.path.join(out, f"scenario_a_{name}.png")
-    fig.savefig(path, dpi=110)
+    with atomic_write(path, "wb") as f:
+        fig.savefig(f, format="png", dpi=110)
     plt.close(fig)
     return path
 

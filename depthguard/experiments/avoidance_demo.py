@@ -56,6 +56,8 @@ from pathlib import Path
 
 import numpy as np
 
+from depthguard.errors import InputError
+
 SCENE = "scenario_b_reach.yaml"
 #: The camera layouts by number of cameras: the scene's own two, or issue 8's four (its reference layout; neither
 #: reached issue 8's usefulness goal, and the issue asks for four then).
@@ -151,11 +153,21 @@ def summarize(log, dt: float) -> dict:
         "simulated_s": duration,
         "wall_s": log.wall_seconds,
         "frames": log.frames,
-        "per_control_point": {
-            "true_min_m": np.min(log.truth, axis=0).tolist(),
-            "reported_min_m": [float(v) if np.isfinite(v) else None for v in np.min(reported, axis=0)],
-        },
+        "per_control_point": {"true_min_m": np.min(log.truth, axis=0).tolist()},
+        "per_link": surface_minima(log, reported),
     }
+
+
+def surface_minima(log, reported) -> dict:
+    """Link (or the end-effector's control point) -> the smallest reported distance from its surface over the run,
+    metres (the distance from each of the loop's points minus its sphere's radius; None: nothing within rho)."""
+    names = log.robot.control_point_names
+    surface = np.min(reported, axis=0) - log.robot.control_point_radii
+    out = {}
+    for name, value in zip(names, surface):
+        link = name.split("/")[0]
+        out[link] = min(out.get(link, np.inf), float(value))
+    return {link: (max(v, 0.0) if np.isfinite(v) else None) for link, v in out.items()}
 
 
 def resumed_cell(figures: dict) -> str:
@@ -175,6 +187,8 @@ def plot(log, mode_summary: dict, path: Path, control_points, rho: float) -> Non
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from depthguard._files import atomic_write
 
     fig, axes = plt.subplots(3, 1, figsize=(9, 10), gridspec_kw={"height_ratios": [1.2, 1, 0.8]})
     ax = axes[0]
@@ -203,7 +217,8 @@ def plot(log, mode_summary: dict, path: Path, control_points, rho: float) -> Non
     ax.set_xlabel("time (s)")
     ax.legend(loc="best", fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    with atomic_write(path, "wb") as f:
+        fig.savefig(f, format=Path(path).suffix[1:].lower() or None, dpi=90)  # as savefig(path) picks it
     plt.close(fig)
 
 
@@ -225,6 +240,7 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
     """Run the scene once per mode, print a table, write the plots and summary.json into ``out`` (and, with
     ``bag``, the ``avoid`` run as a recording in ``out/bag_avoid``, replacing an earlier one). ``ssm_cell``: mode
     ``ssm`` in :data:`SSM_LAYOUT` (else in the others' layout)."""
+    from depthguard._files import write_whole
     from depthguard.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
 
     modes = list(MODES) if not modes else list(dict.fromkeys(modes))
@@ -248,11 +264,18 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
     print()
     rho = {mode: settings.ssm_rho if mode == "ssm" else settings.avoidance.rho for mode in modes}
     results, logs, bags = {}, {}, []
+    refused = {}
     for mode in modes:
         record = bag and mode == BAG_MODE
         cell, cell_settings = (ssm_workcell, ssm_settings) if mode == "ssm" and ssm_cell else (workcell, settings)
-        log = run_closed_loop(cell, mode, duration=span, settings=cell_settings, progress=progress,
-                              keep_frames=record)
+        try:
+            log = run_closed_loop(cell, mode, duration=span, settings=cell_settings, progress=progress,
+                                  keep_frames=record)
+        except InputError as error:
+            if error.field != "detection_capability":
+                raise
+            refused[mode] = str(error)  # SSM that cannot be sound in this cell: said, not run
+            continue
         if record:
             import shutil
 
@@ -266,11 +289,12 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
         logs[mode] = log
         results[mode] = summarize(log, dt)
         results[mode]["cameras"] = list(cell.rig.cameras)
-    for mode in modes:
+    for mode in results:
         plot(logs[mode], results[mode], out / f"demo_{mode}.png", workcell.robot.control_point_names, rho[mode])
     summary = {"scene": SCENE, "cameras": cameras, "control_hz": settings.control_rate, "camera_hz": workcell.rate,
-               "control_points": list(workcell.robot.control_point_names), "modes": results}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+               "control_points": list(workcell.robot.control_point_names), "modes": results,
+               "refused": refused}
+    write_whole(out / "summary.json", json.dumps(summary, indent=2))
     print(f"\n{'mode':6s} {'collisions':>10s} {'clearance m':>12s} {'true min m':>11s} {'reacting s':>11s} "
           f"{'task error end m':>17s} {'resumed after s':>16s} {'oscillation /s':>15s} {'loop Hz':>8s} "
           f"{'step Hz':>8s}")
@@ -280,18 +304,22 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
               f"{r['time_reacting_s']:11.2f} {r['task_error_after_m']:17.3f} {resumed_cell(r)} "
               f"{r['oscillation_per_s']:15.2f} "
               f"{r['loop_hz']:8.0f} {r['step_hz']:8.0f}")
-    print("\nper control point, smallest true / reported distance over the run (m; '-': nothing within rho; the two\n"
-          "smallest need not fall at the same moment: each distance comes from frames 1/30 to 2/30 s old):")
+    for mode, reason in refused.items():
+        print(f"{mode:6s} refused: {reason}")
+    ran = list(results)
+    print("\nper control point, smallest true distance over the run (m; the control points' centres to the obstacles):")
     names = list(workcell.robot.control_point_names)
-    print(f"  {'point':14s} " + " ".join(f"{mode:>15s}" for mode in modes))
+    print(f"  {'point':14s} " + " ".join(f"{mode:>10s}" for mode in ran))
     for j, name in enumerate(names):
-        cells = []
-        for mode in modes:
-            per = results[mode]["per_control_point"]
-            rep = per["reported_min_m"][j]
-            cells.append(f"{per['true_min_m'][j]:.3f} / {'-' if rep is None else f'{rep:.3f}'}")
-        print(f"  {name:14s} " + " ".join(f"{c:>15s}" for c in cells))
-    print(f"\nPlots: {', '.join(str(out / f'demo_{m}.png') for m in modes)}; numbers: {out / 'summary.json'}")
+        print(f"  {name:14s} " + " ".join(f"{results[mode]['per_control_point']['true_min_m'][j]:10.3f}"
+                                          for mode in ran))
+    print("per link, smallest reported distance from its surface (m; the loop measures from spheres covering every "
+          "moving\nlink, none more than Z_r beyond it; '-': nothing within rho; from frames 1/30 to 2/30 s old):")
+    links = list(dict.fromkeys(link for mode in ran for link in results[mode]["per_link"]))
+    for link in links:
+        cells = [results[mode]["per_link"].get(link) for mode in ran]
+        print(f"  {link:18s} " + " ".join(f"{'-' if v is None else f'{v:.3f}':>10s}" for v in cells))
+    print(f"\nPlots: {', '.join(str(out / f'demo_{m}.png') for m in results)}; numbers: {out / 'summary.json'}")
     for folder in bags:
         print(f"Recording (open the .mcap file in Foxglove or rerun; `depthguard replay {folder} --out RESULTS.csv` "
               f"runs it through the monitor again): {folder}")

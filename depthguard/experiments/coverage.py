@@ -58,6 +58,7 @@ import numpy as np
 
 import depthguard as dg
 from depthguard import config
+from depthguard._files import atomic_write, write_whole
 from depthguard.errors import InputError, check_real
 
 #: Sample spacing, metres; also the rho of the monitor queried at the samples.
@@ -440,7 +441,8 @@ def plot(result: Coverage, path, poses: int = PLOTTED_POSES) -> Path:
                  y=1.0 - 0.1 / fig.get_figheight(), fontsize=11)
     fig.tight_layout(rect=(0, 0, 1, 1.0 - 0.75 / fig.get_figheight()))
     path = Path(path)
-    fig.savefig(path, dpi=80)
+    with atomic_write(path, "wb") as f:
+        fig.savefig(f, format=Path(path).suffix[1:].lower() or None, dpi=80)  # as savefig(path) picks it
     plt.close(fig)
     return path
 
@@ -482,6 +484,6 @@ def main(rig, robot="iiwa", trajectory=None, rho: float = config.DEFAULT_RHO, ou
     out.mkdir(parents=True, exist_ok=True)
     picture = plot(result, out / "coverage.png")
     numbers["picture"] = str(picture)
-    (out / "coverage.json").write_text(json.dumps(numbers, indent=2))
+    write_whole(out / "coverage.json", json.dumps(numbers, indent=2))
     print(f"{len(result.poses)} poses in {result.seconds:.1f} s; wrote {out / 'coverage.json'} and {picture}")
     return 0

@@ -34,6 +34,7 @@ import numpy as np
 from tqdm import tqdm
 
 import depthguard as dg
+from depthguard._files import atomic_write, write_whole
 from depthguard.errors import InputError
 from depthguard.experiments import workcell as single
 
@@ -277,7 +278,8 @@ def plot(episode: Episode, out: Path) -> list[Path]:
                      "(distances above 0.6 m and 'nothing within rho' drawn at the top or not at all)")
         fig.tight_layout()
         path = out / f"{episode.layout}_{kind}.png"
-        fig.savefig(path, dpi=80)
+        with atomic_write(path, "wb") as f:
+            fig.savefig(f, format="png", dpi=80)
         plt.close(fig)
         written.append(path)
     return written
@@ -318,7 +320,7 @@ def main(out="out/fusion-workcell", duration: float | None = None, scenes=None, 
         episodes.append(episode)
         plots += plot(episode, out)
     result = summary(episodes)
-    (out / "summary.json").write_text(json.dumps(result, indent=2))
+    write_whole(out / "summary.json", json.dumps(result, indent=2))
     for layout, figures in result["layouts"].items():
         eyes = "; ".join(f"{c} at ({', '.join(f'{x:g}' for x in eye)})" for c, eye in figures["eyes"].items())
         print(f"{layout}: {eyes}; {figures['frames']} frames in {figures['seconds']:.1f} s")

@@ -43,6 +43,7 @@ import numpy as np
 from scipy import ndimage
 
 import depthguard as dg
+from depthguard._files import atomic_write, write_whole
 from depthguard.depthgrid import DepthGridMap, build_map
 from depthguard.transforms import quaternion_to_matrix
 
@@ -525,7 +526,7 @@ def main(out: str = "out/real-room", folder=None, samples: int = 4000, seed: int
     summary, arrays = run(folder, samples=samples, seed=seed)
     files = _plots(out, summary, arrays)
     summary["files"] = sorted([p.name for p in files] + ["summary.json"])
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    write_whole(out / "summary.json", json.dumps(summary, indent=2))
     _print_summary(summary, out)
     return 0
 
@@ -602,7 +603,8 @@ def _plots(out: Path, s: dict, arrays: dict) -> list[Path]:
         ax.set_axis_off()
     fig.colorbar(image, ax=axes, shrink=0.8, label="depth [m] (black: no measurement)")
     path = out / "depth_images.png"
-    fig.savefig(path, dpi=90)
+    with atomic_write(path, "wb") as f:
+        fig.savefig(f, format="png", dpi=90)
     plt.close(fig)
     written.append(path)
 
@@ -630,7 +632,8 @@ def _plots(out: Path, s: dict, arrays: dict) -> list[Path]:
     right.grid(alpha=0.3)
     fig.tight_layout()
     path = out / "calibration_error.png"
-    fig.savefig(path, dpi=90)
+    with atomic_write(path, "wb") as f:
+        fig.savefig(f, format="png", dpi=90)
     plt.close(fig)
     written.append(path)
 
@@ -658,7 +661,8 @@ def _plots(out: Path, s: dict, arrays: dict) -> list[Path]:
         ax.grid(alpha=0.3)
     fig.tight_layout()
     path = out / "margin_sweep.png"
-    fig.savefig(path, dpi=90)
+    with atomic_write(path, "wb") as f:
+        fig.savefig(f, format="png", dpi=90)
     plt.close(fig)
     written.append(path)
     return written

@@ -32,6 +32,7 @@ import numpy as np
 
 import depthguard as dg
 from depthguard import baselines
+from depthguard._files import write_whole
 from depthguard.depthspace._distance import check_points
 from depthguard.scenes import Box, render_depth, scene_distance
 from depthguard.transforms import look_at
@@ -390,8 +391,7 @@ def main(out: str = "out/scenario-a", repeats: int = 20) -> int:
         "paper_timing_seconds": PAPER_TIMES,
         "files": sorted(os.path.basename(f) for f in files),
     }
-    with open(os.path.join(out, "summary.json"), "w") as fh:
-        json.dump(summary, fh, indent=2)
+    write_whole(os.path.join(out, "summary.json"), json.dumps(summary, indent=2))
 
     _print_summary(out, faces, exact_facts, noisy_facts, table, repeats, len(points), time.perf_counter() - started)
     return 0

@@ -26,6 +26,7 @@ import numpy as np
 from tqdm import tqdm
 
 import depthguard as dg
+from depthguard._files import atomic_write, write_whole
 from depthguard.scenes import scene_distance
 
 RHO = 0.4
@@ -179,7 +180,8 @@ def plot(episode: Episode, out: Path) -> list[Path]:
                      "shading: walk, reach, carry, shadow, hidden hand)")
         fig.tight_layout()
         path = out / f"workcell_{camera}.png"
-        fig.savefig(path, dpi=90)
+        with atomic_write(path, "wb") as f:
+            fig.savefig(f, format="png", dpi=90)
         plt.close(fig)
         written.append(path)
 
@@ -199,7 +201,8 @@ def plot(episode: Episode, out: Path) -> list[Path]:
     ax.set_title("Scenario B: the robot's smallest distance, truth and each single camera")
     fig.tight_layout()
     path = out / "workcell_overview.png"
-    fig.savefig(path, dpi=100)
+    with atomic_write(path, "wb") as f:
+        fig.savefig(f, format="png", dpi=100)
     plt.close(fig)
     written.append(path)
     return written
@@ -217,7 +220,7 @@ def main(out="out/workcell", duration: float | None = None, progress: bool = Tru
     episode = run(duration=duration, progress=progress)
     result = summary(episode)
     plots = plot(episode, out)
-    (out / "summary.json").write_text(json.dumps(result, indent=2))
+    write_whole(out / "summary.json", json.dumps(result, indent=2))
     print(f"\n{result['frames']} frames in {result['seconds']:.1f} s "
           f"({result['frames'] / result['seconds']:.1f} frames/s: simulation of both cameras, self-filtering and "
           "queries)\n")

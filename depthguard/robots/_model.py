@@ -63,11 +63,15 @@ class ControlPoint:
         name: unique among the robot's control points.
         link: the URDF link it is fixed to.
         offset: (3,) float64, metres, link frame: its position relative to the link's origin.
+        radius: metres, or None: the sphere round the point that stands for the robot there (a distance from the
+            point minus it is a distance from the robot's surface); None: the radius of its link's capsule
+            (:attr:`RobotModel.control_point_radii`).
     """
 
     name: str
     link: str
     offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    radius: float | None = None
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name:
@@ -85,6 +89,10 @@ class ControlPoint:
                              f"got {self.offset!r}", field="control_points")
         offset.setflags(write=False)
         object.__setattr__(self, "offset", offset)
+        if self.radius is not None and (isinstance(self.radius, bool) or not isinstance(self.radius, numbers.Real)
+                                        or not 0.0 <= float(self.radius) <= config.COORDINATE_LIMIT):
+            raise RobotError(f"control point {self.name!r}: radius must be a number of metres >= 0, got "
+                             f"{self.radius!r}", field="control_points")
 
 
 class _Kinematics:
@@ -377,11 +385,39 @@ class RobotModel:
 
     @property
     def control_point_radii(self) -> np.ndarray:
-        """(m,) float64 metres, each control point's link capsule radius (padding included; 0 for a link without
-        geometry): a distance from the control point minus it is the distance from the link's surface there (the
-        point taken as the centre of a sphere of that radius)."""
+        """(m,) float64 metres, each control point's radius: its own (``ControlPoint.radius``), else its link capsule's
+        (padding included; 0 for a link without geometry): a distance from the control point minus it is the
+        distance from the link's surface there (the point taken as the centre of a sphere of that radius)."""
         radii = {capsule.link: capsule.radius for capsule in self.capsules}
-        return np.array([radii.get(point.link, 0.0) for point in self.control_points], dtype=np.float64)
+        return np.array([point.radius if point.radius is not None else radii.get(point.link, 0.0)
+                         for point in self.control_points], dtype=np.float64)
+
+    def with_surface_points(self, tolerance: float = config.SSM_ROBOT_UNCERTAINTY) -> "RobotModel":
+        """The same robot with control points whose spheres cover every moving link's whole padded capsule, each no
+        more than ``tolerance`` metres (> 0) beyond it, and the end-effector's control point kept (last, the
+        end-effector): SPEC section 9, "distances from the robot's surface".
+
+        Along each moving link's capsule axis (length L, radius r, padding included), k >= 2 points evenly spaced
+        (k = 1 for a ball), spacing h = L / (k - 1) <= 2 sqrt((r + t)^2 - r^2), each the centre of a sphere of
+        radius sqrt(r^2 + (h / 2)^2) <= r + t: every point of the capsule is within r of its axis, and every point
+        of the axis within h / 2 of a centre. So a distance from a point minus its radius is at most the distance
+        from the capsule, and at least that minus t. Names ``<link>/<i>``."""
+        tolerance = float(check_real_positive(tolerance, "tolerance"))
+        points = []
+        for capsule, moves in zip(self.capsules, self.moving_links()):
+            if not moves:
+                continue
+            p0, p1, r = np.asarray(capsule.p0), np.asarray(capsule.p1), float(capsule.radius)
+            length = float(np.linalg.norm(p1 - p0))
+            spacing = 2.0 * math.sqrt((r + tolerance) ** 2 - r * r)
+            k = 1 if length == 0.0 else max(2, int(math.ceil(length / spacing)) + 1)
+            h = 0.0 if k == 1 else length / (k - 1)
+            radius = math.sqrt(r * r + 0.25 * h * h)
+            for i in range(k):
+                offset = p0 if k == 1 else p0 + (p1 - p0) * (i / (k - 1))
+                points.append(ControlPoint(f"{capsule.link}/{i}", capsule.link, offset, radius))
+        points.append(next(p for p in self.control_points if p.name == self.end_effector))
+        return self.with_control_points(points, end_effector=self.end_effector)
 
     @property
     def end_effector_index(self) -> int:
@@ -518,6 +554,56 @@ class RobotModel:
         data = self._forward(q, check)
         return self._capsule_anchors.positions(data, self.T_world_base).reshape(-1, 2, 3)
 
+    def capsule_gap(self) -> float:
+        """Metres: how thick a layer between a link's capsule and the robot's collision meshes can be, so how thick an
+        object lying on the robot inside its capsules may be (the padding not counted: add ``padding``). Measured
+        once per model (a few seconds, then cached): at ``config.CAPSULE_GAP_CONFIGURATIONS`` configurations (all
+        zeros, then seeded random ones within the limits), the largest distance from a sample of a capsule's
+        surface, its radius less the padding, to the nearest sample of every link's mesh surface (the meshes of
+        the neighbouring links close a link's open ends), plus the spacing of those samples. A monitor that counts
+        the capsules as the robot can hide an object of that thickness plus the padding (and its robot zone) on
+        the robot (``DistanceMonitor``'s hidden band)."""
+        key = (str(self.urdf_path), self.padding, tuple(map(tuple, self.T_world_base)))
+        with _GAP_LOCK:
+            if key not in _CAPSULE_GAPS:
+                _CAPSULE_GAPS[key] = self._measure_capsule_gap()
+            return _CAPSULE_GAPS[key]
+
+    def _measure_capsule_gap(self) -> float:
+        from scipy.spatial import cKDTree
+
+        rng = np.random.default_rng(config.CAPSULE_GAP_SEED)
+        low = np.where(np.isfinite(self.lower), self.lower, -math.pi)
+        high = np.where(np.isfinite(self.upper), self.upper, math.pi)
+        configurations = [np.clip(np.zeros(self.n_joints), low, high)] + \
+            [rng.uniform(low, high) for _ in range(config.CAPSULE_GAP_CONFIGURATIONS - 1)]
+        moving = self.moving_links()
+        gap = 0.0
+        for q in configurations:
+            poses = self.link_poses(q)
+            meshes = []
+            for link, mesh in self.collision_meshes.items():
+                placed = mesh.copy()
+                placed.apply_transform(poses[link])
+                meshes.append(placed)
+            union = trimesh.util.concatenate(meshes)
+            count = config.CAPSULE_GAP_MESH_SAMPLES
+            samples, _ = trimesh.sample.sample_surface(union, count, seed=int(rng.integers(2**31)))
+            spacing = math.sqrt(float(union.area) / count)  # the samples' typical spacing: added to the gap
+            tree = cKDTree(samples)
+            for capsule, is_moving in zip(self.capsules_world(q, check=False), moving):
+                if not is_moving:
+                    continue
+                p0, p1 = np.array(capsule.p0), np.array(capsule.p1)
+                radius = max(capsule.radius - self.padding, 0.0)
+                n = config.CAPSULE_GAP_SURFACE_SAMPLES
+                directions = rng.normal(size=(n, 3))
+                directions /= np.linalg.norm(directions, axis=1)[:, None]
+                points = p0 + rng.uniform(0.0, 1.0, (n, 1)) * (p1 - p0) + radius * directions
+                distance, _ = tree.query(points)
+                gap = max(gap, float(distance.max()) + spacing)
+        return gap
+
     def moving_links(self) -> np.ndarray:
         """(m,) bool per link of :attr:`link_names`: whether a movable joint moves it (False for the base and links
         fixed to it)."""
@@ -557,6 +643,17 @@ class RobotModel:
     def __repr__(self) -> str:
         return (f"RobotModel(name={self.name!r}, joints={len(self.joint_names)}, links with geometry="
                 f"{len(self.link_names)}, control points={len(self.control_points)}, padding={self.padding:g})")
+
+
+def check_real_positive(value, name: str) -> float:
+    """``value`` as a float if it is a finite real number > 0, else :class:`InputError` naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0.0 < float(value) < math.inf:
+        raise InputError(f"{name} must be a finite number > 0 (metres), got {short_repr(value)}", field=name)
+    return float(value)
+
+
+_CAPSULE_GAPS: dict = {}  # (urdf, padding, base) -> metres, RobotModel.capsule_gap
+_GAP_LOCK = threading.Lock()
 
 
 def _control_point(item) -> ControlPoint:

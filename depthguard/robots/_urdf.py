@@ -21,6 +21,18 @@ What a URDF may read (a URDF is input from outside, like a rig file):
 - The XML may not have a document type declaration (``<!DOCTYPE ...>``): no DTD, no entity declarations, so no
   entity expansion (internal or external) and no file or network access while parsing. The same bytes go to
   pinocchio, which therefore builds its model from exactly the text that was checked.
+
+Every number in the URDF that pinocchio's parser (urdfdom) or depthguard reads is checked once, before either reads
+it (``_NUMBERS``): a plain decimal number (``nan``, ``inf``, hexadecimal and ``1_000`` are refused: Python and urdfdom
+read them differently), finite (``1e400`` is refused), and within its range: positions (``<origin xyz>``) and joint
+limits within ``config.COORDINATE_LIMIT``, as a rig's coordinates; box sizes, cylinder radii and lengths and sphere
+radii in [0, ``config.COORDINATE_LIMIT``]; effort and mass >= 0; angles (``rpy``), axes, velocities, inertias and the
+rest finite. Where depthguard uses a number it also checks what that use needs: a collision shape's sizes and mesh
+scale components > 0 (a negative scale mirrors the mesh, which flips its faces' winding, and is refused; a
+``<visual>``, which depthguard does not use, may be flat or mirrored), a movable joint's unit axis, positive velocity
+limit and ordered position limits, and a link's collision geometry, scaled and placed, within
+``config.COORDINATE_LIMIT`` of the link's origin on every axis. Each refusal is a :class:`RobotError` naming the
+file, the link or joint, the element and the attribute.
 """
 
 from __future__ import annotations
@@ -28,6 +40,7 @@ from __future__ import annotations
 import io
 import math
 import os
+import re
 import xml.etree.ElementTree as ET
 import xml.parsers.expat
 from dataclasses import dataclass, field
@@ -144,6 +157,69 @@ class UrdfDescription:
 
 # --------------------------------------------------------------------------------------------------------- parsing
 
+#: A plain decimal number, as urdfdom and Python both read it the same way.
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+
+#: Ranges of _NUMBERS: (lowest, highest).
+_ANY = (-math.inf, math.inf)
+_NON_NEGATIVE = (0.0, math.inf)
+_LENGTH = (-config.COORDINATE_LIMIT, config.COORDINATE_LIMIT)
+_SIZE = (0.0, config.COORDINATE_LIMIT)
+
+#: Every number of a URDF that urdfdom (pinocchio's parser) or depthguard reads: element tag -> attribute -> (how
+#: many numbers, range), for elements inside a <link>'s <inertial>, <visual> and <collision>, a <joint>, and a
+#: top-level <material>. Lengths in metres (joint limits: metres or radians) within config.COORDINATE_LIMIT, as a
+#: rig's coordinates; sizes not below zero (a collision shape's must be positive: _collision).
+_NUMBERS = {
+    "origin": {"xyz": (3, _LENGTH), "rpy": (3, _ANY)},
+    "axis": {"xyz": (3, _ANY)},
+    "limit": {"lower": (1, _LENGTH), "upper": (1, _LENGTH), "effort": (1, _NON_NEGATIVE), "velocity": (1, _ANY)},
+    "dynamics": {"damping": (1, _ANY), "friction": (1, _ANY)},
+    "safety_controller": {key: (1, _ANY) for key in ("soft_lower_limit", "soft_upper_limit", "k_position",
+                                                      "k_velocity")},
+    "calibration": {key: (1, _ANY) for key in ("rising", "falling", "reference_position")},
+    "mimic": {"multiplier": (1, _ANY), "offset": (1, _ANY)},
+    "mass": {"value": (1, _NON_NEGATIVE)},
+    "inertia": {key: (1, _ANY) for key in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")},
+    "box": {"size": (3, _SIZE)},
+    "cylinder": {"radius": (1, _SIZE), "length": (1, _SIZE)},
+    "sphere": {"radius": (1, _SIZE)},
+    "mesh": {"scale": (3, _ANY)},
+    "color": {"rgba": (4, _ANY)},
+}
+
+
+def _check_numbers(root_element, source: Path) -> None:
+    """Every number ``_NUMBERS`` lists, wherever urdfdom reads it, is plain, finite and in range; else
+    :class:`RobotError` naming the link, joint or material, the element and the attribute (module docstring)."""
+    stack = []  # (element, what names its parent: "link 'arm' <collision>"); a stack, so any nesting depth will do
+    for element in root_element:
+        if element.tag in ("link", "joint", "material"):
+            what = f"{element.tag} {element.get('name')!r}"
+            stack.extend((child, what) for child in element
+                         if element.tag != "link" or child.tag in ("inertial", "visual", "collision"))
+    stack.reverse()  # the first fault in file order is the one reported
+    while stack:
+        element, what = stack.pop()
+        for name, (count, (low, high)) in _NUMBERS.get(element.tag, {}).items():
+            text = element.get(name)
+            if text is None:
+                continue
+            tokens = text.split()
+            values = [float(token) for token in tokens if _NUMBER.fullmatch(token)]
+            if len(tokens) != count or len(values) != count or \
+                    not all(math.isfinite(value) and low <= value <= high for value in values):
+                if math.isinf(low) and math.isinf(high):
+                    bounds = ""
+                elif math.isinf(high):
+                    bounds = f" >= {low:g}"
+                else:
+                    bounds = f" in [{low:g}, {high:g}]"
+                numbers = "a finite number" if count == 1 else f"{count} finite numbers"
+                raise RobotError(f"{what} <{element.tag} {name}> must be {numbers}{bounds}, got {short_repr(text)}",
+                                 source=str(source))
+        stack.extend((child, f"{what} <{element.tag}>") for child in reversed(element))
+
 
 def _floats(text: str | None, count: int, *, what: str, source: Path, default=None) -> np.ndarray:
     if text is None:
@@ -223,6 +299,7 @@ def parse_urdf(path, package_dirs=None) -> UrdfDescription:
         raise RobotError(f"not valid XML ({exc})", source=str(path)) from None
     if root_element.tag != "robot":
         raise RobotError(f"not a URDF: the root element is <{root_element.tag}>, not <robot>", source=str(path))
+    _check_numbers(root_element, path)
     dirs = _package_dirs(path, package_dirs)
 
     links, collisions = [], {}
@@ -360,6 +437,9 @@ def _collision(element, link: str, path: Path, dirs: list[Path]) -> UrdfCollisio
     for key, value in params.items():
         if key in ("size", "radius", "length") and not np.all(np.asarray(value) > 0):
             raise RobotError(f"{what}: <{kind} {key}> must be positive, got {value}", source=str(path))
+    if kind == "mesh" and not np.all(params["scale"] > 0):
+        raise RobotError(f"{what}: <mesh scale> must be 3 positive numbers (a zero flattens the mesh, a negative one "
+                         f"mirrors it and flips its faces' winding), got {params['scale'].tolist()}", source=str(path))
     return UrdfCollision(link=link, kind=kind, T_link_geometry=T, params=params)
 
 
@@ -424,7 +504,8 @@ def collision_mesh(collisions: tuple[UrdfCollision, ...], source: Path) -> trime
     """One mesh, in the link frame (metres), of all of a link's collision elements with their origins applied.
 
     Mesh files are read with trimesh (STL, OBJ, PLY, OFF, GLB; COLLADA needs ``pycollada``). Primitive shapes become
-    meshes that contain them (see ``config.PRIMITIVE_CYLINDER_SECTIONS``).
+    meshes that contain them (see ``config.PRIMITIVE_CYLINDER_SECTIONS``). Every vertex, scaled and placed, must lie
+    within ``config.COORDINATE_LIMIT`` of the link's origin on every axis; else :class:`RobotError` naming the link.
     """
     parts = []
     for item in collisions:
@@ -438,6 +519,11 @@ def collision_mesh(collisions: tuple[UrdfCollision, ...], source: Path) -> trime
         else:
             mesh = _sphere_mesh(item.params["radius"])
         mesh.apply_transform(item.T_link_geometry)
+        reach = float(np.abs(mesh.vertices).max())
+        if not reach <= config.COORDINATE_LIMIT:  # NaN too: a huge scale times a mesh's coordinates
+            raise RobotError(f"link {item.link!r}: collision {item.kind} reaches {reach:.3g} m from the link's origin, "
+                             f"beyond config.COORDINATE_LIMIT ({config.COORDINATE_LIMIT:g} m): check its scale and "
+                             "units", source=str(source))
         parts.append(mesh)
     return parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)
 

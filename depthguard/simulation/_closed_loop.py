@@ -12,10 +12,16 @@ Per control step k (t = k dt):
    - ``"none"``: the task alone (the joints' limits still hold);
    - ``"avoid"``: the papers' avoidance (:class:`~depthguard.avoidance.AvoidanceController`);
    - ``"ssm"``: the task, slowed by speed and separation monitoring
-     (:class:`~depthguard.avoidance.SpeedSeparationMonitor`), with the reaction time = the data's age + one control
-     step;
+     (:class:`~depthguard.avoidance.SpeedSeparationMonitor`), with the reaction time = the age of the set's oldest
+     frame + the set's measured preparation time (wall clock) + one control step, the stopping time from the
+     robot's braking (its joints' acceleration limits, the robot braking along its path), and the detection
+     capability that of the monitor's answers: d plus what its concessions can hide next to a surface
+     (:meth:`~depthguard.DistanceMonitor.query_hidden_band`); above ISO 13855's 70 mm no C covers it, and the loop
+     refuses to run SSM (:class:`~depthguard.errors.InputError` naming ``detection_capability``);
 
 4. the joints move by the command (Euler, within their limits).
+
+A blind answer (no camera could see yet) stops the robot in every mode that uses the monitor.
 
 The task: the end-effector follows the workcell's scripted trajectory (its end-effector position over time, x_ref):
 desired velocity dx_ref/dt + ``gain`` (x_ref - x); the arm's redundancy pulls towards the scripted joints
@@ -76,6 +82,12 @@ class LoopSettings:
             a body part thinner than d reaches at most the intrusion distance C beyond the detected body, and S_p
             counts C. Its space is what any camera sees entirely free (not only through the principal), in 1 cm
             voxels over the rig's workspace: about 0.3-0.5 s of work per set of frames, so off by default.
+        cover_surface: the avoidance and SSM measure from spheres that cover every moving link's padded capsule
+            (``RobotModel.with_surface_points``), none more than ``surface_tolerance`` metres (SSM's Z_r) beyond it,
+            and the end-effector's control point; False: from the robot's control points only (the papers' nine,
+            which leave 4-5 cm of the iiwa's capsules outside their spheres).
+        surface_tolerance: metres, > 0: how far the covering spheres may reach beyond the capsules (default SSM's
+            Z_r, which counts it).
         known_solids: tell the monitor the workcell's known static boxes (``Workcell.background()``: floor, walls,
             pedestal) as ``DistanceMonitor(static=...)``: they stop counting as possibly a person, what they hide
             still counts.
@@ -98,6 +110,8 @@ class LoopSettings:
     ssm_ramp: float = 0.25
     ssm_capability: bool = False
     known_solids: bool = False
+    cover_surface: bool = True
+    surface_tolerance: float = config.SSM_ROBOT_UNCERTAINTY
     monitor: dict = field(default_factory=lambda: dict(aggregate="hybrid", invalid="neighbors",
                                                        robot_zone=config.LOOP_ROBOT_ZONE))
 
@@ -108,7 +122,9 @@ class LoopSettings:
         check_real(self.posture_gain, "posture_gain", minimum=0.0, maximum=1e3, unit="1/s", field="posture_gain")
         if isinstance(self.truth_every, bool) or not isinstance(self.truth_every, int) or self.truth_every < 1:
             raise InputError("truth_every must be a whole number >= 1", field="truth_every")
-        for name in ("ssm_lookahead", "ssm_capability", "known_solids"):
+        check_real(self.surface_tolerance, "surface_tolerance", minimum=0.0, above_minimum=True, maximum=1.0,
+                   unit="metres", field="surface_tolerance")
+        for name in ("ssm_lookahead", "ssm_capability", "known_solids", "cover_surface"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(f"{name} must be True or False", field=name)
         check_real(self.ssm_ramp, "ssm_ramp", minimum=0.0, maximum=10.0, unit="seconds", field="ssm_ramp")
@@ -144,6 +160,10 @@ class LoopLog:
         frames: how many camera sets were captured. wall_seconds: the whole run, wall clock.
         captures: with ``keep_frames``, each captured set as (capture time, joints, {camera: DepthImage}); else
             empty.
+        robot: the robot whose control points the avoidance and SSM measured from (the rows of ``reported`` and
+            ``flags``, ``robot.control_point_names``): with ``LoopSettings.cover_surface``, spheres covering every
+            moving link (``RobotModel.with_surface_points``) and the end-effector; ``truth`` is per control point of
+            the workcell's robot.
     """
 
     mode: str
@@ -165,6 +185,7 @@ class LoopLog:
     frames: int
     wall_seconds: float
     captures: tuple = ()
+    robot: object = None
 
     @property
     def task_error(self) -> np.ndarray:
@@ -200,32 +221,36 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
     params = replace(settings.avoidance, posture_gain=settings.posture_gain,
                      tolerance=settings.avoidance.tolerance + zone)
     limits = JointLimits.from_robot(robot, acceleration=settings.acceleration)
-    controller = AvoidanceController(robot, params, limits)
-    ssm = None
-    if mode == "ssm":
-        from depthguard.avoidance import SpeedSeparationMonitor, SSMParams
-
-        ssm_params = SSMParams() if settings.ssm is None else settings.ssm
-        ssm_params = replace(ssm_params, sensing_uncertainty=ssm_params.sensing_uncertainty + zone)
-        ssm = SpeedSeparationMonitor(ssm_params, rho=settings.ssm_rho)
+    # The points the avoidance and SSM measure from: spheres that cover every moving link's padded capsule, none more
+    # than Z_r beyond it, and the end-effector's control point (SPEC section 9: distances from the robot's surface).
+    points_robot = robot.with_surface_points(settings.surface_tolerance) if settings.cover_surface else robot
+    controller = AvoidanceController(points_robot, params, limits)
     options = dict(settings.monitor)
     if settings.known_solids:
         options["static"] = workcell.background_parts()
     capability = mode == "ssm" and settings.ssm_capability
-    if capability:
-        options["detection_capability"] = ssm_params.detection_capability
+    ssm_params = None
+    if mode == "ssm":
+        from depthguard.avoidance import SSMParams
+
+        ssm_params = SSMParams() if settings.ssm is None else settings.ssm
+        if capability:
+            options["detection_capability"] = ssm_params.detection_capability
     monitor = dg.DistanceMonitor(workcell.rig, rho=settings.ssm_rho if mode == "ssm" else params.rho, robot=robot,
                                  **options)
+    ssm = None
+    if mode == "ssm":
+        ssm = _ssm_monitor(monitor, ssm_params, capability, zone, settings.ssm_rho, limits)
     truth = TruthComputer(robot)
     part_names = {name: workcell.part_names(name) for name in workcell.obstacle_names}
-    m, n = len(robot.control_points), robot.n_joints
-    ee = robot.end_effector_index
-    radii = robot.control_point_radii
+    m, n = len(points_robot.control_points), robot.n_joints
+    ee = points_robot.end_effector_index
+    radii = points_robot.control_point_radii
     nothing = _empty_result(m)
 
     def reference(t):
         q_ref = workcell.joints_at(min(max(t, 0.0), workcell.duration))
-        return robot.control_point_positions(q_ref, check=False)[ee], q_ref
+        return points_robot.control_point_positions(q_ref, check=False)[ee], q_ref
 
     q = workcell.joints_at(start).copy()
     dq = np.zeros(n)
@@ -266,7 +291,7 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
                 _, prepared, captured_at = pending.pop(0)
                 current = (prepared, captured_at)
             tick = time.perf_counter()
-            points, jacobians = robot.control_point_kinematics(q, check=False)
+            points, jacobians = points_robot.control_point_kinematics(q, check=False)
             if current is None:
                 result = DistanceResult.blind(m, Flag.MISSING_CAMERA, {})  # nothing seen yet: distance 0
                 age = math.inf
@@ -295,17 +320,16 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
                 dq_new, scale, repulsive = command.dq, command.scale, np.zeros(3)
                 requested = requested_before = dq_new
                 if mode == "ssm":
-                    # Nothing seen yet: no reaction time can be stated, and the robot stays.
+                    # Nothing seen yet: no reaction time can be stated, and the robot stays. T_r: the set's oldest
+                    # frame's age + its measured preparation + one control step.
+                    reaction = math.inf if current is None else age + current[0].prepare_seconds + dt
                     scale = 0.0 if current is None else _ssm_factor(ssm, current[0], result.distance, points,
-                                                                    jacobians, dq_new, age + dt, radii,
+                                                                    jacobians, dq_new, reaction, radii,
                                                                     settings.ssm_lookahead, ask)
                     if settings.ssm_ramp > 0.0:  # rises no faster than the ramp; falls at once
                         scale = min(scale, ssm_scale + dt / settings.ssm_ramp)
                     ssm_scale = scale
-                    # The robot brakes as hard as its joints allow: the stopping time T_s of SSM covers it.
-                    low, high = reachable(np.minimum(dq_new * scale, 0.0), np.maximum(dq_new * scale, 0.0), dq,
-                                          limits.acceleration * dt)
-                    dq_new = np.clip(dq_new * scale, low, high)
+                    dq_new = _ssm_command(dq_new * scale, dq, scale, limits, dt)
             log["step_seconds"].append(time.perf_counter() - tick)
             if captured or k % settings.truth_every == 0:
                 g = frame.truth if captured else truth(q, workcell.obstacles_at(t), part_names)
@@ -324,7 +348,41 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
     arrays = {key: np.array(value) for key, value in log.items()}
     return LoopLog(mode=mode, truth_steps=np.array(truth_steps, dtype=np.int64), truth=np.array(truth_rows),
                    clearance=np.array(clearance), frames=frames, wall_seconds=time.perf_counter() - wall,
-                   captures=tuple(captures), **arrays)
+                   captures=tuple(captures), robot=points_robot, **arrays)
+
+
+def _ssm_monitor(monitor, params, capability: bool, zone: float, rho: float, limits):
+    """The loop's :class:`~depthguard.avoidance.SpeedSeparationMonitor`: C for the detection capability of the
+    monitor's answers (d + the band its concessions can hide, or that band alone on the query's distances), the robot
+    zone in Z_d (a distance from the links may exceed the truth by its thickness), T_s from the joints' braking.
+    Raises :class:`InputError` naming ``detection_capability`` where that capability is above ISO 13855's 70 mm."""
+    from depthguard.avoidance import SpeedSeparationMonitor
+
+    if capability:
+        d, why = monitor.detectable.capability + monitor.hidden_band, f"d {monitor.detectable.capability:g} m + " \
+            f"{monitor.hidden_band:.3f} m hidden"
+    else:
+        d, why = monitor.query_hidden_band()
+    if d > config.SSM_INTRUSION_LIMIT * (1.0 + 1e-12):
+        raise InputError(f"SSM cannot be sound here: its distances may leave out an object {d:.3f} m thick next to a "
+                         f"surface ({why}), coarser than ISO 13855's 70 mm, for which no intrusion distance C is "
+                         "defined", field="detection_capability")
+    params = replace(params, detection_capability=d, sensing_uncertainty=params.sensing_uncertainty + zone)
+    return SpeedSeparationMonitor(params, rho=rho, braking=limits.acceleration, reaches=monitor.robot.joint_reaches())
+
+
+def _ssm_command(target, dq, scale: float, limits, dt: float):
+    """The joint velocities the loop sends under SSM (n,): ``target`` (the task's command times SSM's factor) where
+    the joints' accelerations reach it from ``dq`` within one step; where SSM slowed the robot (``scale`` < 1) and
+    they cannot, the robot brakes along its path (every joint in proportion, the slowest at its limit), as the
+    stopping time T_s of SSM takes it (``depthguard.avoidance.brake_along_path``)."""
+    from depthguard.avoidance import brake_along_path
+
+    low, high = reachable(np.minimum(target, 0.0), np.maximum(target, 0.0), dq, limits.acceleration * dt)
+    reached = np.clip(target, low, high)
+    if scale < 1.0 and not np.allclose(reached, target, rtol=0.0, atol=1e-12):
+        return brake_along_path(dq, limits.acceleration, dt)
+    return reached
 
 
 class _MovedSince:
@@ -354,7 +412,7 @@ class _MovedSince:
 def _detectable(prepared, points, rho) -> np.ndarray:
     """(m,) the detectable distances (``PreparedSet.detectable_distances``) of points (m, 3), inf where at least
     rho (as the monitor's "nothing within rho")."""
-    distance = prepared.detectable_distances(points, limit=rho, check=False)
+    distance = prepared.detectable_distances(points, limit=rho, check=False).distance
     return np.where(distance >= rho, np.inf, distance)
 
 
@@ -381,7 +439,7 @@ def _ssm_factor(ssm, prepared, distance, points, jacobians, dq, reaction_time, r
     if verdict.factor < 1.0 and lookahead:
         # Only a point beyond S_p at rest can be certified (D' <= D + T |v|): ask for those that slow the robot.
         asks = np.flatnonzero((verdict.approach_speed > verdict.allowed_speed) & (verdict.allowed_speed > 0.0))
-        looked = points[asks] + ssm.lookahead_time(reaction_time) * (jacobians[asks] @ dq)
+        looked = points[asks] + ssm.lookahead_time(reaction_time, dq) * (jacobians[asks] @ dq)
         ahead = np.zeros(len(surface))  # not asked: certifies nothing
         ahead[asks] = from_spheres(ask(prepared, looked), radii[asks])
         verdict = ssm.speed_factor(surface, unknown, jacobians, dq, reaction_time, ahead=ahead, check=False)

@@ -8,6 +8,7 @@ import math
 from collections import deque
 from collections.abc import Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,6 +17,7 @@ import yaml
 from PIL import Image
 
 from depthguard import config
+from depthguard._files import atomic_write, write_whole
 from depthguard.cameras import save_rig
 from depthguard.depth import depth_image
 from depthguard.errors import InputError
@@ -260,9 +262,14 @@ def write_episode(workcell: Workcell, out_dir, seed: int | None = None, progress
             there is no obstacle.
         timeline.csv: ``person, index, action, start, hold_start, end`` (seconds) of every scripted action.
         scene.yaml: the scene (a copy of its data; a relative URDF path is made absolute).
+
+    Every file is written whole (:func:`depthguard._files.atomic_write`), and frames.csv last, once every frame is
+    written: a folder without frames.csv is an episode that did not finish
+    (:func:`~depthguard.recordings.open_recording` refuses it), never a shorter one that reads as complete.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    (out / "frames.csv").unlink(missing_ok=True)  # an earlier episode's: the folder is incomplete until the end
     save_rig(workcell.rig, out / "rig.yaml")
     if workcell.intensity_rig is not None:
         save_rig(workcell.intensity_rig, out / "intensity_rig.yaml")
@@ -270,8 +277,8 @@ def write_episode(workcell: Workcell, out_dir, seed: int | None = None, progress
     robot_entry = scene.get("robot")
     if isinstance(robot_entry, dict) and "urdf" in robot_entry:
         scene["robot"] = {**robot_entry, "urdf": str((workcell.base_dir / str(robot_entry["urdf"])).resolve())}
-    (out / "scene.yaml").write_text(yaml.safe_dump(scene, sort_keys=False, default_flow_style=None))
-    with open(out / "timeline.csv", "w", newline="") as f:
+    write_whole(out / "scene.yaml", yaml.safe_dump(scene, sort_keys=False, default_flow_style=None))
+    with atomic_write(out / "timeline.csv", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(["person", "index", "action", "start", "hold_start", "end"])
         for span in workcell.timeline():
@@ -287,13 +294,15 @@ def write_episode(workcell: Workcell, out_dir, seed: int | None = None, progress
         from tqdm import tqdm
 
         iterator = tqdm(iterator, total=len(indices), unit="frame", desc="simulating")
-    joints_file = open(out / "joint_states.csv", "w", newline="")
-    truth_file = open(out / "ground_truth.csv", "w", newline="")
-    frames_file = open(out / "frames.csv", "w", newline="")
     # PNGs are compressed on a second thread (zlib releases the GIL) while the next frame is simulated.
     writer = ThreadPoolExecutor(max_workers=1)
     pending: deque = deque()
-    with joints_file, truth_file, frames_file, writer:
+    with ExitStack() as files:
+        # The CSVs are renamed to their names as the block ends, in the reverse order: frames.csv last.
+        frames_file = files.enter_context(atomic_write(out / "frames.csv", newline=""))
+        truth_file = files.enter_context(atomic_write(out / "ground_truth.csv", newline=""))
+        joints_file = files.enter_context(atomic_write(out / "joint_states.csv", newline=""))
+        files.enter_context(writer)
         joints_csv, truth_csv, frames_csv = csv.writer(joints_file), csv.writer(truth_file), csv.writer(frames_file)
         joints_csv.writerow(["time", *workcell.robot.joint_names])
         frames_csv.writerow(["camera", "frame", "time"])
@@ -326,9 +335,11 @@ def _write_frame(out: Path, frame: SimFrame) -> None:
         data = np.asarray(image.data)
         if data.dtype != np.uint16 or data.ndim != 2:
             raise InputError(f"depth image of camera {name!r} is not a 2-D uint16 array")
-        Image.fromarray(data).save(out / "depth" / name / stem, compress_level=level)
+        with atomic_write(out / "depth" / name / stem, "wb") as f:
+            Image.fromarray(data).save(f, format="PNG", compress_level=level)
     for name, grey in frame.intensity.items():
-        Image.fromarray(grey).save(out / "intensity" / name / stem, compress_level=level)
+        with atomic_write(out / "intensity" / name / stem, "wb") as f:
+            Image.fromarray(grey).save(f, format="PNG", compress_level=level)
 
 
 def _number(x: float) -> str:

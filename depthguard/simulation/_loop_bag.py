@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from depthguard._files import atomic_folder
 from depthguard.cameras import save_rig
 from depthguard.errors import InputError, check_path
 from depthguard.recordings import (
@@ -70,8 +71,9 @@ def write_loop_bag(path, workcell, log, rho: float) -> Path:
     store = ros_typestore()
     types = store.types
     rig = workcell.rig
-    robot = workcell.robot
+    robot = workcell.robot if log.robot is None else log.robot  # the points the loop measured from
     names = list(robot.control_point_names)
+    truth_names = list(workcell.robot.control_point_names)
     messages = []  # (ns, topic, message)
     ns_of = [ros_nanoseconds(t, "control time") for t in log.times]
 
@@ -96,21 +98,24 @@ def write_loop_bag(path, workcell, log, rho: float) -> Path:
             header=ros_header(store, ns, "world"), vector=_vector3(types, log.repulsive[k]))))
         if k % MARKER_EVERY == 0:
             messages.append((ns, ROBOT_TOPIC, _robot_markers(store, ns, robot, log.q[k], log.reported[k], rho)))
+    truth_layout = _layout(types, truth_names)
     for row, k in enumerate(log.truth_steps):
-        messages.append((ns_of[k], TRUE_DISTANCES_TOPIC, array(layout=layout,
+        messages.append((ns_of[k], TRUE_DISTANCES_TOPIC, array(layout=truth_layout,
                                                                 data=np.asarray(log.truth[row], np.float64))))
     topics = dict(_TYPES)
     for image_topic, info_topic in image_topics.values():
         topics[image_topic] = "sensor_msgs/msg/Image"
         topics[info_topic] = "sensor_msgs/msg/CameraInfo"
     order = sorted(range(len(messages)), key=lambda i: messages[i][0])  # stable: same stamp keeps its order
-    with Writer(path, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP) as writer:
+    # Written beside path and renamed: the bag appears whole, rig.yaml included, or not at all.
+    with atomic_folder(path) as folder, Writer(folder, version=Writer.VERSION_LATEST,
+                                               storage_plugin=StoragePlugin.MCAP) as writer:
+        save_rig(rig, folder / "rig.yaml")
         connections = {topic: writer.add_connection(topic, msgtype, typestore=store) for topic, msgtype in
                        topics.items()}
         for i in order:
             ns, topic, message = messages[i]
             writer.write(connections[topic], ns, store.serialize_cdr(message, topics[topic]))
-    save_rig(rig, path / "rig.yaml")
     return path
 
 

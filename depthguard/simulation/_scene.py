@@ -84,7 +84,7 @@ import numpy as np
 import yaml
 
 from depthguard import config
-from depthguard._files import read_yaml
+from depthguard._files import read_yaml, write_whole
 from depthguard.cameras import PinholeCamera, Rig, rig_from_dict
 from depthguard.errors import InputError, RigError, RobotError, SceneError
 from depthguard.robots import RobotModel
@@ -339,8 +339,8 @@ def default_workcell() -> Workcell:
 
 def save_workcell(workcell: Workcell, path) -> None:
     """Write the workcell's scene as YAML; :func:`load_workcell` reads it back to the same workcell (relative
-    paths in it are resolved against the new file's folder)."""
-    Path(path).write_text(yaml.safe_dump(workcell.scene, sort_keys=False, default_flow_style=None))
+    paths in it are resolved against the new file's folder). Written whole or not at all."""
+    write_whole(Path(path), yaml.safe_dump(workcell.scene, sort_keys=False, default_flow_style=None))
 
 
 def workcell_from_dict(data, base_dir=".") -> Workcell:
