@@ -39,9 +39,10 @@ class LiveMonitor:
 
     - :meth:`submit` hands over a set of frames (as :meth:`DistanceMonitor.query` takes them) and returns at once.
     - :meth:`query` answers from the latest prepared set; ``result.timestamps`` say when its frames were captured,
-      so the data's age is ``now - max(result.timestamps.values())``. Before the first set is prepared, every point
-      gets distance 0 and ``missing_camera``. With ``max_age``, when a frame of that set is older than ``max_age`` at
-      the query's ``now``, every point gets distance 0 and ``stale_camera``: submit frames in time.
+      and ``result.ages`` how old each was at the query's ``now`` (the answer is as old as the oldest, ``result.age``).
+      Before the first set is prepared, every point gets distance 0 and ``missing_camera``. When a frame of that set
+      is older than ``max_age`` at the query's ``now`` (by default 0.1 s for frames with timestamps), every point gets
+      distance 0 and ``stale_camera``: submit frames in time.
     - :meth:`wait` blocks until everything submitted is prepared (tests, replay); :meth:`close` stops the worker.
     - A set the worker cannot prepare (bad input) is skipped and kept in ``errors``: the monitor keeps answering
       from the last good set, and the worker keeps running.
@@ -50,7 +51,6 @@ class LiveMonitor:
     """
 
     def __init__(self, rig: Rig, **options):
-        self.max_age = options.get("max_age")
         self.errors: list[DepthguardError] = []
         self.prepared = 0
         self.dropped = 0
@@ -98,15 +98,12 @@ class LiveMonitor:
         prepared = self._latest
         if prepared is None:
             return DistanceResult.blind(len(points), Flag.MISSING_CAMERA)
-        if self.max_age is not None:
-            if now is None:
-                raise InputError("this monitor has max_age set: pass now= (seconds, the frames' clock) to query()",
-                                 field="now")
-            times = {n: s.occupancy.timestamp for n, s in prepared.usable.items()}
-            if any(t is None or now - t > self.max_age for t in times.values()):
-                return DistanceResult.blind(len(points), Flag.STALE_CAMERA, times)
+        if prepared.untimed_stale and now is None:
+            raise InputError("this monitor has max_age set: pass now= (seconds, the frames' clock) to query()",
+                             field="now")
         with self._query_lock, _maybe(self._kernels):
-            return prepared.query(points, check=False)
+            # A frame older than max_age at now (the default 0.1 s for stamped frames) makes the answer blind.
+            return prepared.query(points, check=False, now=now)
 
     def wait(self, timeout: float | None = None) -> bool:
         """Block until every submitted set is prepared (or ``timeout`` seconds pass); True when it is."""

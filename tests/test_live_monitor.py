@@ -91,7 +91,8 @@ def test_a_query_never_waits_for_the_set_being_prepared(monkeypatch):
 
     monkeypatch.setattr(DistanceMonitor, "prepare_set", held)
     first, second, third = frames_at(0), frames_at(5), frames_at(10)
-    with dg.LiveMonitor(RIG, rho=0.5) as live:
+    # No age limit here: the first set is asked for after 5 frame periods (0.17 s), older than the default 0.1 s.
+    with dg.LiveMonitor(RIG, rho=0.5, max_age=None) as live:
         live.submit(first, now=0.0)
         assert live.wait(60)
         answer_first = live.query(POINTS, now=0.0)
@@ -107,7 +108,7 @@ def test_a_query_never_waits_for_the_set_being_prepared(monkeypatch):
         release.set()
         assert live.wait(60)
         assert live.latest_time == 10 / FPS
-        expected = DistanceMonitor(RIG, rho=0.5).query(third, POINTS, now=10 / FPS)
+        expected = DistanceMonitor(RIG, rho=0.5, max_age=None).query(third, POINTS, now=10 / FPS)
         assert np.array_equal(live.query(POINTS, now=10 / FPS).distance, expected.distance)
 
 
@@ -134,6 +135,12 @@ def test_a_set_gone_stale_at_the_query_s_time_answers_zero():
         assert np.all(stale.distance == 0) and all(Flag.STALE_CAMERA in f for f in stale.flags)
         with pytest.raises(dg.InputError, match="now"):
             live.query(POINTS)
+    with dg.LiveMonitor(RIG, rho=0.5) as live:  # the default max_age (0.1 s) for stamped frames
+        live.submit(frames_at(0), now=0.0)
+        assert live.wait(60)
+        assert not live.query(POINTS, now=0.05).is_blind and live.query(POINTS, now=0.05).age == 0.05
+        stale = live.query(POINTS, now=0.2)
+        assert stale.is_blind and all(Flag.STALE_CAMERA in f for f in stale.flags)
 
 
 def test_a_closed_monitor_takes_no_frames_and_bad_options_fail_at_once():

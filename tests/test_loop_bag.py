@@ -42,8 +42,10 @@ def test_every_topic_holds_what_the_run_did(run):
     for k, (stamp, _, ros) in enumerate(distances):
         assert stamp == ns[k]
         assert np.array_equal(np.asarray(ros.data), log.reported[k])  # inf stays inf
-    label = distances[0][2].layout.dim[0].label
-    assert label == "control_points:" + ",".join(workcell.robot.control_point_names)
+    label = distances[0][2].layout.dim[0].label  # the points the loop measured from (covering every moving link)
+    assert label == "control_points:" + ",".join(log.robot.control_point_names) and m > 9
+    truth_label = messages["/depthguard/true_distances"][0][2].layout.dim[0].label
+    assert truth_label == "control_points:" + ",".join(workcell.robot.control_point_names)
     for k, (_, _, ros) in enumerate(messages["/joint_states"]):
         assert list(ros.name) == list(workcell.robot.joint_names) and np.array_equal(ros.position, log.q[k])
     truth = messages["/depthguard/true_distances"]
@@ -84,7 +86,7 @@ def test_camera_poses_and_robot_markers(run):
         np.testing.assert_allclose(R, T[:3, :3], atol=1e-9)
         np.testing.assert_allclose([t.x, t.y, t.z], T[:3, 3], atol=0)
     assert {t.child_frame_id for t in tf.transforms} == {f"{n}_optical_frame" for n in workcell.rig.cameras}
-    robot = workcell.robot
+    robot = log.robot  # the points the loop measured from
     arrays = messages["/depthguard/robot"]
     assert len(arrays) == math.ceil(len(log.times) / MARKER_EVERY)
     rho = LoopSettings().avoidance.rho

@@ -160,7 +160,10 @@ def summarize(log, dt: float) -> dict:
 
 def surface_minima(log, reported) -> dict:
     """Link (or the end-effector's control point) -> the smallest reported distance from its surface over the run,
-    metres (the distance from each of the loop's points minus its sphere's radius; None: nothing within rho)."""
+    metres (the distance from each of the loop's points minus its sphere's radius; None: nothing within rho). Empty
+    for a log that does not say which robot's points it holds."""
+    if log.robot is None:
+        return {}
     names = log.robot.control_point_names
     surface = np.min(reported, axis=0) - log.robot.control_point_radii
     out = {}
