@@ -1,11 +1,13 @@
 """What speed and separation monitoring needs to let the robot move in scenario B's workcell (issue 9), layout by layout.
 
 With no person in the room (scenario_b_reach.yaml at 5.2 s, the person gone), SSM lets a control point move only when
-its distance from the link's surface to the nearest possibly occupied space is at least S_p at rest (0.90 m with the
-loop's defaults and robot zone). This probe prints, per layout, that distance for every control point and the nearest
-possibly occupied point (the monitor's ``min`` answer: the point minus distance times direction), so that what stands
-in the way can be read off; and the distances SSM may use with ``DistanceMonitor(detection_capability=0.04)``
-(possibly occupied regions thinner than the detection capability left out: ``depthguard.freespace.DetectableSpace``):
+its distance from the link's surface to the nearest possibly occupied space is at least S_p at rest. This probe
+prints, per layout, that distance for every control point and the nearest possibly occupied point (the monitor's
+``min`` answer: the point minus distance times direction), so that what stands in the way can be read off; what those
+answers may hide next to a surface (``DistanceMonitor.query_hidden_band``: SSM on them is refused above ISO 13855's
+70 mm); whether the detectable space with the loop's settings is allowed; and the distances SSM may use with the
+settings that are sound, ``DistanceMonitor(detection_capability=0.04)`` with no robot zone (possibly occupied regions
+thinner than the detection capability left out: ``depthguard.freespace.DetectableSpace``):
 
     .venv/bin/python benchmarks/probe_ssm_coverage.py [--time 5.2] [--rho 1.5]
 
@@ -36,7 +38,6 @@ from depthguard.simulation import load_workcell
 from depthguard.simulation._episode import sense_at
 
 PACKAGE = resources.files("depthguard.simulation")
-S_P_AT_REST = 0.90  # metres, the loop's defaults (LoopSettings docstring)
 
 CEILING = """  - name: ceiling          # 3.2 m up, looking straight down: the depth grid's principal
     width: 512
@@ -73,22 +74,36 @@ def _variant(directory: Path, name: str, ceiling: bool, wide_pedestal: bool) -> 
 
 def probe(path: Path, t: float, rho: float, known: bool, layout: Path | None = None):
     """At time t with the person gone: (the depth grid's distances from each link's surface, its nearest possibly
-    occupied point per control point, the detectable distances from each link's surface, names)."""
+    occupied point per control point, the detectable distances from each link's surface (None when refused), what
+    the loop's settings would hide (band, why), names).
+
+    The depth grid's answers use the loop's settings (robot zone 6 cm, invalid="neighbors"). SSM's detectable space
+    with those settings is refused (d + the band they hide is above ISO 13855's 70 mm), so its distances here are
+    those of the settings that are sound: no robot zone, holes occupied; the robot's own body then counts as
+    possibly occupied."""
     workcell = load_workcell(path, layout=layout)
     robot = workcell.robot
     static = workcell.background_parts() if known else None
-    monitor = dg.DistanceMonitor(workcell.rig, rho=rho, robot=robot, aggregate="min", invalid="neighbors",
-                                 robot_zone=config.LOOP_ROBOT_ZONE, static=static,
-                                 detection_capability=config.SSM_DETECTION_CAPABILITY)
+    loop = dict(rho=rho, robot=robot, aggregate="min", invalid="neighbors", robot_zone=config.LOOP_ROBOT_ZONE,
+                static=static)
+    monitor = dg.DistanceMonitor(workcell.rig, **loop)
+    band, why = monitor.query_hidden_band()
+    try:
+        dg.DistanceMonitor(workcell.rig, **loop, detection_capability=config.SSM_DETECTION_CAPABILITY)
+        refusal = None
+    except dg.InputError as error:
+        refusal = str(error)
+    sound = dg.DistanceMonitor(workcell.rig, rho=rho, robot=robot, aggregate="min", static=static,
+                               detection_capability=config.SSM_DETECTION_CAPABILITY)
     q = workcell.joints_at(t)
     (frame,) = sense_at(workcell, [t])
     points = robot.control_point_positions(q)
-    prepared = monitor.prepare_set(frame.depth, joints=q, now=t)
-    result = prepared.query(points)
-    detectable = prepared.detectable_distances(points, limit=rho)
+    result = monitor.prepare_set(frame.depth, joints=q, now=t).query(points)
+    detectable = sound.prepare_set(frame.depth, joints=q, now=t).detectable_distances(points, limit=rho).distance
     nearest = points - np.where(np.isfinite(result.distance), result.distance, 0.0)[:, None] * result.direction
     radii = robot.control_point_radii
-    return result.distance - radii, nearest, detectable - radii, list(robot.control_point_names)
+    return (result.distance - radii, nearest, np.maximum(detectable - radii, 0.0), (band, why, refusal),
+            list(robot.control_point_names))
 
 
 def main(argv=None) -> None:
@@ -101,17 +116,22 @@ def main(argv=None) -> None:
             ("four+ceiling", True, False, False, None), ("four+ceiling known", True, False, True, None),
             ("four+ceiling known wide pedestal", True, True, True, None),
             ("scenario_b_ssm.yaml known (ToF noise)", False, False, True, ssm_layout)]
-    print(f"S_p at rest {S_P_AT_REST:.2f} m; distances from the links' surfaces, metres; t = {args.time} s; "
+    print(f"distances from the links' surfaces, metres; t = {args.time} s; "
           f"detectable: d = {config.SSM_DETECTION_CAPABILITY * 1000:.0f} mm\n")
     with tempfile.TemporaryDirectory() as tmp:
         for label, ceiling, wide, known, layout in rows:
             base = "two" if label == "two" else "four"
             path = _variant(Path(tmp), base, ceiling, wide) if layout is None else PACKAGE / "scenario_b_reach.yaml"
-            distance, nearest, detectable, names = probe(Path(str(path)), args.time, args.rho, known, layout)
+            distance, nearest, detectable, (band, why, refusal), names = probe(Path(str(path)), args.time,
+                                                                                 args.rho, known, layout)
             worst = int(np.argmin(distance))
             print(f"{label:38s} grid       {' '.join(f'{d:5.2f}' for d in distance)}   least {distance[worst]:.2f} "
                   f"({names[worst]}), nearest possibly occupied point {np.round(nearest[worst], 2).tolist()}")
-            print(f"{'':38s} detectable {' '.join(f'{d:5.2f}' for d in detectable)}   least "
+            print(f"{'':38s} what the grid's answers may hide next to a surface: {band:.3f} m ({why}): SSM on them "
+                  f"{'refused' if band > config.SSM_INTRUSION_LIMIT else 'allowed'}")
+            print(f"{'':38s} detectable with the loop's settings: "
+                  f"{'refused: ' + refusal.split(': ', 1)[-1][:110] if refusal else 'allowed'}")
+            print(f"{'':38s} detectable, sound (no zone) {' '.join(f'{d:5.2f}' for d in detectable)}   least "
                   f"{detectable.min():.2f} ({names[int(np.argmin(detectable))]})")
     print("\ncolumns: " + " ".join(names))
 

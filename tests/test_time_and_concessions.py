@@ -309,3 +309,38 @@ def test_the_surface_points_cover_every_moving_links_capsule_within_the_toleranc
             capsule = robot.capsules_world(q)[robot.link_names.index(point.link)]
             assert radius - capsule.radius <= tolerance + 1e-12
         assert worst_nine > 0.03  # what the nine leave out
+
+
+def test_a_declared_tool_counts_as_the_robot():
+    """RobotModel.with_tool: a gripped box fixed to the flange becomes part of the last link's geometry. Its capsule
+    holds it, the surface points cover it, and self-filtering takes it out of a frame that sees it (a point next to
+    it reads as far as without the box), while the same box not declared is an obstacle there."""
+    from depthguard.robots import RobotModel
+    from depthguard.scenes import render_depth
+
+    robot = RobotModel.default()
+    piece = Box((0.0, 0.0, 0.12), (0.05, 0.05, 0.06))  # link 7's frame: 12 cm beyond the flange
+    tooled = robot.with_tool("lbr_iiwa_link_7", piece)
+    q = np.array([0.0, 0.5, 0.0, -1.0, 0.0, 1.0, 0.0])
+    T = tooled.link_poses(q)["lbr_iiwa_link_7"]
+    corners = np.array([[x, y, z] for x in (-0.05, 0.05) for y in (-0.05, 0.05) for z in (0.06, 0.18)])
+    world = corners @ T[:3, :3].T + T[:3, 3]
+    capsule = tooled.capsules_world(q)[tooled.link_names.index("lbr_iiwa_link_7")]
+    assert np.all(capsule.distance(world) <= 1e-9)  # inside the refitted capsule
+    covered = tooled.with_surface_points(0.01)
+    outside = np.min(np.linalg.norm(world[:, None] - covered.control_point_positions(q)[None], axis=2)
+                     - covered.control_point_radii[None], axis=1)
+    assert np.all(outside <= 1e-9)
+    # Rendered with the box in a camera: declared, it is the robot; not declared, it is an obstacle.
+    camera = _camera(eye=(2.0, 0.5, 1.5))
+    rig = dg.Rig({"a": camera})
+    box_world = Box(tuple(T[:3, :3] @ np.array([0.0, 0.0, 0.12]) + T[:3, 3]), (0.05, 0.05, 0.06), T[:3, :3])
+    frame = dg.depth_image(render_depth(camera, [FLOOR, box_world]), camera)
+    near = (T[:3, :3] @ np.array([0.0, 0.15, 0.12]) + T[:3, 3])[None]  # 10 cm beside the box
+    seen = dg.DistanceMonitor(rig, robot=robot, rho=0.4).query({"a": frame}, near, joints=q)
+    filtered = dg.DistanceMonitor(rig, robot=tooled, rho=0.4).query({"a": frame}, near, joints=q)
+    assert seen.distance[0] < 0.11 and filtered.distance[0] > seen.distance[0] + 0.02
+    with pytest.raises(Exception):
+        robot.with_tool("no_such_link", piece)
+    with pytest.raises(InputError):
+        robot.with_tool("lbr_iiwa_link_7", "box")

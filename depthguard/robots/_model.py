@@ -392,6 +392,41 @@ class RobotModel:
         return np.array([point.radius if point.radius is not None else radii.get(point.link, 0.0)
                          for point in self.control_points], dtype=np.float64)
 
+    def with_tool(self, link: str, solid) -> "RobotModel":
+        """The same robot carrying a tool or a gripped piece fixed to ``link``: ``solid`` is a
+        :class:`depthguard.scenes.Box`, :class:`~depthguard.scenes.Sphere` or :class:`~depthguard.scenes.Capsule` in
+        the link's frame (metres). It becomes part of the link's collision geometry (a mesh that contains it), so
+        everything that takes the robot takes it too: self-filtering renders it, the link's capsule is fitted again
+        round both (padding included), ``with_surface_points`` covers it, and the ground truth's meshes hold it.
+        Call again for more pieces. Raises :class:`RobotError` naming ``link`` for a link without kinematics, and
+        :class:`InputError` for a solid that is not one of those, or not finite."""
+        from depthguard.rendering._meshes import primitive_mesh
+        from depthguard.scenes import Box, Capsule, Sphere
+
+        if not isinstance(link, str) or link not in self._kinematics.frame_ids:
+            raise RobotError(f"with_tool: no link {link!r} in the URDF", field="link", source=str(self.urdf_path))
+        if not isinstance(solid, (Box, Sphere, Capsule)):
+            raise InputError(f"a tool must be a depthguard.scenes Box, Sphere or Capsule in the link's frame, got "
+                             f"{short_repr(solid)}", field="tool")
+        vertices, faces = primitive_mesh(solid)
+        if not np.all(np.isfinite(vertices)) or np.abs(vertices).max() > config.COORDINATE_LIMIT:
+            raise InputError("a tool's geometry must be finite and within the coordinate limit", field="tool")
+        piece = trimesh.Trimesh(vertices, faces, process=False)
+        meshes = dict(self.collision_meshes)
+        meshes[link] = piece if link not in meshes else trimesh.util.concatenate([meshes[link], piece])
+        capsule = fit_capsule(meshes[link].vertices, link=link, padding=self.padding)
+        names = list(self.link_names)
+        capsules = list(self.capsules)
+        if link in names:
+            capsules[names.index(link)] = capsule
+        else:
+            names.append(link)
+            capsules.append(capsule)
+        anchors = self._kinematics.anchors([c.link for c in capsules for _ in (0, 1)],
+                                           [end for c in capsules for end in (c.p0, c.p1)])
+        return replace(self, link_names=tuple(names), collision_meshes=types.MappingProxyType(meshes),
+                       capsules=tuple(capsules), _capsule_anchors=anchors)
+
     def with_surface_points(self, tolerance: float = config.SSM_ROBOT_UNCERTAINTY) -> "RobotModel":
         """The same robot with control points whose spheres cover every moving link's whole padded capsule, each no
         more than ``tolerance`` metres (> 0) beyond it, and the end-effector's control point kept (last, the
@@ -563,7 +598,8 @@ class RobotModel:
         the neighbouring links close a link's open ends), plus the spacing of those samples. A monitor that counts
         the capsules as the robot can hide an object of that thickness plus the padding (and its robot zone) on
         the robot (``DistanceMonitor``'s hidden band)."""
-        key = (str(self.urdf_path), self.padding, tuple(map(tuple, self.T_world_base)))
+        key = (str(self.urdf_path), self.padding, tuple(map(tuple, self.T_world_base)),
+               tuple((c.link, tuple(c.p0), tuple(c.p1), c.radius) for c in self.capsules))  # tools included
         with _GAP_LOCK:
             if key not in _CAPSULE_GAPS:
                 _CAPSULE_GAPS[key] = self._measure_capsule_gap()
