@@ -210,14 +210,15 @@ class DistanceMonitor:
 
         - with a robot, the self-filter's shell: the padded rendered geometry (``robot.padding`` and the capsules'
           gap to the meshes, ``RobotModel.capsule_gap``, which bounds the hulls' too) plus ``self_filter_tolerance``
-          plus twice the noise margin at the farthest depth at which a camera sees the workspace (a measurement that
-          near the robot is the robot); with a robot zone, the zone instead where it is thicker;
+          plus twice the noise margin at the farthest depth at which a camera can see the robot (its base's depth
+          plus ``RobotModel.reach``): a measurement that near the robot is the robot; with a robot zone, the zone
+          instead where it is thicker;
         - known solids: the largest band a replaced measurement may hide (``StaticSolids.largest_band``);
         - ``invalid="neighbors"``: the widest object a filled hole hides (as :meth:`_hidden_band`).
         """
         parts = {}
         if self.robot is not None:
-            margin = max(float(camera.noise.margin(np.array([_farthest_depth(camera, self.rig.workspace)]))[0])
+            margin = max(float(camera.noise.margin(np.array([_farthest_robot_depth(camera, self.robot)]))[0])
                          for camera in self.rig.cameras.values())
             body = self.robot.padding + self.robot.capsule_gap()
             parts["the self-filter's shell"] = body + self.self_filter_tolerance + 2.0 * margin
@@ -861,6 +862,13 @@ def _is_stale(timestamp, now, max_age, untimed_stale) -> bool:
     if now is not None and timestamp > now + config.CLOCK_SKEW_TOLERANCE:
         return True
     return max_age is not None and now is not None and now - timestamp > max_age
+
+
+def _farthest_robot_depth(camera, robot) -> float:
+    """Metres: the largest optical depth at which ``camera`` can see a part of ``robot`` (the depth of its base plus
+    its reach), within the camera's depth range."""
+    base = camera.world_to_camera(robot.T_world_base[:3, 3][None])[0, 2]
+    return max(min(float(base) + robot.reach(), camera.depth_range[1]), 0.0)
 
 
 def _farthest_depth(camera, workspace) -> float:

@@ -589,6 +589,30 @@ class RobotModel:
         data = self._forward(q, check)
         return self._capsule_anchors.positions(data, self.T_world_base).reshape(-1, 2, 3)
 
+    def reach(self) -> float:
+        """Metres: a radius about the base's origin (``T_world_base``) that holds every capsule of the robot at every
+        configuration: for the links a joint moves, the longest chain of rigid offsets from the base to their
+        capsules (the first joint's placement plus :meth:`joint_reaches`), for the others their capsules' ends plus
+        radius."""
+        model = self._kinematics.model
+        reaches = self.joint_reaches()
+        out = 0.0
+        for i, name in enumerate(self.joint_names):
+            joint = model.getJointId(name)
+            chain, k = 0.0, joint
+            while k > 0:  # the rigid offsets from the root to this joint
+                chain += float(np.linalg.norm(model.jointPlacements[k].translation))
+                k = model.parents[k]
+            out = max(out, chain + float(reaches[i]))
+        for capsule, moves in zip(self.capsules, self.moving_links()):
+            if not moves:
+                ends = self.capsules_world(np.clip(np.zeros(self.n_joints), self.lower, self.upper), check=False)
+                fixed = ends[self.link_names.index(capsule.link)]
+                origin = self.T_world_base[:3, 3]
+                out = max(out, max(np.linalg.norm(np.subtract(fixed.p0, origin)),
+                                   np.linalg.norm(np.subtract(fixed.p1, origin))) + capsule.radius)
+        return out
+
     def capsule_gap(self) -> float:
         """Metres: how thick a layer between a link's capsule and the robot's collision meshes can be, so how thick an
         object lying on the robot inside its capsules may be (the padding not counted: add ``padding``). Measured

@@ -12,7 +12,7 @@ from depthguard.cameras import Rig
 from depthguard.errors import SceneError
 from depthguard.robots import RobotModel
 from depthguard.simulation._fields import Section, as_number, as_vector, new_name, pose_of
-from depthguard.simulation._people import Person
+from depthguard.simulation._people import LIMBS, Person
 from depthguard.simulation._trajectory import RobotTrajectory
 
 
@@ -70,6 +70,13 @@ def _facing(section: Section, key: str, position: np.ndarray, robot_xy: np.ndarr
     return math.atan2(d[1], d[0])
 
 
+def _limbs(section: Section) -> str:
+    limbs = section.get("limbs", default="default")
+    if limbs not in LIMBS:
+        raise SceneError(f"limbs must be one of {', '.join(LIMBS)}, got {limbs!r}", field=section.field("limbs"))
+    return limbs
+
+
 def build_person(section: Section, names: set, floor: float, context: ActionContext, carried: dict,
             duration: float) -> Person:
     name = new_name(section, names)
@@ -82,7 +89,8 @@ def build_person(section: Section, names: set, floor: float, context: ActionCont
                     0.0 if heading is None else heading,
                     section.number("walk_speed", default=config.SIM_WALK_SPEED, positive=True),
                     section.number("clothes_albedo", default=config.SIM_CLOTHES_ALBEDO, minimum=0.01, maximum=1.0),
-                    section.number("skin_albedo", default=config.SIM_SKIN_ALBEDO, minimum=0.01, maximum=1.0))
+                    section.number("skin_albedo", default=config.SIM_SKIN_ALBEDO, minimum=0.01, maximum=1.0),
+                    _limbs(section))
     for index, item in enumerate(section.get("actions", default=[]) or []):
         field = f"{section.field('actions')}[{index}]"
         if not isinstance(item, dict) or len(item) != 1:

@@ -23,7 +23,6 @@ from depthguard.depth import depth_image
 from depthguard.errors import InputError
 from depthguard.rendering import MeshInstance, Renderer, RenderResult, primitive_mesh
 from depthguard.scenes import Box, Capsule
-from depthguard.simulation._people import PARTS
 from depthguard.simulation._scene import Workcell
 from depthguard.simulation._sensors import simulate_depth, simulate_intensity
 from depthguard.simulation._truth import GroundTruth, TruthComputer
@@ -94,11 +93,11 @@ class SceneRenderer:
         for obj in workcell.carried_objects:
             vertices, faces = primitive_mesh(Box((0.0, 0.0, 0.0), tuple(obj.size / 2.0)), segments)
             self._carried[obj.name] = (r.add_mesh(vertices, faces, closed=True), label(obj.name), obj.albedo)
-        self._people = {}  # name -> list of (mesh id, label, albedo) in PARTS order
+        self._people = {}  # name -> list of (mesh id, label, albedo) in the person's parts order
         capsules = {}  # (length, radius) -> mesh id: left and right limbs share their meshes
         for person in workcell.people:
             entries = []
-            for part, capsule in zip(PARTS, person.parts_at(0.0)):
+            for part, capsule in zip(person.parts, person.parts_at(0.0)):
                 key = (round(float(np.linalg.norm(np.subtract(capsule.p1, capsule.p0))), 12), capsule.radius)
                 if key not in capsules:
                     vertices, faces = primitive_mesh(Capsule((0.0, 0.0, 0.0), (0.0, 0.0, key[0]), key[1]), segments)

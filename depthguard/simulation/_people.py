@@ -105,8 +105,18 @@ PARTS = (
     BodyPart("foot_right", "ankle_right", "toe_right", "foot_radius"),
 )
 
-#: Names of the parts, in the order of :meth:`Person.parts_at`.
+#: Names of the parts, in the order of :meth:`Person.parts_at` (of a person with the default limbs).
 PART_NAMES = tuple(part.name for part in PARTS)
+
+#: A person with ``limbs: thin`` (SPEC section 11a's thin-limb judges), whatever their height: forearms 45 mm across,
+#: hands 25 mm thick (from the wrist to the knuckles, half the hand's length) and a finger 15 mm across (from the
+#: knuckles to the hand's end, where a reach ends). Radii in metres.
+THIN_LIMBS = dict(forearm_radius=0.0225, hand_radius=0.0125, finger_radius=0.0075)
+THIN_PARTS = tuple(BodyPart(part.name, part.a, f"knuckles_{part.a.split('_')[1]}", part.radius, part.skin)
+                   if part.name.startswith("hand_") else part for part in PARTS) + (
+    BodyPart("finger_left", "knuckles_left", "hand_left", "finger_radius", skin=True),
+    BodyPart("finger_right", "knuckles_right", "hand_right", "finger_radius", skin=True))
+LIMBS = ("default", "thin")
 
 _FINE_RATE = 240.0  # Hz: the grid on which heading and gait amplitude are sampled and smoothed
 
@@ -186,8 +196,10 @@ class Person:
     """
 
     def __init__(self, name: str, height: float, floor: float, start_position, start_heading: float,
-                 walk_speed: float, clothes_albedo: float, skin_albedo: float):
+                 walk_speed: float, clothes_albedo: float, skin_albedo: float, limbs: str = "default"):
         self.name = name
+        self.limbs = limbs
+        self.parts = THIN_PARTS if limbs == "thin" else PARTS  # BodyParts in parts_at's order
         self.height = float(height)
         self.floor = float(floor)
         self.walk_speed = float(walk_speed)
@@ -195,6 +207,8 @@ class Person:
         self.skin_albedo = float(skin_albedo)
         s = self.height / 1.75
         self.bones = {key: value * s for key, value in BONES.items()}
+        if limbs == "thin":
+            self.bones.update(THIN_LIMBS)
         self.spans: list[ActionSpan] = []
         self.arm_tasks: list[_ArmTask] = []
         self.carries: list[_Carry] = []
@@ -388,13 +402,20 @@ class Person:
             joints[f"elbow_{side}"] = elbow
             joints[f"wrist_{side}"] = wrist
             joints[f"hand_{side}"] = hand
+            if self.limbs == "thin":
+                joints[f"knuckles_{side}"] = 0.5 * (wrist + hand)
         return joints
 
+    @property
+    def part_names(self) -> tuple[str, ...]:
+        """Names of the parts, in :meth:`parts_at`'s order (:data:`PART_NAMES`, then the fingers of thin limbs)."""
+        return tuple(part.name for part in self.parts)
+
     def parts_at(self, t: float) -> list[Capsule]:
-        """The body's capsules at time ``t`` (world frame, metres), in :data:`PART_NAMES` order."""
+        """The body's capsules at time ``t`` (world frame, metres), in :attr:`part_names` order."""
         joints = self.joints_at(t)
         b = self.bones
-        return [Capsule(tuple(joints[part.a]), tuple(joints[part.b]), b[part.radius]) for part in PARTS]
+        return [Capsule(tuple(joints[part.a]), tuple(joints[part.b]), b[part.radius]) for part in self.parts]
 
     def carry_box_pose(self, base: BasePose, size) -> tuple[np.ndarray, float]:
         """(center (3,) world metres, yaw radians) of a box of ``size`` (3,) held in front of the body."""

@@ -53,7 +53,8 @@ carried object is a box: ``size: [sx, sy, sz]`` and optionally ``rest: {center: 
 before it is first carried (without ``rest`` it appears only when carried).
 
 ``people``: ``name``, ``height`` (1.75), ``start: {position: [x, y], facing: angle | [x, y] | robot}``,
-``walk_speed`` (1.3 m/s), ``clothes_albedo``, ``skin_albedo``, and ``actions``, a list of one-key mappings run one
+``walk_speed`` (1.3 m/s), ``clothes_albedo``, ``skin_albedo``, ``limbs`` (``default``, or ``thin``: forearms 45 mm
+across, hands 25 mm thick and a finger 15 mm across, the thin-limb judges' person), and ``actions``, a list of one-key mappings run one
 after another (see :mod:`depthguard.simulation._people` for what each does):
 
 - ``walk: {to: [x, y], via: [[x, y], ...], speed: 1.3, leg_swing: 0.35, backwards: false}`` (``backwards``:
@@ -91,7 +92,7 @@ from depthguard.robots import RobotModel
 from depthguard.scenes import Box, Capsule, Sphere
 from depthguard.simulation._actions import ActionContext, build_person
 from depthguard.simulation._fields import Section, new_name, pose_of
-from depthguard.simulation._people import PART_NAMES, PARTS, ActionSpan, Person, box_primitive
+from depthguard.simulation._people import ActionSpan, Person, box_primitive
 from depthguard.simulation._sensors import SensorModel
 from depthguard.simulation._trajectory import Hexagon, HexagonTrajectory, JointTrajectory, RobotTrajectory
 from depthguard.transforms import check_transform, look_at, yaw_pose
@@ -203,13 +204,14 @@ class Workcell:
 
     def part_names(self, name: str) -> tuple[str, ...]:
         """Names of the primitives of obstacle or object ``name`` (a person's body parts, or the object's name)."""
-        if any(p.name == name for p in self.people):
-            return PART_NAMES
+        for person in self.people:
+            if person.name == name:
+                return person.part_names
         return (name,)
 
     def obstacles_at(self, t: float) -> dict[str, list]:
         """Obstacles at time ``t``: name -> list of :mod:`depthguard.scenes` primitives in the world frame (a
-        person's body parts in :data:`PART_NAMES` order; an object's one primitive; an empty list for a carried
+        person's body parts in its ``part_names`` order; an object's one primitive; an empty list for a carried
         object not in the scene at ``t``). Keys in :attr:`obstacle_names` order."""
         out = {}
         for person in self.people:
@@ -253,7 +255,7 @@ class Workcell:
         out += [(obj.name, obj.albedo) for obj in self.carried_objects]
         for person in self.people:
             out += [(f"{person.name}/{part.name}", person.skin_albedo if part.skin else person.clothes_albedo)
-                    for part in PARTS]
+                    for part in person.parts]
         return tuple(out)
 
     def person(self, name: str) -> Person:
