@@ -507,10 +507,8 @@ class DistanceMonitor:
             if capsules:
                 zone = (np.array(capsules, dtype=np.float64), self.robot_zone)
         solids = None
-        if self._static is not None:
+        if self._static is not None:  # query() only: the detectable space uses the frames as measured
             band = max([s.solid_band for s in usable.values()], default=0.0)
-            if self.detectable is not None:  # the detectable space counts the solids grown by the tolerance free
-                band = max(band, self.self_filter_tolerance)
             if band > 0.0:
                 solids = (self._static.boxes, band)
         fills = tuple(s.filled for s in usable.values() if s.occupancy.invalid_policy == "neighbors"
@@ -798,9 +796,10 @@ class Concessions:
     - ``zone``: None, or (capsules (n, 7) float64: p0, p1, radius with the padding, metres, world frame, at every
       usable frame's joints; thickness, metres): the robot zone takes space within thickness of a capsule for the
       robot. It applies to fused answers (``zone_in_query``) and to the detectable space.
-    - ``solids``: None, or (boxes, band metres): every replaced measurement, and the detectable space's grown
-      solids, lie within band of a known solid (``StaticSolids.substitute_band``).
-    - ``fills``: occupancy images of the space filled holes counted free (``depth._prepare.filled_space``).
+    - ``solids``: None, or (boxes, band metres): every replaced measurement lies within band of a known solid
+      (``StaticSolids.substitute_band``). Queries only: the detectable space takes the frames as measured.
+    - ``fills``: occupancy images of the space filled holes counted free (``depth._prepare.filled_space``), in
+      queries and in the detectable space alike.
     """
 
     zone: tuple | None
@@ -823,7 +822,7 @@ class Concessions:
             t = np.clip((rel * axis[None]).sum(2) / length2, 0.0, 1.0)
             gap = np.linalg.norm(rel - t[..., None] * axis[None], axis=2) - (radius + thickness)[None]
             out[Flag.ROBOT_ZONE] = np.maximum(gap.min(axis=1), 0.0)
-        if self.solids is not None and n:
+        if self.solids is not None and query and n:
             boxes, band = self.solids
             near = np.full(n, np.inf)
             for box in boxes:
