@@ -132,6 +132,7 @@ class DistanceMonitor:
         self.maps = self._maps(maps)
         self.robot = robot
         self._silhouette = None
+        self._shell = 0.0  # metres beyond the robot's capsules that self-filtering may take for the robot
         if robot is not None:
             from depthguard.robots import RobotModel
 
@@ -141,6 +142,11 @@ class DistanceMonitor:
             from depthguard.self_filter import RobotSilhouette  # needs OpenGL: only with a robot
 
             self._silhouette = RobotSilhouette(robot, geometry=self.self_filter)
+            # The self-filter's shell beyond the robot's capsules: what the rendered geometry adds, the tolerance, and
+            # twice the noise margin where a camera can see the robot (a concession, flagged robot_shell).
+            margin = max(float(camera.noise.margin(np.array([_farthest_robot_depth(camera, robot)]))[0])
+                         for camera in rig.cameras.values())
+            self._shell = self._silhouette.beyond_capsules + self.self_filter_tolerance + 2.0 * margin
         self._static = None
         if static is not None:
             from depthguard.self_filter import StaticSolids  # needs OpenGL
@@ -208,9 +214,9 @@ class DistanceMonitor:
         """(metres, what): the thickest layer next to a surface in which :meth:`query` may not see an object, for
         speed and separation monitoring on its distances (the effective detection capability, SPEC section 9):
 
-        - with a robot, the self-filter's shell: the padded rendered geometry (``robot.padding`` and the capsules'
-          gap to the meshes, ``RobotModel.capsule_gap``, which bounds the hulls' too) plus ``self_filter_tolerance``
-          plus twice the noise margin at the farthest depth at which a camera can see the robot (its base's depth
+        - with a robot, the self-filter's shell: the capsules' padding and gap to the meshes
+          (``RobotModel.capsule_gap``), what the rendered geometry adds beyond the capsules, ``self_filter_tolerance``
+          and twice the noise margin at the farthest depth at which a camera can see the robot (its base's depth
           plus ``RobotModel.reach``): a measurement that near the robot is the robot; with a robot zone, the zone
           instead where it is thicker;
         - known solids: the largest band a replaced measurement may hide (``StaticSolids.largest_band``);
@@ -218,10 +224,8 @@ class DistanceMonitor:
         """
         parts = {}
         if self.robot is not None:
-            margin = max(float(camera.noise.margin(np.array([_farthest_robot_depth(camera, self.robot)]))[0])
-                         for camera in self.rig.cameras.values())
             body = self.robot.padding + self.robot.capsule_gap()
-            parts["the self-filter's shell"] = body + self.self_filter_tolerance + 2.0 * margin
+            parts["the self-filter's shell"] = body + self._shell
             if self.robot_zone > 0.0:
                 parts["robot zone + padding + the capsules' gap to the meshes"] = body + self.robot_zone
         if self._static is not None:
@@ -513,7 +517,14 @@ class DistanceMonitor:
                 solids = (self._static.boxes, band)
         fills = tuple(s.filled for s in usable.values() if s.occupancy.invalid_policy == "neighbors"
                       and s.occupancy.invalid_pixels and s.filled is not None)
-        return Concessions(zone, solids, fills, zone_in_query=plan.kind == "fused")
+        shell = None
+        if self.robot is not None:
+            joints = {s._joints.tobytes(): s._joints for s in usable.values() if s._joints is not None}
+            capsules = [tuple(c.p0) + tuple(c.p1) + (c.radius,) for q in joints.values()
+                        for c in self.robot.capsules_world(q, check=False)]
+            if capsules:
+                shell = (np.array(capsules, dtype=np.float64), self._shell)
+        return Concessions(zone, solids, fills, zone_in_query=plan.kind == "fused", shell=shell)
 
     def _remember(self, usable: dict) -> None:
         """Take the usable frames the memory has not seen into it (SPEC section 8a), as of the earliest capture time
@@ -800,12 +811,17 @@ class Concessions:
       (``StaticSolids.substitute_band``). Queries only: the detectable space takes the frames as measured.
     - ``fills``: occupancy images of the space filled holes counted free (``depth._prepare.filled_space``), in
       queries and in the detectable space alike.
+    - ``shell``: None, or (capsules as ``zone``'s, thickness): self-filtering takes a measurement within the
+      rendered geometry plus the tolerance and the noise margin for the robot, and the depth grid as much behind it;
+      that space lies within thickness of the capsules (queries only: the detectable space takes the frames' free
+      space as measured, up to the robot's surface less the margin).
     """
 
     zone: tuple | None
     solids: tuple | None
     fills: tuple
     zone_in_query: bool = False
+    shell: tuple | None = None
 
     def distances(self, points: np.ndarray, rho: float, query: bool = True) -> dict:
         """Flag -> (n,) float64 metres: each concession's distance from the points ((n, 3) world frame), a lower
@@ -814,14 +830,9 @@ class Concessions:
         n = len(points)
         out = {}
         if self.zone is not None and (self.zone_in_query or not query) and n:
-            capsules, thickness = self.zone
-            p0, p1, radius = capsules[:, 0:3], capsules[:, 3:6], capsules[:, 6]
-            axis = p1 - p0
-            length2 = np.maximum((axis * axis).sum(1), 1e-300)
-            rel = points[:, None, :] - p0[None]
-            t = np.clip((rel * axis[None]).sum(2) / length2, 0.0, 1.0)
-            gap = np.linalg.norm(rel - t[..., None] * axis[None], axis=2) - (radius + thickness)[None]
-            out[Flag.ROBOT_ZONE] = np.maximum(gap.min(axis=1), 0.0)
+            out[Flag.ROBOT_ZONE] = _to_grown_capsules(points, *self.zone)
+        if self.shell is not None and query and n:
+            out[Flag.ROBOT_SHELL] = _to_grown_capsules(points, *self.shell)
         if self.solids is not None and query and n:
             boxes, band = self.solids
             near = np.full(n, np.inf)
@@ -849,6 +860,18 @@ class Concessions:
             near = np.minimum(near, d)
             flags = [f | flag if x < b else f for f, x, b in zip(flags, d, bound)]
         return flags, near
+
+
+def _to_grown_capsules(points: np.ndarray, capsules: np.ndarray, thickness: float) -> np.ndarray:
+    """(n,) metres from each point ((n, 3) world frame) to the union of the capsules ((k, 7): p0, p1, radius) grown
+    by ``thickness`` metres (0 inside)."""
+    p0, p1, radius = capsules[:, 0:3], capsules[:, 3:6], capsules[:, 6]
+    axis = p1 - p0
+    length2 = np.maximum((axis * axis).sum(1), 1e-300)
+    rel = points[:, None, :] - p0[None]
+    t = np.clip((rel * axis[None]).sum(2) / length2, 0.0, 1.0)
+    gap = np.linalg.norm(rel - t[..., None] * axis[None], axis=2) - (radius + thickness)[None]
+    return np.maximum(gap.min(axis=1), 0.0)
 
 
 def _is_stale(timestamp, now, max_age, untimed_stale) -> bool:

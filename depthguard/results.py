@@ -40,6 +40,9 @@ class Flag(enum.IntFlag):
       self-filter's tolerance plus the noise margin of its surface counted as the solid.
     - ``HOLE_FILLED``: a hole in a frame filled from its neighbours (``invalid="neighbors"``): a pixel with no
       measurement counted free up to the nearest surface round it.
+    - ``ROBOT_SHELL``: self-filtering (SPEC section 7): space within the self-filter's shell of the robot (its
+      padded geometry, plus the tolerance and twice the noise margin) counted as the robot. A thin object lying on
+      the robot is not told from it.
     - ``DETECTION_OPENING``: SSM's detectable distances only (:meth:`PreparedSet.detectable_distances`): possibly
       occupied regions in which no ball of the detection capability fits were left out (ISO 13855's intrusion
       distance C covers them).
@@ -57,6 +60,7 @@ class Flag(enum.IntFlag):
     KNOWN_SOLID = 512
     HOLE_FILLED = 1024
     DETECTION_OPENING = 2048
+    ROBOT_SHELL = 4096
 
     @property
     def names(self) -> list[str]:
@@ -64,7 +68,8 @@ class Flag(enum.IntFlag):
         return [member.name.lower() for member in Flag if member in self]
 
 
-CONCESSION_FLAGS = Flag.REMEMBERED | Flag.ROBOT_ZONE | Flag.KNOWN_SOLID | Flag.HOLE_FILLED | Flag.DETECTION_OPENING
+CONCESSION_FLAGS = (Flag.REMEMBERED | Flag.ROBOT_ZONE | Flag.KNOWN_SOLID | Flag.HOLE_FILLED | Flag.DETECTION_OPENING
+                    | Flag.ROBOT_SHELL)
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,10 +103,10 @@ class DistanceResult:
         ages: camera name -> the age of the frame used, seconds, at the query's ``now`` (at the set's newest capture
             time when no ``now`` was given), or None when the frame has no timestamp. The answer is as old as its
             oldest frame (:attr:`age`): a camera's free space is what it saw then.
-        concession_distance: (n,) float64 metres, the distance to the nearest space that a concession (the robot
-            zone, a known solid, a filled hole, remembered free space; the flags ``robot_zone``, ``known_solid``,
-            ``hole_filled``, ``remembered``) counted free although no camera saw it free now, inf when none lies
-            within rho. Each such flag is set where it is nearer than ``distance``. The answer without any
+        concession_distance: (n,) float64 metres, the distance to the nearest space that a concession (the
+            self-filter's shell round the robot, the robot zone, a known solid, a filled hole; the flags
+            ``robot_shell``, ``robot_zone``, ``known_solid``, ``hole_filled``) counted free although no camera saw it
+            free now, inf when none lies within rho (remembered space has its own bound, ``v_max``). Each such flag is set where it is nearer than ``distance``. The answer without any
             concession is at least ``min(distance, blind_distance, concession_distance)``.
     """
 

@@ -49,6 +49,15 @@ def padded_hull(vertices, padding: float, directions: int = config.SELF_FILTER_H
     return np.asarray(mesh.vertices), np.asarray(mesh.faces)
 
 
+def _beyond(vertices: np.ndarray, capsule) -> float:
+    """Metres by which the convex hull of ``vertices`` ((n, 3), link frame) reaches outside ``capsule`` (its own
+    link's; 0 when inside): the largest distance of a vertex from the capsule's segment less its radius."""
+    p0, p1 = np.asarray(capsule.p0), np.asarray(capsule.p1)
+    axis = p1 - p0
+    t = np.clip((vertices - p0) @ axis / max(float(axis @ axis), 1e-300), 0.0, 1.0)
+    return max(float(np.max(np.linalg.norm(vertices - (p0 + t[:, None] * axis), axis=1))) - capsule.radius, 0.0)
+
+
 def _fibonacci_sphere(n: int) -> np.ndarray:
     """(n, 3) unit vectors spread evenly over the sphere."""
     i = np.arange(n) + 0.5
@@ -83,6 +92,9 @@ class RobotSilhouette:
         self.padding = robot.padding if padding is None else check_real(padding, "padding", minimum=0.0,
                                                                         unit="metres", field="padding")
         self._meshes: list[tuple[str, int]] = []  # (link, mesh id) with vertices in the link frame
+        #: Metres: how far the rendered geometry reaches beyond the robot's capsules (the hulls' corners; 0 for the
+        #: capsules and the meshes, which the capsules contain).
+        self.beyond_capsules = 0.0
         for link, capsule in zip(robot.link_names, robot.capsules):
             mesh = robot.collision_meshes[link]
             if geometry == "capsules":
@@ -92,6 +104,7 @@ class RobotSilhouette:
             elif geometry == "hulls":
                 vertices, faces = padded_hull(mesh.vertices, self.padding)
                 mesh_id = self.renderer.add_mesh(vertices, faces, closed=True)
+                self.beyond_capsules = max(self.beyond_capsules, _beyond(vertices, capsule))
             else:
                 mesh_id = self.renderer.add_mesh(mesh.vertices, mesh.faces, closed=False)
             self._meshes.append((link, mesh_id))

@@ -25,12 +25,13 @@ The judge can fail: with the known solids' band twice as thick (the hand vanishe
 effective capability (C taken for 40 mm while the 45 mm forearm vanishes into a 6 cm zone), and with a self-filter
 tolerance of 4 cm judged against the stated 2 cm, it reports violations (the mutation tests below).
 
-Finding (strict xfail below): the depth grid takes everything within the self-filter's shell of a link -- the padded
-geometry, the tolerance in front of it and behind it -- for the robot, and no flag's distance covers it: a 25 mm hand
-lying 1 cm from link 3 reads 40 mm above the truth, unflagged; a 15 mm finger 1 cm from links 3 and 5 reads 56 mm
-above it, flagged robot_blind_spot with a blind distance that does not cover it. The shell is stated only as a
-thickness for SSM's C (``DistanceMonitor.query_hidden_band()``, 0.107 m here), not in the answer. One camera alone
-covers the same objects through its blind distance (the space from the padded geometry's front on is blind).
+What the self-filter takes for the robot (test_what_the_self_filter_takes_for_the_robot_is_covered): the depth grid
+takes everything within the self-filter's shell of a link -- the padded geometry, the tolerance in front of it and
+behind it -- for the robot. This judge found it uncovered: a 25 mm hand lying 1 cm from link 3 read 40 mm above the
+truth, unflagged; a 15 mm finger 1 cm from links 3 and 5 read 56 mm above it, flagged robot_blind_spot with a blind
+distance that did not cover it. Now every answer that rests on it is flagged robot_shell and its concession_distance
+covers it (the capsules grown by the shell: 0 for a point on the robot). One camera alone covers the same objects
+through its blind distance (the space from the padded geometry's front on is blind).
 """
 
 from __future__ import annotations
@@ -387,30 +388,17 @@ def test_the_judge_catches_a_self_filter_tolerance_twice_as_large(cases, robot):
 
 # ------------------------------------------------------------------------------------ what the shell really hides
 
-SHELL_FINDING = (
-    "finding: the depth grid (fused answers, principal p) takes whatever lies inside the self-filter's shell of a link "
-    "(the padded hull, 2 cm in front of it, its far side + 2 cm) for the robot, and no flag's distance covers it. "
-    "A 25 mm hand 1 cm above link 3's mesh (iiwa held out horizontally, q = (0, pi/2, 0, 0, 0, 0, 0)): at "
-    "(0.34, 0, 0.477), 2 cm above the hand, fused distance 0.060 m, blind 0.072 m, no flag, truth 0.020 m (40 mm "
-    "above, tolerance 10.5 mm); 4 cm above: 0.069 m for 0.040 m; 8 cm above: 0.097 m for 0.080 m. A 15 mm finger "
-    "across the crook of the elbow, 1 cm from links 3-4 and 5 (q = (0, 0.5, 0, -2, 0, 0, 0)): at (0.211, -0.06, "
-    "0.587), 2 cm from it, min(distance, blind) 0.076 m (flag robot_blind_spot, blind 0.076 m), truth 0.020 m (56 mm "
-    "above). DistanceMonitor.query_hidden_band() states the shell as a thickness (0.107 m here) for SSM's C, but the "
-    "answer itself carries no flag naming it and no distance covering it (SPEC 11, 11a). One camera alone covers both "
-    "(blind from the padded hull's front on): at most 0.6 mm above the truth")
-
-
 @pytest.mark.parametrize("path", [
     "single p", "single s", "single t",
-    pytest.param("fused", marks=pytest.mark.xfail(strict=True, reason=SHELL_FINDING)),
+    "fused",
 ])
 def test_what_the_self_filter_takes_for_the_robot_is_covered(cases, answers, path):
     """Judged against the full truth (no shell allowed): every answer above truth + tolerance carries a flag whose
     distance covers it. Holds for each camera alone: the space from the padded geometry's front on is blind there,
     and a part 1 cm from a link reaches into the 2 cm padding (a part wholly within the tolerance in front of the
-    padded geometry could read up to (2 cm + 2 m) |ray| above the truth; none here). Fails for the fused answers
-    (SHELL_FINDING), although every part they hide lies within the self-filter's shell (rule 1 of
-    test_default_monitor), well within the band ``DistanceMonitor.query_hidden_band()`` states for SSM."""
+    padded geometry could read up to (2 cm + 2 m) |ray| above the truth; none here). The fused answers hold it
+    through the flag robot_shell and its concession_distance (before it, a hand 1 cm from link 3 read 40 mm and a
+    finger between links 3 and 5 56 mm above the truth, uncovered)."""
     failures = []
     for label in CASES:
         case = cases[label]

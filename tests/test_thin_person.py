@@ -56,7 +56,8 @@ def test_the_fused_defaults_see_a_thin_hand_reaching_for_the_arm():
     come towards the end-effector, no control point reads farther than its exact distance to the person plus the
     fused tolerance (2.5 footprints of the farthest camera + 1 mm), wherever the person is farther from the robot's
     meshes than what self-filtering may take for the robot (DistanceMonitor.query_hidden_band: the padded capsules'
-    gap to the meshes, the tolerance and twice the noise margin); no answer rests on another concession."""
+    gap to the meshes, the tolerance and twice the noise margin); every answer says it rests on self-filtering
+    (robot_shell, concession_distance 0 on the robot) and on no other concession but the memory."""
     workcell = _thin_reach()
     robot = workcell.robot
     monitor = dg.DistanceMonitor(workcell.rig, robot=robot, rho=0.6)
@@ -66,7 +67,10 @@ def test_the_fused_defaults_see_a_thin_hand_reaching_for_the_arm():
     for frame in sense_at(workcell, list(np.arange(1.2, 3.0, 0.1))):
         points = robot.control_point_positions(frame.joints)
         result = monitor.query(frame.depth, points, joints=frame.joints, now=frame.time)
-        assert not any(f & (CONCESSION_FLAGS & ~Flag.REMEMBERED) for f in result.flags)
+        # on the robot every answer rests on self-filtering (robot_shell), and on nothing else but the memory
+        assert not any(f & (CONCESSION_FLAGS & ~Flag.REMEMBERED & ~Flag.ROBOT_SHELL) for f in result.flags)
+        assert all(Flag.ROBOT_SHELL in f for f, d in zip(result.flags, result.distance) if d > 0.0)
+        assert np.all(result.concession_distance == 0.0)  # the control points lie inside the capsules
         if not frame.truth.clearance > shell:
             continue
         far = max(np.linalg.norm(points - camera.T_world_camera[:3, 3], axis=1).max()

@@ -526,7 +526,8 @@ def expect(case: Case, robot, rig: dg.Rig, rho: float, zone: float = 0.0, known_
     return Expectation(outside_shell, outside_stated, tol, gap)
 
 
-CONCESSIONS = (dg.Flag.ROBOT_ZONE | dg.Flag.KNOWN_SOLID | dg.Flag.HOLE_FILLED | dg.Flag.REMEMBERED)
+CONCESSIONS = (dg.Flag.ROBOT_ZONE | dg.Flag.KNOWN_SOLID | dg.Flag.HOLE_FILLED | dg.Flag.REMEMBERED
+               | dg.Flag.ROBOT_SHELL)
 
 
 def _capped(x, rho):
