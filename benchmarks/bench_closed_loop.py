@@ -1,5 +1,6 @@
-"""Issue 9's figures: the avoidance loop in simulated time, two 640x480 cameras (scenario B), 9 control points,
-distances at every 2 ms control step, the camera simulation included.
+"""Issue 9's figures: the avoidance loop in simulated time, two 640x480 cameras (scenario B), distances at every 2 ms
+control step from the loop's points (the spheres covering every moving link, ``LoopSettings.cover_surface``), the
+camera simulation included.
 
 The scene is ``scenario_b_reach.yaml`` (a person reaches into the end-effector); the run covers ``--start`` to
 ``--start + --duration`` seconds. Per mode (none: the task alone, the baseline; avoid: the papers' avoidance; ssm:
@@ -26,7 +27,7 @@ import numpy as np
 
 from depthguard.errors import InputError
 from depthguard.simulation import load_workcell
-from depthguard.simulation._closed_loop import MODES, run_closed_loop
+from depthguard.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
 
 
 def main() -> None:
@@ -36,7 +37,9 @@ def main() -> None:
     args = parser.parse_args()
     workcell = load_workcell(Path(str(resources.files("depthguard.simulation").joinpath("scenario_b_reach.yaml"))))
     print(f"scenario_b_reach, {args.start:g} s to {args.start + args.duration:g} s, control 500 Hz, cameras "
-          f"{workcell.rate:g} Hz, 2 cameras 640x480, 9 control points")
+          f"{workcell.rate:g} Hz, 2 cameras 640x480, "
+          f"{len(workcell.robot.with_surface_points(LoopSettings().surface_tolerance).control_points)} points covering "
+          "the arm")
     print(f"{'mode':6s} {'sim s / wall s':>14s} {'step median ms':>15s} {'step worst ms':>14s} {'min clearance m':>16s} "
           f"{'task error end m':>17s} {'slowed steps':>13s}")
     for mode in MODES:

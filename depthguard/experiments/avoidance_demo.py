@@ -262,8 +262,8 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
     if ssm_cell and "ssm" in modes:
         ssm_workcell, ssm_settings = ssm_scene()
         print(f"Mode ssm in {SSM_LAYOUT} ({', '.join(ssm_workcell.rig.cameras)}; time-of-flight noise), the room's "
-              "solids known, regions thinner than\nthe detection capability left out: the layout it needs to let the "
-              "arm move (--ssm-in-layout: in the one above).")
+              "solids known, regions thinner than\nthe detection capability left out (--ssm-in-layout: in the one "
+              "above); refused where its distances can hide more than ISO 13855's 70 mm.")
     print()
     rho = {mode: settings.ssm_rho if mode == "ssm" else settings.avoidance.rho for mode in modes}
     results, logs, bags = {}, {}, []
