@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # depthguard's one entry point for a fresh machine: it sets up everything it needs, then runs a job.
 #
-#   ./dev.sh demo    set up, then run the main job: the built-in workcell in closed loop (plots + tables in out/demo)
+#   ./dev.sh demo    set up, then run the main job: the lab's built-in workcell in closed loop (plots + tables in
+#                    out/demo)
 #   ./dev.sh test    set up, then run the test suite (what CI runs)
 #   ./dev.sh bench   set up, then run the benchmarks
 #   ./dev.sh setup   only set up
 #
-# Setup: system packages (when missing, through apt-get), a virtual environment in .venv with depthguard installed
-# in editable mode with its test dependencies. It is skipped when pyproject.toml has not changed since the last run.
+# Setup: system packages (when missing, through apt-get), a virtual environment in .venv with the library
+# (depthguard, this folder) and the lab beside it (depthguard-lab, ./lab) installed in editable mode with the test
+# dependencies. It is skipped when neither pyproject.toml has changed since the last run.
 # Then, every time, `depthguard warmup` compiles the numba kernels not cached yet (about two minutes after a fresh clone
 # or an upgrade of depthguard or numba; a few seconds when everything is cached), so that no query waits for them.
 set -euo pipefail
@@ -47,10 +49,10 @@ setup() {
   fi
   local stamp=".venv/.depthguard-installed"
   local want
-  want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+  want=$(cat pyproject.toml lab/pyproject.toml | sha256sum | cut -d' ' -f1)
   if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-    echo "dev.sh: installing depthguard and its dependencies into .venv (log: .venv/pip.log)"
-    if ! { .venv/bin/python -m pip install --upgrade pip && .venv/bin/python -m pip install -e '.[test]'; } \
+    echo "dev.sh: installing depthguard and depthguard-lab with their dependencies into .venv (log: .venv/pip.log)"
+    if ! { .venv/bin/python -m pip install --upgrade pip && .venv/bin/python -m pip install -e '.[test]' -e ./lab; } \
         > .venv/pip.log 2>&1; then
       tail -n 30 .venv/pip.log >&2
       echo "dev.sh: pip install failed (full log: .venv/pip.log)" >&2
@@ -66,7 +68,7 @@ shift || true
 setup
 case "$job" in
   setup) ;;
-  demo) exec .venv/bin/depthguard demo "$@" ;;
+  demo) exec .venv/bin/depthguard-lab demo "$@" ;;
   test) exec .venv/bin/python -m pytest -q "$@" ;;
   bench)
     for bench in benchmarks/bench_*.py; do

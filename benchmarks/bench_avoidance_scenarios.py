@@ -30,10 +30,10 @@ from importlib import resources
 from pathlib import Path
 
 from depthguard.avoidance import AvoidanceParams
-from depthguard.experiments.avoidance_demo import resumed_cell, summarize
-from depthguard.simulation import load_workcell
+from depthguard_lab.experiments.avoidance_demo import resumed_cell, summarize
+from depthguard_lab.simulation import load_workcell
 from depthguard.errors import InputError
-from depthguard.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
+from depthguard_lab.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
 
 WINDOWS = {"scenario_b_reach.yaml": (1.9, 3.6), "scenario_b_board.yaml": (1.6, 4.4),
            "scenario_b_elbow.yaml": (2.4, 4.6)}
@@ -43,7 +43,7 @@ SSM_CELL = dict(ssm_capability=True, known_solids=True)
 
 
 def _packaged(name: str) -> Path:
-    return Path(str(resources.files("depthguard.simulation").joinpath(name)))
+    return Path(str(resources.files("depthguard_lab.simulation").joinpath(name)))
 
 
 def main() -> None:

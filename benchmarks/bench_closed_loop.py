@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from depthguard.errors import InputError
-from depthguard.simulation import load_workcell
-from depthguard.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
+from depthguard_lab.simulation import load_workcell
+from depthguard_lab.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
 
 
 def main() -> None:
@@ -35,7 +35,7 @@ def main() -> None:
     parser.add_argument("--start", type=float, default=1.9)
     parser.add_argument("--duration", type=float, default=1.3)
     args = parser.parse_args()
-    workcell = load_workcell(Path(str(resources.files("depthguard.simulation").joinpath("scenario_b_reach.yaml"))))
+    workcell = load_workcell(Path(str(resources.files("depthguard_lab.simulation").joinpath("scenario_b_reach.yaml"))))
     print(f"scenario_b_reach, {args.start:g} s to {args.start + args.duration:g} s, control 500 Hz, cameras "
           f"{workcell.rate:g} Hz, 2 cameras 640x480, "
           f"{len(workcell.robot.with_surface_points(LoopSettings().surface_tolerance).control_points)} points covering "

@@ -117,9 +117,9 @@ def main() -> None:
     #    observe (difference images with the light's gain, Tables I and III) + one future configuration's verdict.
     from importlib import resources
 
-    from depthguard.simulation import load_workcell, simulate
+    from depthguard_lab.simulation import load_workcell, simulate
 
-    with resources.as_file(resources.files("depthguard.simulation").joinpath("scenario_c.yaml")) as path:
+    with resources.as_file(resources.files("depthguard_lab.simulation").joinpath("scenario_c.yaml")) as path:
         workcell = load_workcell(path)
     frames = {f.index: f for f in simulate(workcell, frames=list(range(0, 45, 5)) + [100])}
     future = workcell.joints_at(7.0)

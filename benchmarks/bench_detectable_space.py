@@ -22,8 +22,8 @@ import numpy as np
 
 import depthguard as dg
 from depthguard import config
-from depthguard.simulation import load_workcell
-from depthguard.simulation._episode import sense_at
+from depthguard_lab.simulation import load_workcell
+from depthguard_lab.simulation._episode import sense_at
 
 
 def _seconds(function) -> tuple[float, object]:
@@ -36,7 +36,7 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sets", type=int, default=12, help="sets of frames, spread over the scene (default 12)")
     args = parser.parse_args(argv)
-    package = resources.files("depthguard.simulation")
+    package = resources.files("depthguard_lab.simulation")
     workcell = load_workcell(Path(str(package / "scenario_b_reach.yaml")),
                              layout=Path(str(package / "scenario_b_ssm.yaml")))
     robot = workcell.robot

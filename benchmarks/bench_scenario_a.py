@@ -1,7 +1,7 @@
 """Scenario A (2015 paper, section 4): time per query of ONE control point over the whole motion.
 
 P moves along y = 0.4, z = 0.2, x in [-0.5, 0.5] m (201 positions), rho = 0.3 m, one 640x480 camera looking at a
-table top and a thin wall (depthguard.experiments.scenario_a). Every position is queried ``--repeats`` times per
+table top and a thin wall (depthguard_lab.experiments.scenario_a). Every position is queried ``--repeats`` times per
 method on a prepared frame; the per-position median is kept (this machine is shared and noisy), and the table gives
 the worst / median / best of those medians over the motion, as the paper's Fig. 11 does.
 
@@ -20,7 +20,7 @@ import numpy as np
 
 import depthguard as dg
 from depthguard import baselines
-from depthguard.experiments import scenario_a as sa
+from depthguard_lab.experiments import scenario_a as sa
 
 GOAL_MIN_WORST = 0.3e-3  # seconds
 

@@ -14,6 +14,7 @@ Reported (medians, the machine is shared and noisy):
 
 from __future__ import annotations
 
+from depthguard_lab import config as lab_config
 import argparse
 import os
 import sys
@@ -27,7 +28,7 @@ sys.path.insert(0, os.path.dirname(__file__))
 
 import depthguard as dg  # noqa: E402
 from depthguard import config  # noqa: E402
-from depthguard.simulation import (  # noqa: E402
+from depthguard_lab.simulation import (  # noqa: E402
     SceneRenderer,
     SensorModel,
     TruthComputer,
@@ -110,8 +111,8 @@ def main(argv=None) -> None:
         tm = timings(lambda: dg.depth.write_depth_png(path, data), n)
         print(f"{'one 16-bit depth PNG, depthguard.depth.write_depth_png':58s} {np.median(tm) * 1e3:10.2f}")
         image = Image.fromarray(data)
-        tm = timings(lambda: image.save(path, compress_level=config.SIM_PNG_COMPRESSION), n)
-        print(f"{f'the same at zlib level {config.SIM_PNG_COMPRESSION} (what write_episode uses)':58s} "
+        tm = timings(lambda: image.save(path, compress_level=lab_config.SIM_PNG_COMPRESSION), n)
+        print(f"{f'the same at zlib level {lab_config.SIM_PNG_COMPRESSION} (what write_episode uses)':58s} "
               f"{np.median(tm) * 1e3:10.2f}")
     renderer.release()
 

@@ -23,8 +23,8 @@ import numpy as np
 
 import depthguard as dg
 from depthguard.depthgrid import _kernels
-from depthguard.experiments import fusion_workcell as fw
-from depthguard.simulation import load_workcell, simulate
+from depthguard_lab.experiments import fusion_workcell as fw
+from depthguard_lab.simulation import load_workcell, simulate
 
 CELLS = 12  # cells probed behind blind_from; the last bin counts runs of CELLS - 1 or more
 

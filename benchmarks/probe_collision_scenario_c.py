@@ -23,8 +23,8 @@ from importlib import resources
 import numpy as np
 
 from depthguard.collision import ConfigurationTable, ImageCollisionTest
-from depthguard.simulation import load_workcell, simulate
-from depthguard.simulation._truth import TruthComputer
+from depthguard_lab.simulation import load_workcell, simulate
+from depthguard_lab.simulation._truth import TruthComputer
 
 FALSE_ALARM_CLEARANCE = 0.15
 
@@ -36,7 +36,7 @@ def main() -> None:
     parser.add_argument("--images", nargs="+", default=["intensity", "depth"], choices=["intensity", "depth"])
     parser.add_argument("--verbose", action="store_true", help="print every missed collision")
     args = parser.parse_args()
-    with resources.as_file(resources.files("depthguard.simulation").joinpath("scenario_c.yaml")) as path:
+    with resources.as_file(resources.files("depthguard_lab.simulation").joinpath("scenario_c.yaml")) as path:
         workcell = load_workcell(path)
     robot = workcell.robot
     reference_frames = range(0, int(3.0 * workcell.rate), 5)

@@ -17,9 +17,9 @@ import argparse
 import numpy as np
 
 import depthguard as dg
-from depthguard.experiments import fusion_workcell as fw
-from depthguard.experiments.workcell import scene_distance
-from depthguard.simulation import load_workcell, simulate
+from depthguard_lab.experiments import fusion_workcell as fw
+from depthguard_lab.experiments.workcell import scene_distance
+from depthguard_lab.simulation import load_workcell, simulate
 
 USEFUL_MARGIN = 0.05  # issue 8: pairs truly farther than rho + 5 cm
 

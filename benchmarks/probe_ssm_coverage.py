@@ -34,10 +34,10 @@ import numpy as np
 
 import depthguard as dg
 from depthguard import config
-from depthguard.simulation import load_workcell
-from depthguard.simulation._episode import sense_at
+from depthguard_lab.simulation import load_workcell
+from depthguard_lab.simulation._episode import sense_at
 
-PACKAGE = resources.files("depthguard.simulation")
+PACKAGE = resources.files("depthguard_lab.simulation")
 
 CEILING = """  - name: ceiling          # 3.2 m up, looking straight down: the depth grid's principal
     width: 512

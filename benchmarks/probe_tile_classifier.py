@@ -17,11 +17,11 @@ from importlib import resources
 import numpy as np
 
 from depthguard.collision import BayesTileClassifier, ImageCollisionTest, labelled_tiles, light_gain, tile_features
-from depthguard.simulation import load_workcell, simulate
+from depthguard_lab.simulation import load_workcell, simulate
 
 
 def main() -> None:
-    with resources.as_file(resources.files("depthguard.simulation").joinpath("scenario_c.yaml")) as path:
+    with resources.as_file(resources.files("depthguard_lab.simulation").joinpath("scenario_c.yaml")) as path:
         workcell = load_workcell(path)
     reference_frames = list(range(0, 45, 5))
     person_frames = list(range(70, workcell.n_frames, 2))

@@ -69,7 +69,7 @@ class DistanceMonitor:
         static: known static solids no person can be inside (the floor, a pedestal, walls, a table built down to the
             floor): a list or tuple of :class:`depthguard.scenes.Box`, world frame. Their surfaces, measured where
             they are known to be, stop counting as obstacles; the space they hide still counts
-            (:class:`depthguard.self_filter.StaticSolids`). An object within ``self_filter_tolerance`` + the noise
+            (:class:`depthguard.static_solids.StaticSolids`). An object within ``self_filter_tolerance`` + the noise
             margin of such a surface is taken for it. None (default): everything the cameras see counts.
         detection_capability: d, metres, or None (default): with a value, each set of frames also finds where in the
             possibly occupied space a ball of diameter d fits (:class:`depthguard.freespace.DetectableSpace`, in
@@ -149,10 +149,9 @@ class DistanceMonitor:
             self._shell = self._silhouette.beyond_capsules + self.self_filter_tolerance + 2.0 * margin
         self._static = None
         if static is not None:
-            from depthguard.self_filter import StaticSolids  # needs OpenGL
+            from depthguard.static_solids import StaticSolids
 
-            self._static = StaticSolids(static, self.self_filter_tolerance,
-                                        None if self._silhouette is None else self._silhouette.renderer)
+            self._static = StaticSolids(static, self.self_filter_tolerance)
         self.robot_zone = check_real(robot_zone, "robot_zone", minimum=0.0, maximum=config.ROBOT_ZONE_MAX,
                                      unit="metres", field="robot_zone")
         self.memory = None

@@ -1,16 +1,10 @@
-"""The ``depthguard`` command line.
+"""The ``depthguard`` command line: the commands a cell runs (the lab's simulations and experiments are
+``depthguard-lab``'s).
 
     depthguard distance --rig RIG.yaml --depth NAME=PATH --points POINTS [--rho 0.4] [--aggregate hybrid] ...
     depthguard build-map --rig RIG.yaml [--principal NAME] [--d-min M --d-max M --delta-d M] --out MAP
-    depthguard simulate [SCENE.yaml] --out DIR [--seed N] [--duration S] [--bag]
     depthguard replay RECORDING --out RESULTS.csv [--robot URDF|iiwa|panda] [--points POINTS] [--rho 0.4] ...
-    depthguard demo [--out DIR] [--duration S] [--mode none|avoid|ssm ...] [--cameras 4|2] [--no-bag]
-                    [--ssm-in-layout]
-    depthguard workcell [--out DIR] [--duration S]
-    depthguard fusion-workcell [--out DIR] [--scene SCENE.yaml ...] [--all-frames]
     depthguard coverage --rig RIG.yaml [--robot URDF|iiwa|panda] [--trajectory joint_states.csv] [--rho 0.4] ...
-    depthguard scenario-a [--out DIR]
-    depthguard real-room [--out DIR] [--data FOLDER]
     depthguard collide --rig RIG.yaml --reference NAME=GLOB ... --image NAME=PATH ... --robot URDF|iiwa|panda|xarm6
                        --current VALUES --future VALUES [...] [--motion "VALUES;VALUES"] [--theta N] [--json]
     depthguard plan --rig RIG.yaml --reference NAME=GLOB ... --image NAME=PATH ... --robot URDF --current VALUES
@@ -23,9 +17,6 @@ Numeric options are checked where they are parsed (``inf``, ``nan`` and ``1e999`
 - ``--rho``: metres in [``config.RHO_MIN``, ``config.RHO_MAX``] (``coverage``: in ``coverage.RHO_RANGE``);
 - ``--d-min``, ``--d-max``, ``--delta-d``: metres in (0, ``config.COORDINATE_LIMIT``], with d-max > d-min and at
   most ``config.DEPTH_GRID_MAX_CELLS`` cells;
-- ``--duration``: finite seconds, at least one frame period of the scene (1/30 s for the default scenes); longer
-  than the scene simulates the whole scene;
-- ``--seed``: a whole number in [0, ``config.MAX_SEED``]; ``--repeats``: in [1, ``config.MAX_REPEATS``];
 - ``--joints``: finite numbers (radians, or metres for prismatic joints).
 """
 
@@ -41,14 +32,14 @@ from depthguard import config
 from depthguard.errors import DepthguardError
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line (no usage dump) and exit status 2."""
+class Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (no usage dump) and exit status 2, prefixed with the program's name."""
 
     def error(self, message):
-        self.exit(2, f"depthguard: error: {message}\n")
+        self.exit(2, f"{self.prog.split()[0]}: error: {message}\n")
 
 
-def _real(minimum: float, maximum: float, unit: str, above_minimum: bool = False):
+def real_option(minimum: float, maximum: float, unit: str, above_minimum: bool = False):
     """An argparse type: a finite number in [minimum, maximum] (``(minimum, maximum]`` with ``above_minimum``).
     argparse reports a refusal as one line naming the option."""
 
@@ -67,7 +58,7 @@ def _real(minimum: float, maximum: float, unit: str, above_minimum: bool = False
     return number
 
 
-def _whole(minimum: int, maximum: int):
+def whole_option(minimum: int, maximum: int):
     """An argparse type: a whole number in [minimum, maximum]."""
 
     def whole(text: str) -> int:
@@ -83,16 +74,15 @@ def _whole(minimum: int, maximum: int):
     return whole
 
 
-_METRES = _real(config.RHO_MIN, config.RHO_MAX, "metres")
-_GRID_METRES = _real(0.0, config.COORDINATE_LIMIT, "metres", above_minimum=True)
-_SECONDS = _real(0.0, math.inf, "seconds", above_minimum=True)
-_SPEED = _real(0.0, config.COORDINATE_LIMIT, "metres/second", above_minimum=True)
+_METRES = real_option(config.RHO_MIN, config.RHO_MAX, "metres")
+_GRID_METRES = real_option(0.0, config.COORDINATE_LIMIT, "metres", above_minimum=True)
+_SPEED = real_option(0.0, config.COORDINATE_LIMIT, "metres/second", above_minimum=True)
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="depthguard", description="Distances between a robot and unknown obstacles, computed in "
+    parser = Parser(prog="depthguard", description="Distances between a robot and unknown obstacles, computed in "
                                                      "the depth space of calibrated depth cameras.")
-    commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     distance = commands.add_parser("distance", help="distances from control points to what the cameras see")
     distance.add_argument("--rig", required=True, help="rig YAML file (SPEC section 2)")
@@ -136,17 +126,6 @@ def _build_parser() -> argparse.ArgumentParser:
                             f"{config.DEPTH_GRID_MAX_CELLS} cells in all)")
     build.add_argument("--out", required=True, help="map file to write (.npz)")
 
-    simulate = commands.add_parser("simulate", help="simulate a workcell and write its frames, rig, joint states "
-                                                     "and ground truth")
-    simulate.add_argument("scene", nargs="?", help="scene YAML (default: reference scenario B)")
-    simulate.add_argument("--out", required=True, help="output folder")
-    simulate.add_argument("--seed", type=_whole(0, config.MAX_SEED), default=None,
-                          help="sensor-noise seed (default: the scene's)")
-    simulate.add_argument("--duration", type=_SECONDS, default=None,
-                          help="simulate only the first S seconds (at least one frame period)")
-    simulate.add_argument("--bag", action="store_true", help="also write the recording as a ROS 2 bag (MCAP) into "
-                                                             "OUT/bag/ (depth images, camera_info, joint_states)")
-
     replay = commands.add_parser("replay", help="run a recording (folder or ROS 2 bag, SPEC section 12a) through the "
                                                 "monitor in capture-time order, one answer per set of frames")
     replay.add_argument("recording", metavar="RECORDING", help="a recording folder (rig.yaml, frames.csv, depth/, "
@@ -175,39 +154,6 @@ def _build_parser() -> argparse.ArgumentParser:
                         help="do not remember free space: only what the cameras see now clears space")
     replay.add_argument("--json", action="store_true", help="also print a JSON summary to standard output")
 
-    demo = commands.add_parser("demo", help="the Quick start's main job: a robot doing its task next to a person "
-                                            "in closed loop, without avoidance, with the papers' avoidance and "
-                                            "with speed and separation monitoring, judged by exact geometry")
-    demo.add_argument("--out", default="out/demo", help="output folder for plots and summary.json")
-    demo.add_argument("--duration", type=_SECONDS, default=None,
-                      help="only the first S seconds, at least one frame (1/30 s) (default: the whole scene, 5.5 s)")
-    demo.add_argument("--mode", action="append", choices=("none", "avoid", "ssm"),
-                      help="run only this mode (repeatable; default: none, avoid and ssm)")
-    demo.add_argument("--cameras", type=int, choices=(2, 4), default=4,
-                      help="four depth cameras round the robot (issue 8's reference layout, default) or the scene's "
-                           "two front ones (faster)")
-    demo.add_argument("--no-bag", action="store_true",
-                      help="do not write the avoid run as a recording (DIR/bag_avoid, an MCAP file of about 150 MB)")
-    demo.add_argument("--ssm-in-layout", action="store_true",
-                      help="run ssm in the other modes' camera layout (where it stops the robot for good) instead of "
-                           "scenario_b_ssm.yaml's five cameras, known solids and detectable distances")
-
-    workcell = commands.add_parser("workcell", help="the simulated workcell of reference scenario B, each camera's "
-                                                    "distances on its own against the truth")
-    workcell.add_argument("--out", default="out/workcell", help="output folder for plots and summary.json")
-    workcell.add_argument("--duration", type=_SECONDS, default=None,
-                          help="only the first S seconds, at least one frame (1/30 s) (default: all 12)")
-
-    fusion = commands.add_parser("fusion-workcell", help="scenario B's shadow and hidden-hand cases: a camera alone "
-                                                         "against all fused through the depth grid, without and with "
-                                                         "the free-space memory")
-    fusion.add_argument("--out", default="out/fusion-workcell", help="output folder for plots and summary.json")
-    fusion.add_argument("--scene", action="append", metavar="SCENE", help="a camera layout (scene YAML) to run "
-                                                                           "(repeatable; default: scenario_b.yaml and "
-                                                                           "scenario_b_four.yaml)")
-    fusion.add_argument("--all-frames", action="store_true", help="simulate the whole episode (default: the two "
-                                                                  "cases and 0.5 s around them)")
-
     coverage = commands.add_parser("coverage", help="camera placement: the space within rho of the robot that no "
                                                     "camera of a rig can clear, as fractions and a picture")
     coverage.add_argument("--rig", required=True, help="rig YAML file (SPEC section 2)")
@@ -218,22 +164,11 @@ def _build_parser() -> argparse.ArgumentParser:
                           help="robot poses: a CSV time,<joint names...> (a recording's joint_states.csv), at most "
                                "20 rows used, evenly spread (default: scenario B's posture and four poses along its "
                                "trajectory for the iiwa, else the zero configuration)")
-    from depthguard.experiments.coverage import RHO_RANGE  # the samples fill rho around the robot: bounded
+    from depthguard._coverage import RHO_RANGE  # the samples fill rho around the robot: bounded
 
-    coverage.add_argument("--rho", type=_real(*RHO_RANGE, "metres"), default=config.DEFAULT_RHO,
+    coverage.add_argument("--rho", type=real_option(*RHO_RANGE, "metres"), default=config.DEFAULT_RHO,
                           help=f"surveillance radius, metres, in [{RHO_RANGE[0]:g}, {RHO_RANGE[1]:g}]")
     coverage.add_argument("--out", default="out/coverage", help="output folder for coverage.json and coverage.png")
-
-    room = commands.add_parser("real-room", help="real data: three calibrated views of a room fused through the "
-                                                 "depth grid; the calibration error and the fusion margin it needs")
-    room.add_argument("--out", default="out/real-room", help="output folder for plots and summary.json")
-    room.add_argument("--data", default=None, help="the slambook2-room folder (default: ../shared/data/real/...)")
-
-    scenario_a = commands.add_parser("scenario-a", help="reference scenario A of the 2015 paper: plots and a "
-                                                        "timing table")
-    scenario_a.add_argument("--out", default="out/scenario-a", help="output folder for plots and tables")
-    scenario_a.add_argument("--repeats", type=_whole(1, config.MAX_REPEATS), default=20,
-                            help="timing repetitions per control point position")
 
     from depthguard import _collision_command as _command
 
@@ -256,7 +191,8 @@ _NUMBER_LIST_OPTIONS = ("--current", "--future", "--goal", "--motion", "--lower"
                         "--workspace", "--reference-joints")
 
 
-def _attach_number_lists(argv: list[str]) -> list[str]:
+def attach_number_lists(argv: list[str]) -> list[str]:
+    """``argv`` with a number list that starts with a minus sign joined to its option (``--current=-0.3,0.2``)."""
     out, i = [], 0
     while i < len(argv):
         if argv[i] in _NUMBER_LIST_OPTIONS and i + 1 < len(argv) and argv[i + 1][:1] == "-" and \
@@ -271,61 +207,53 @@ def _attach_number_lists(argv: list[str]) -> list[str]:
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    args = _build_parser().parse_args(_attach_number_lists(argv))
+    args = _build_parser().parse_args(attach_number_lists(argv))
+    return run(lambda: _COMMANDS[args.command](args), "depthguard")
+
+
+def run(command, program: str) -> int:
+    """Run ``command()`` (a command's body, returning its exit status) as every depthguard command line does: a
+    :class:`~depthguard.DepthguardError` (bad input) or an ``OSError`` ends with exit status 2 and one line on
+    standard error, ``<program>: error: ...``; any other exception is a bug: exit status 3 and one line
+    (``DEPTHGUARD_DEBUG=1`` raises it instead, with its traceback)."""
     try:
-        if args.command == "distance":
-            return _distance(args)
-        if args.command == "simulate":
-            return _simulate(args)
-        if args.command == "replay":
-            return _replay(args)
-        if args.command == "build-map":
-            return _build_map(args)
-        if args.command == "real-room":
-            from depthguard.experiments import real_room
-
-            return real_room.main(args.out, folder=args.data)
-        if args.command == "demo":
-            from depthguard.experiments import avoidance_demo
-
-            return avoidance_demo.main(out=args.out, duration=_duration(args.duration, config.SIM_RATE),
-                                       modes=args.mode, bag=not args.no_bag, cameras=args.cameras,
-                                       ssm_cell=not args.ssm_in_layout)
-        if args.command == "workcell":
-            from depthguard.experiments import workcell
-
-            return workcell.main(out=args.out, duration=_duration(args.duration, config.SIM_RATE))
-        if args.command == "warmup":
-            from depthguard import _warmup
-
-            return _warmup.main()
-        if args.command == "coverage":
-            from depthguard.experiments import coverage
-
-            return coverage.main(args.rig, robot=args.robot, trajectory=args.trajectory, rho=args.rho, out=args.out)
-        if args.command in ("collide", "plan"):
-            from depthguard import _collision_command as _command
-
-            return _command.collide(args) if args.command == "collide" else _command.plan(args)
-        if args.command == "fusion-workcell":
-            from depthguard.experiments import fusion_workcell
-
-            return fusion_workcell.main(out=args.out, scenes=args.scene, all_frames=args.all_frames)
-        from depthguard.experiments import scenario_a
-
-        return scenario_a.main(out=args.out, repeats=args.repeats)
+        return command()
     except DepthguardError as exc:
-        print(f"depthguard: error: {exc}", file=sys.stderr)
+        print(f"{program}: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:
-        print(f"depthguard: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        print(f"{program}: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2
     except Exception as exc:  # a bug, not bad input: still one line, the traceback on request
         if os.environ.get("DEPTHGUARD_DEBUG"):
             raise
-        print(f"depthguard: internal error: {type(exc).__name__}: {exc} (set DEPTHGUARD_DEBUG=1 for the traceback)",
+        print(f"{program}: internal error: {type(exc).__name__}: {exc} (set DEPTHGUARD_DEBUG=1 for the traceback)",
               file=sys.stderr)
         return 3
+
+
+def _warmup(args) -> int:
+    from depthguard import _warmup
+
+    return _warmup.main()
+
+
+def _coverage(args) -> int:
+    from depthguard import _coverage as coverage
+
+    return coverage.main(args.rig, robot=args.robot, trajectory=args.trajectory, rho=args.rho, out=args.out)
+
+
+def _collide(args) -> int:
+    from depthguard import _collision_command as command
+
+    return command.collide(args)
+
+
+def _plan(args) -> int:
+    from depthguard import _collision_command as command
+
+    return command.plan(args)
 
 
 def _distance(args) -> int:
@@ -395,39 +323,15 @@ def _build_map(args) -> int:
     return 0
 
 
-def _simulate(args) -> int:
-    from pathlib import Path
-
-    from depthguard.errors import InputError
-    from depthguard.simulation import default_workcell, load_workcell, write_episode
-
-    if args.bag and (Path(args.out) / "bag").exists():  # refused before the simulation, not after it
-        raise InputError(f"--bag: {Path(args.out) / 'bag'} exists already; a bag is written into a new folder")
-    workcell = load_workcell(args.scene) if args.scene else default_workcell()
-    duration = _duration(args.duration, workcell.rate)
-    frames = None if duration is None else range(min(workcell.n_frames, int(round(duration * workcell.rate))))
-    n = workcell.n_frames if frames is None else len(frames)
-    print(f"simulating {n} frames of {', '.join(workcell.rig.cameras)} at {workcell.rate:g} Hz into {args.out}")
-    out = write_episode(workcell, args.out, seed=args.seed, progress=True, frames=frames)
-    print(f"wrote {out}: rig.yaml, frames.csv, depth/, intensity/, joint_states.csv, ground_truth.csv, scene.yaml")
-    if args.bag:
-        from depthguard.recordings import open_recording, write_bag
-
-        bag = write_bag(open_recording(out), out / "bag")
-        print(f"wrote {bag}: ROS 2 bag (MCAP) with the same frames and joint states, and rig.yaml")
-    return 0
-
-
 def _replay(args) -> int:
     import csv
     from pathlib import Path
 
     import numpy as np
-    from tqdm import tqdm
 
     from depthguard import DistanceMonitor
-    from depthguard._files import atomic_write
     from depthguard.errors import InputError
+    from depthguard.files import atomic_write
     from depthguard.recordings import open_recording
 
     out = Path(args.out)
@@ -460,8 +364,8 @@ def _replay(args) -> int:
     with atomic_write(out, newline="") as f:  # --out appears once every set is answered
         writer = csv.writer(f)
         writer.writerow(["time", "frame", "control_point", "x", "y", "z", "distance", "blind_distance", "flags"])
-        for frame_set in tqdm(recording.frame_sets(), total=len(recording), unit="set", desc="replaying",
-                              file=sys.stderr):
+        print(f"replaying {len(recording)} frame sets ...", file=sys.stderr, flush=True)
+        for frame_set in recording.frame_sets():
             points = fixed if fixed is not None else \
                 robot.control_point_positions(recording.joints_at(frame_set.time)[order])
             camera_joints = {camera: q[order] for camera, q in frame_set.joints.items()}
@@ -493,15 +397,6 @@ def _replay_robot(name: str):
 
     robot = {"iiwa": RobotModel.default, "panda": RobotModel.panda}.get(name)
     return robot() if robot is not None else RobotModel.from_urdf(name)
-
-
-def _duration(value, rate: float):
-    """``--duration`` (finite seconds, or None): at least one frame period of a scene simulated at ``rate`` Hz."""
-    from depthguard.errors import InputError
-
-    if value is not None and value < 1.0 / rate:
-        raise InputError(f"--duration must be at least one frame period (1/{rate:g} s), got {value:g} s")
-    return value
 
 
 def _robot_and_joints(args):
@@ -546,6 +441,11 @@ def parse_joints(text: str, option: str = "--joints"):
     if len(set(names)) != len(names):
         raise InputError(f"{option} names a joint twice: {text!r}")
     return dict(zip(names, values))
+
+
+#: The commands: name -> the function that runs it on the parsed arguments (its exit status).
+_COMMANDS = {"distance": _distance, "build-map": _build_map, "replay": _replay, "coverage": _coverage,
+             "collide": _collide, "plan": _plan, "warmup": _warmup}
 
 
 if __name__ == "__main__":

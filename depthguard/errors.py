@@ -9,7 +9,7 @@ fix the rig or the driver::
     ├── InputError        points, options or other arguments are malformed
     ├── RobotError        a robot description (URDF, meshes, control points) is missing, malformed or unsupported
     ├── RenderingError    no headless OpenGL (EGL) context, or its OpenGL lacks what rendering needs
-    └── SceneError        a simulation scene file (depthguard.simulation) is malformed or describes the impossible
+    └── SceneError        a simulation scene file (depthguard_lab.simulation) is malformed or describes the impossible
 
 Three helpers phrase such errors alike everywhere: :func:`short_repr` (a value the user gave, cut short for a one-line
 message), :func:`check_real` (a real number within a range, with its unit) and :func:`check_path` (a file name).
@@ -63,7 +63,7 @@ class RenderingError(DepthguardError, RuntimeError):
 
 
 class SceneError(DepthguardError, ValueError):
-    """A simulation scene (depthguard.simulation) is malformed, names something that does not exist, or asks for
+    """A simulation scene (depthguard_lab.simulation) is malformed, names something that does not exist, or asks for
     the impossible (an unreachable trajectory). ``field`` is the path of the offending key, e.g.
     ``people[0].actions[2].reach.target``."""
 

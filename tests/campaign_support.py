@@ -577,12 +577,12 @@ def check_result(kind: str, result, points_camera, wall: float, rho, aggregate: 
 def run_cli(argv, *, seconds: float = 10.0, trace: bool = True):
     """``depthguard.cli.main(argv)`` in-process, bounded, with stdout and stderr captured. Returns (exit status,
     stdout, stderr, Bound) or raises the bound's exception."""
-    from depthguard import cli
+    from cli_support import lab_main, main, program
 
     out, err = io.StringIO(), io.StringIO()
     with bounded(seconds, trace=trace) as stats, contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
-            code = cli.main([str(a) for a in argv])
+            code = (lab_main if program(argv) == "depthguard-lab" else main)([str(a) for a in argv])
         except SystemExit as exc:  # argparse's usage errors
             code = exc.code
     return code, out.getvalue(), err.getvalue(), stats
@@ -612,8 +612,9 @@ def cli_outcome(kind: str, code, stderr: str, names, *, allow_success: bool = Fa
         violation(kind, f"exit {code}", where)
     if len(lines) != 1:
         violation(kind, f"{len(lines)} lines on stderr", where)
-    if not lines[0].startswith("depthguard: error:"):
-        violation(kind, "stderr line does not start with 'depthguard: error:'", where)
+    if not (lines[0].startswith("depthguard: error:") or lines[0].startswith("depthguard-lab: error:")):
+        violation(kind, "stderr line does not start with 'depthguard: error:' (or 'depthguard-lab: error:')",
+                  where)
     if names and not any(str(name).lower() in lines[0].lower() for name in names):
         violation(kind, "error line does not name the input", f"expected one of {list(names)}; {where}")
     return "exit 2, one line"

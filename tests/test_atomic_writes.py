@@ -24,7 +24,7 @@ from depthguard.depth import write_depth_pgm, write_depth_png
 from depthguard.depthgrid import build_map, load_map, save_map
 from depthguard.errors import InputError, RigError
 from depthguard.recordings import open_recording, write_bag
-from depthguard.simulation import _episode, load_workcell, save_workcell, workcell_from_dict, write_episode
+from depthguard_lab.simulation import _episode, load_workcell, save_workcell, workcell_from_dict, write_episode
 from depthguard.transforms import look_at
 
 

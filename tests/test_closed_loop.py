@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from depthguard.avoidance import JointLimits
-from depthguard.simulation import load_workcell
-from depthguard.simulation._closed_loop import LoopSettings, run_closed_loop
+from depthguard_lab.simulation import load_workcell
+from depthguard_lab.simulation._closed_loop import LoopSettings, run_closed_loop
 
 #: The person reaches into the end-effector (no standoff): without avoidance the hand meets the robot at about 3.0 s.
 CONTACT_WINDOW = (1.9, 1.3)  # start, duration (s)
@@ -60,7 +60,7 @@ def test_the_task_resumes_after_the_person_has_left(runs, board_runs, elbow_runs
     scenario has bounds of its own (ELBOW_RESUME): the arm comes back from 0.39 m off its path, not 0.1-0.2 m, and in
     its posture the same phantoms keep more of the arm's points within reach (measured: back 1.19 s after the box
     left, median error after 1.75 cm, two cameras)."""
-    from depthguard.experiments.avoidance_demo import resumption
+    from depthguard_lab.experiments.avoidance_demo import resumption
 
     log = {"reach": runs, "board": board_runs, "elbow": elbow_runs}[scene]["avoid"]
     within, median_bound = ELBOW_RESUME if scene == "elbow" else (RESUME_WITHIN, RESUMED_MEDIAN)
@@ -78,7 +78,7 @@ BOARD_WINDOW = (1.6, 1.6)
 
 
 def _packaged(name: str) -> Path:
-    return Path(str(resources.files("depthguard.simulation").joinpath(name)))
+    return Path(str(resources.files("depthguard_lab.simulation").joinpath(name)))
 
 
 def _every_mode(name: str, window, to_the_end=(), windows=None) -> dict:
@@ -101,7 +101,7 @@ def board_runs():
 def test_a_board_the_principal_camera_sees_edge_on_is_avoided(board_runs):
     """The second avoidance scenario: a flat object approaching the end-effector, mostly hidden from the principal
     camera (it sees the board's 2 cm edge; the second camera its face). The fused cameras find it."""
-    from depthguard.experiments.avoidance_demo import summarize
+    from depthguard_lab.experiments.avoidance_demo import summarize
 
     assert board_runs["none"].clearance.min() <= 0.0
     for mode in ("avoid",):
@@ -137,7 +137,7 @@ def test_a_box_on_the_elbows_path_is_avoided_by_the_arm(elbow_runs):
     """The third avoidance scenario (the 2015 paper's scenario 3): without avoidance the forearm meets the box while
     the end-effector stays clear of it, so only the other control points can keep the arm away; with either mode it
     stays ELBOW_CLEARANCE clear, without oscillating."""
-    from depthguard.experiments.avoidance_demo import summarize
+    from depthguard_lab.experiments.avoidance_demo import summarize
 
     none = elbow_runs["none"]
     assert none.clearance.min() <= 0.0
@@ -175,7 +175,7 @@ def test_distances_from_the_links_surface_keep_the_arm_clear_of_the_box_with_fou
 
 
 def test_the_board_is_mostly_hidden_from_the_principal_camera():
-    from depthguard.simulation import simulate
+    from depthguard_lab.simulation import simulate
 
     workcell = load_workcell(_packaged("scenario_b_board.yaml"))
     board = [name for name, _ in workcell.labels()].index("board")
@@ -213,7 +213,7 @@ def test_the_loops_ssm_brakes_along_its_path_within_the_stopping_time_and_distan
     points travel up to 1.5 times |v| T_s / 2: the arm turns by radians while it brakes)."""
     from depthguard.avoidance import SpeedSeparationMonitor
     from depthguard.robots import RobotModel
-    from depthguard.simulation._closed_loop import _ssm_command
+    from depthguard_lab.simulation._closed_loop import _ssm_command
 
     robot = RobotModel.default().with_surface_points()
     limits = JointLimits.from_robot(robot, acceleration=LoopSettings().acceleration)
@@ -246,7 +246,7 @@ def test_the_loops_ssm_brakes_along_its_path_within_the_stopping_time_and_distan
 @pytest.mark.slow
 @pytest.mark.parametrize("mode", ["avoid"])
 def test_the_reaction_does_not_oscillate(runs, mode):
-    from depthguard.experiments.avoidance_demo import summarize
+    from depthguard_lab.experiments.avoidance_demo import summarize
 
     log = runs[mode]
     figures = summarize(log, 1.0 / LoopSettings().control_rate)
@@ -334,7 +334,7 @@ def test_the_loops_ssm_looks_ahead_from_the_links_surfaces():
     from depthguard.avoidance import SpeedSeparationMonitor, SSMParams, protective_separation_distance
     from depthguard.results import DistanceResult, Flag
     from depthguard.scenes import Sphere, scene_distance
-    from depthguard.simulation._closed_loop import _ssm_factor
+    from depthguard_lab.simulation._closed_loop import _ssm_factor
 
     person = Sphere((0.0, 0.0, 0.0), 0.25)
     asked = []
@@ -374,7 +374,7 @@ def test_ssms_distances_between_asks_are_lower_bounds_and_only_moved_points_are_
     """The loop's SSM asks the monitor again on the same frames only for points that moved more than the tolerance;
     meanwhile a point's distance is the one asked minus how far it moved: judged against exact distances to a fixed
     cloud (inf beyond rho, as the monitor says "nothing within rho")."""
-    from depthguard.simulation._closed_loop import _MovedSince
+    from depthguard_lab.simulation._closed_loop import _MovedSince
 
     rng = np.random.default_rng(11)
     cloud = rng.uniform(-1.0, 1.0, (200, 3))

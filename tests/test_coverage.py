@@ -14,7 +14,7 @@ import pytest
 
 import depthguard as dg
 from cli_support import assert_refused, run_cli
-from depthguard.experiments import coverage as cov
+from depthguard import _coverage as cov
 from depthguard.robots import RobotModel, segment_distances
 from depthguard.scenes import Box, render_depth
 from depthguard.self_filter import RobotSilhouette
@@ -280,3 +280,17 @@ def test_bad_arguments_exit_2_with_one_line(files, capsys, tmp_path, case):
 
 def test_all_bad_cases_are_tested(files, tmp_path):
     assert sorted(_bad_cases(files, tmp_path)) == sorted(BAD)
+
+
+def test_the_iiwas_default_poses_are_scenario_bs():
+    """The library keeps scenario B's poses of the iiwa as numbers (it does not import the lab): they are the lab's
+    scenario B posture and its trajectory's joints at a quarter lap apart."""
+    from depthguard.robots import RobotModel
+    from depthguard_lab.simulation import default_workcell
+
+    workcell = default_workcell()
+    poses = dict(cov.default_poses(RobotModel.default()))
+    np.testing.assert_array_equal(poses.pop("posture"), workcell.trajectory.posture)
+    assert len(poses) == 4
+    for label, q in poses.items():
+        np.testing.assert_allclose(q, workcell.joints_at(float(label[2:-2])), rtol=0, atol=1e-15)

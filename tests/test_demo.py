@@ -9,8 +9,8 @@ import json
 import numpy as np
 import pytest
 
-from depthguard.experiments import avoidance_demo
-from depthguard.simulation._closed_loop import LoopLog
+from depthguard_lab.experiments import avoidance_demo
+from depthguard_lab.simulation._closed_loop import LoopLog
 
 FIELDS = {"collisions": int, "true_min_distance_m": float, "clearance_m": float, "task_error_after_m": float,
           "oscillation_per_s": float, "loop_hz": float}
@@ -78,7 +78,7 @@ def test_figures_of_a_run():
 
 
 def test_demo_writes_one_summary_per_mode_and_plots(tmp_path, capsys):
-    from depthguard import cli
+    from depthguard_lab import cli
 
     assert cli.main(["demo", "--out", str(tmp_path), "--duration", "0.1", "--mode", "avoid", "--mode",
                      "none"]) == 0
@@ -112,7 +112,7 @@ def test_demo_writes_one_summary_per_mode_and_plots(tmp_path, capsys):
 def test_the_demos_ssm_is_refused_where_it_cannot_be_sound_and_says_why(tmp_path, capsys):
     """Mode ssm cannot be sound in the demo's cells (its distances may leave out an object thicker than ISO 13855's
     70 mm lying on the robot: tests/test_closed_loop.py): the demo says so, with the band, and runs the others."""
-    from depthguard import cli
+    from depthguard_lab import cli
 
     assert cli.main(["demo", "--out", str(tmp_path), "--duration", "0.1", "--mode", "ssm", "--mode", "none",
                      "--no-bag"]) == 0
@@ -129,7 +129,7 @@ def test_resumption_needs_the_obstacles_gone_and_the_task_back_for_a_while():
     count."""
     from types import SimpleNamespace
 
-    from depthguard.experiments.avoidance_demo import resumption
+    from depthguard_lab.experiments.avoidance_demo import resumption
 
     t = np.arange(0.0, 3.0, 0.002)
     steps = np.arange(0, len(t), 5)

@@ -183,10 +183,10 @@ def _workcell_frames(times):
     from importlib import resources
     from pathlib import Path
 
-    from depthguard.simulation import load_workcell
-    from depthguard.simulation._episode import sense_at
+    from depthguard_lab.simulation import load_workcell
+    from depthguard_lab.simulation._episode import sense_at
 
-    package = resources.files("depthguard.simulation")
+    package = resources.files("depthguard_lab.simulation")
     workcell = load_workcell(Path(str(package / "scenario_b_reach.yaml")),
                              layout=Path(str(package / "scenario_b_four.yaml")))
     return workcell, [(frame.time, frame.joints, frame) for frame in sense_at(workcell, times)]

@@ -15,7 +15,7 @@ import hostile
 from depthguard import config
 from depthguard._points_io import load_points
 from depthguard.errors import InputError, SceneError
-from depthguard.simulation import load_workcell
+from depthguard_lab.simulation import load_workcell
 
 LIMIT = config.COORDINATE_LIMIT
 

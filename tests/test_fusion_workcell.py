@@ -1,4 +1,4 @@
-"""Issue 4's workcell experiment (depthguard.experiments.fusion_workcell): one depth camera against two fused through
+"""Issue 4's workcell experiment (depthguard_lab.experiments.fusion_workcell): one depth camera against two fused through
 the depth grid, in reference scenario B's shadow and hidden-hand cases, with the second camera across the robot
 (scenario_b_across.yaml). The fused result never misses and never reports less than the principal camera alone; in
 the hidden-hand case it finds the hand the principal camera cannot see. In the shadow case it cannot remove the
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import depthguard as dg
-from depthguard.experiments import fusion_workcell as fw
-from depthguard.simulation import load_workcell, simulate
+from depthguard_lab.experiments import fusion_workcell as fw
+from depthguard_lab.simulation import load_workcell, simulate
 
 RHO = fw.RHO
 FRAMES_PER_CASE = 4
@@ -90,7 +90,7 @@ def _method(episode, allowed, name, rows):
 
 
 def test_the_across_layout_moves_only_the_second_camera(across):
-    from depthguard.simulation import default_workcell
+    from depthguard_lab.simulation import default_workcell
 
     reference = default_workcell()
     a, b = dict(reference.scene), dict(across.scene)
@@ -214,7 +214,7 @@ def test_plots_and_the_command_line(tmp_path, capsys, monkeypatch):
     assert [p.name for p in written] == ["fake_shadow.png", "fake_hidden_hand.png"]
     assert all(p.stat().st_size > 5000 for p in written)
 
-    from depthguard import cli
+    from depthguard_lab import cli
 
     calls = []
     monkeypatch.setattr(fw, "main", lambda **kwargs: calls.append(kwargs) or 0)
@@ -230,7 +230,7 @@ def test_plots_and_the_command_line(tmp_path, capsys, monkeypatch):
 def test_main_writes_plots_and_summary(tmp_path, capsys, across):
     # The first 0.2 s of a layout saved under another name (before either case: no plots): the file's name keys the
     # outputs.
-    from depthguard.simulation import save_workcell
+    from depthguard_lab.simulation import save_workcell
 
     scene = tmp_path / "tiny.yaml"
     save_workcell(across, scene)
@@ -243,7 +243,7 @@ def test_main_writes_plots_and_summary(tmp_path, capsys, across):
 def test_the_packaged_layouts_differ_only_where_they_say():
     """scenario_b_four.yaml is scenario_b.yaml with two more cameras; scenario_b_four_tof.yaml is scenario_b_four.yaml
     with every camera's noise model lower (time-of-flight class), and nothing else."""
-    from depthguard.simulation import default_workcell
+    from depthguard_lab.simulation import default_workcell
 
     paths = {p.name: p for p in fw.scene_paths(fw.SCENES + ("scenario_b_four_tof.yaml",))}
     reference, four, tof = (dict(load_workcell(paths[n]).scene) if n != "scenario_b.yaml" else

@@ -319,7 +319,7 @@ def test_the_judge_catches_a_known_solid_band_twice_as_thick(cases, robot, monke
     """StaticSolids accepting measurements twice as far from a solid as it states (its reach doubled): the hand,
     thicker than the stated 2 cm band but thinner than 4 cm, vanishes, and the judge reports it (rule 2), whatever
     band the library then reports."""
-    from depthguard.self_filter import StaticSolids
+    from depthguard.static_solids import StaticSolids
 
     original = StaticSolids._view
 

@@ -13,9 +13,9 @@ from mcap_ros2.decoder import DecoderFactory
 from scipy.spatial.transform import Rotation
 
 from depthguard.errors import InputError
-from depthguard.experiments import avoidance_demo
-from depthguard.simulation._closed_loop import LoopSettings, run_closed_loop
-from depthguard.simulation._loop_bag import MARKER_EVERY, NEAR, write_loop_bag
+from depthguard_lab.experiments import avoidance_demo
+from depthguard_lab.simulation._closed_loop import LoopSettings, run_closed_loop
+from depthguard_lab.simulation._loop_bag import MARKER_EVERY, NEAR, write_loop_bag
 
 
 @pytest.fixture(scope="module")

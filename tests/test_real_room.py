@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from depthguard.experiments import real_room as rr
+from depthguard_lab.experiments import real_room as rr
 
 #: Surface points per secondary camera and kind (gray area, principal hole): 4 x 600 points; free-space points of
 #: the principal per kind (gray area, holes): 2 x 600.

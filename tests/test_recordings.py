@@ -30,7 +30,7 @@ from depthguard.depth import write_depth_png
 from depthguard.errors import DepthImageError, InputError, RigError
 from depthguard.recordings import open_recording, write_bag
 from depthguard.robots import RobotModel
-from depthguard.simulation import default_workcell, write_episode
+from depthguard_lab.simulation import default_workcell, write_episode
 
 HEADER = ["time", "frame", "control_point", "x", "y", "z", "distance", "blind_distance", "flags"]
 FRAMES = 3  # frames of the simulated episode (0.1 s at 30 Hz)
@@ -285,7 +285,7 @@ def test_replay_gives_each_camera_its_own_joints(episode, tmp_path, capsys):
 def test_replay_json_summary(episode, replayed, tmp_path, capsys):
     status, out, err = run_cli(["replay", episode, "--out", tmp_path / "r.csv", "--json"], capsys)
     assert status == 0, err
-    assert "replaying" in err  # the progress bar
+    assert "replaying" in err  # what it is doing, on stderr
     summary = json.loads(out)
     rows = read_csv(replayed)[1:]
     distances = np.array([float(r[6]) for r in rows])

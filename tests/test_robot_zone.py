@@ -13,6 +13,7 @@ stated thickness of the robot's padded capsules for the robot, in every directio
 
 from __future__ import annotations
 
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -21,10 +22,10 @@ import pytest
 import depthguard as dg
 from depthguard.depthgrid import _kernels as K
 from depthguard.depthgrid._fusion import _zone_arrays
-from depthguard.experiments.workcell import scene_distance
-from depthguard.simulation import load_workcell, simulate
+from depthguard_lab.experiments.workcell import scene_distance
+from depthguard_lab.simulation import load_workcell, simulate
 
-SCENE = Path(dg.__file__).parent / "simulation" / "scenario_b_four_tof.yaml"
+SCENE = Path(str(resources.files("depthguard_lab.simulation") / "scenario_b_four_tof.yaml"))
 RHO = 0.4
 ZONE = 0.03
 #: Footprints and metres of quantisation a fused distance may exceed the truth by (as tests/test_fusion_workcell.py

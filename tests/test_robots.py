@@ -990,7 +990,7 @@ def test_bad_base_pose_is_refused(iiwa, T):
 
 def test_default_robot_without_pybullet_says_how_to_get_it(monkeypatch):
     monkeypatch.setitem(sys.modules, "pybullet_data", None)  # import pybullet_data now raises ImportError
-    with pytest.raises(RobotError, match="pip install pybullet"):
+    with pytest.raises(RobotError, match=r"pip install depthguard\[robots\]"):
         default_robot_path()
     with pytest.raises(RobotError, match="pybullet_data"):
         RobotModel.panda()

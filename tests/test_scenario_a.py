@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from depthguard.experiments import scenario_a as sa
+from depthguard_lab.experiments import scenario_a as sa
 
 MM = 1e-3
 

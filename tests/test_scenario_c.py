@@ -32,8 +32,8 @@ from depthguard.collision import (
 from depthguard.errors import InputError, RobotError, SceneError
 from depthguard.robots import RobotModel
 from depthguard.robots._model import xarm6_robot_path
-from depthguard.simulation import load_workcell, simulate, workcell_from_dict
-from depthguard.simulation._truth import TruthComputer
+from depthguard_lab.simulation import load_workcell, simulate, workcell_from_dict
+from depthguard_lab.simulation._truth import TruthComputer
 from depthguard.transforms import look_at
 
 SCENE = "scenario_c.yaml"
@@ -48,7 +48,7 @@ FALSE_ALARM_CLEARANCE = 0.15  # metres, as in the probe
 
 
 def _scene_path():
-    return resources.files("depthguard.simulation").joinpath(SCENE)
+    return resources.files("depthguard_lab.simulation").joinpath(SCENE)
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""depthguard.simulation: the scene loader, the people, the hexagon, the sensor model, ground truth and episode files.
+"""depthguard_lab.simulation: the scene loader, the people, the hexagon, the sensor model, ground truth and episode files.
 
 Judges and tolerances:
 
@@ -35,7 +35,7 @@ import depthguard as dg
 from depthguard.errors import SceneError
 from depthguard.rendering import primitive_mesh_excess
 from depthguard.scenes import Capsule, render_depth
-from depthguard.simulation import (
+from depthguard_lab.simulation import (
     PART_NAMES,
     SceneRenderer,
     SensorModel,
@@ -50,7 +50,7 @@ from depthguard.simulation import (
     workcell_from_dict,
     write_episode,
 )
-from depthguard.simulation._truth import coal_shape
+from depthguard_lab.simulation._truth import coal_shape
 
 #: Off-silhouette agreement of the rendered depth with exact ray casting, metres (see the module docstring).
 DEPTH_TOL = 1e-4
@@ -643,7 +643,7 @@ def test_a_scene_loads_with_another_scenes_camera_layout(tmp_path):
     from importlib import resources
     from pathlib import Path
 
-    folder = Path(str(resources.files("depthguard.simulation")))
+    folder = Path(str(resources.files("depthguard_lab.simulation")))
     scene = load_workcell(folder / "scenario_b_reach.yaml")
     four = load_workcell(folder / "scenario_b_four.yaml")
     both = load_workcell(folder / "scenario_b_reach.yaml", layout=folder / "scenario_b_four.yaml")

@@ -1,4 +1,4 @@
-"""Known static solids (DistanceMonitor(static=...); depthguard.self_filter.StaticSolids): their surfaces stop counting
+"""Known static solids (DistanceMonitor(static=...); depthguard.static_solids.StaticSolids): their surfaces stop counting
 as obstacles, the space they hide does not, and nothing a camera did not see becomes free.
 
 The judges are exact geometry (depthguard.scenes' ray casting and distances, and coal along the workcell), not the
@@ -79,7 +79,7 @@ def test_a_solid_that_is_not_where_it_is_said_to_be_changes_nothing():
 
 def test_only_whole_footprints_on_one_solid_are_replaced():
     """The pixels round a solid's outline (their 3 x 3 neighbours not all on it) keep their measurement."""
-    from depthguard.self_filter import StaticSolids
+    from depthguard.static_solids import StaticSolids
 
     camera = _camera()
     solids = StaticSolids([PEDESTAL], 0.02)
@@ -138,7 +138,8 @@ def test_the_robot_resting_on_a_solid_ends_where_the_solid_does():
     """Seen from above, the robot's base stands on the pedestal: behind the base is the pedestal's inside, so the
     robot's far end moves to where the pedestal ends; behind the arm held out over the floor, nothing moves."""
     from depthguard.robots import RobotModel
-    from depthguard.self_filter import RobotSilhouette, StaticSolids
+    from depthguard.self_filter import RobotSilhouette
+    from depthguard.static_solids import StaticSolids
 
     robot = RobotModel.default()
     q = np.array([0.0, np.pi / 2, 0.0, 0.0, 0.0, 0.0, 0.0])
@@ -147,7 +148,7 @@ def test_the_robot_resting_on_a_solid_ends_where_the_solid_does():
                               noise=dg.NoiseModel.none())
     silhouette = RobotSilhouette(robot, geometry="capsules")
     near, far = silhouette.render(camera, q), silhouette.render_far(camera, q)
-    solids = StaticSolids([FLOOR, PEDESTAL], 0.02, silhouette.renderer)
+    solids = StaticSolids([FLOOR, PEDESTAL], 0.02)
     moved_far, moved = solids.extend_robot(camera, near, far)
     entry, usable = solids.view(camera)
 
@@ -169,11 +170,11 @@ def test_the_workcell_with_its_background_known_is_never_farther_than_the_truth(
     known solids move some distances out. Only a little here (measured: the upper arm's first point 1 cm farther at
     0.5 s and 2.2 s): what is nearest the arm without a person is the space its own links hide round its base, and
     the top of what the principal camera sees (README, "Avoidance")."""
-    from depthguard.simulation import load_workcell
-    from depthguard.simulation._episode import SceneRenderer, sense
-    from depthguard.simulation._truth import TruthComputer
+    from depthguard_lab.simulation import load_workcell
+    from depthguard_lab.simulation._episode import SceneRenderer, sense
+    from depthguard_lab.simulation._truth import TruthComputer
 
-    workcell = load_workcell(resources.files("depthguard.simulation") / "scenario_b_reach.yaml")
+    workcell = load_workcell(resources.files("depthguard_lab.simulation") / "scenario_b_reach.yaml")
     robot = workcell.robot
     static = workcell.background_parts()
     assert all(isinstance(box, Box) for box in static) and len(static) == 5
@@ -215,3 +216,39 @@ def test_bad_static_solids_are_refused(static):
     with pytest.raises(InputError) as info:
         dg.DistanceMonitor(rig, static=static)
     assert info.value.field == "static"
+
+
+def test_the_solids_ray_casting_agrees_with_the_renderer():
+    """StaticSolids casts each pixel's centre ray against the boxes exactly (no OpenGL). Judged against the
+    renderer, which draws the same boxes as meshes (closed, exact for boxes): the same box first entered, and the same
+    entry and first-exit depths to float32 rounding, for boxes at random poses, overlapping or not."""
+    from depthguard.rendering import MeshInstance, Renderer, primitive_mesh
+    from depthguard.static_solids import ray_boxes
+
+    rng = np.random.default_rng(4)
+    renderer = Renderer()
+    camera = _camera()
+    for trial in range(3):
+        boxes = [FLOOR, WALL, PEDESTAL]
+        for _ in range(3):
+            q = rng.normal(size=4)
+            q /= np.linalg.norm(q)
+            w, x, y, z = q
+            R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                          [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                          [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+            boxes.append(Box(tuple(rng.uniform([-0.6, -0.8, -0.4], [0.6, 0.8, 0.8])),
+                             tuple(rng.uniform(0.05, 0.3, 3)), R))
+        label, entry, exits = ray_boxes(camera, boxes)
+        instances = [MeshInstance(renderer.add_mesh(*primitive_mesh(b), closed=True), np.eye(4), label=i)
+                     for i, b in enumerate(boxes)]
+        drawn = renderer.render(camera, instances)
+        drawn_exit = renderer.render_depth_first_exit(camera, instances)
+        seen = (drawn.label >= 0) & (label >= 0)
+        assert np.mean(drawn.label == label) > 0.995  # rasterisation decides a few edge pixels otherwise
+        np.testing.assert_allclose(entry[seen & (drawn.label == label)], drawn.depth[seen & (drawn.label == label)],
+                                   rtol=2e-6, atol=1e-6)
+        both = (exits > 0) & (drawn_exit > 0)
+        assert np.mean((exits > 0) == (drawn_exit > 0)) > 0.995
+        close = np.isclose(exits[both], drawn_exit[both], rtol=2e-6, atol=1e-6)
+        assert np.mean(close) > 0.995, np.mean(close)

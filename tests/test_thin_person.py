@@ -13,10 +13,10 @@ import yaml
 import depthguard as dg
 from depthguard.errors import SceneError
 from depthguard.results import CONCESSION_FLAGS, Flag
-from depthguard.simulation import workcell_from_dict
-from depthguard.simulation._episode import sense_at
+from depthguard_lab.simulation import workcell_from_dict
+from depthguard_lab.simulation._episode import sense_at
 
-PACKAGE = resources.files("depthguard.simulation")
+PACKAGE = resources.files("depthguard_lab.simulation")
 
 
 def _thin_reach(layout="scenario_b_four.yaml"):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import depthguard as dg
-from depthguard.experiments import workcell
+from depthguard_lab.experiments import workcell
 
 #: Footprints of discretisation a single-camera distance may exceed the truth by (see :func:`allowed_excess`).
 FOOTPRINTS = 2.5
@@ -35,7 +35,7 @@ def allowed_excess(camera, points, rho=workcell.RHO):
 
 @pytest.fixture(scope="module")
 def episode():
-    from depthguard.simulation import default_workcell
+    from depthguard_lab.simulation import default_workcell
 
     # The scene's own 640x480 cameras: the sensor's dropouts (at edges and grazing angles) depend on the resolution,
     # and so do the holes they leave. Every 6th frame over the whole 12 s: walk-in, reach, carry, shadow, hidden hand.
@@ -47,7 +47,7 @@ def episode():
 def allowed(episode):
     """(cameras, t, m) metres: :func:`allowed_excess` of each camera at each frame's control points, from the scene's
     own cameras and trajectory (not from the episode's record)."""
-    from depthguard.simulation import default_workcell
+    from depthguard_lab.simulation import default_workcell
 
     scene = default_workcell()
     points = [scene.control_points_at(t) for t in episode.times]
@@ -111,7 +111,7 @@ def test_hidden_hand_is_missed_by_the_principal_camera_and_seen_by_the_other(epi
 
 
 def test_workcell_writes_its_plots_and_summary(tmp_path, capsys):
-    from depthguard import cli
+    from depthguard_lab import cli
 
     assert cli.main(["workcell", "--out", str(tmp_path), "--duration", "0.4"]) == 0
     out = capsys.readouterr().out

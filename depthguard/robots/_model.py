@@ -28,7 +28,7 @@ def _pybullet_data_path(relative: str) -> Path:
         import pybullet_data
     except ImportError:
         raise RobotError(f"the built-in robot {relative!r} comes from pybullet's 'pybullet_data' folder, and "
-                         "pybullet is not installed: 'pip install pybullet', or load your own URDF with "
+                         "pybullet is not installed: 'pip install depthguard[robots]', or load your own URDF with "
                          "RobotModel.from_urdf(path)") from None
     path = Path(pybullet_data.getDataPath()) / relative
     if not path.is_file():
@@ -39,8 +39,8 @@ def _pybullet_data_path(relative: str) -> Path:
 def default_robot_path() -> Path:
     """The default robot's URDF: the KUKA LBR iiwa of ``pybullet_data`` (``config.DEFAULT_ROBOT_URDF``).
 
-    pybullet must be installed (it is a test dependency of depthguard, not a run-time one); a
-    :class:`RobotError` says so otherwise.
+    pybullet must be installed (the ``robots`` extra, ``pip install depthguard[robots]``; a cell with its own URDF needs
+    none of it); a :class:`RobotError` says so otherwise.
     """
     return _pybullet_data_path(config.DEFAULT_ROBOT_URDF)
 

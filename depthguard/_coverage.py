@@ -58,7 +58,7 @@ import numpy as np
 
 import depthguard as dg
 from depthguard import config
-from depthguard._files import atomic_write, write_whole
+from depthguard.files import atomic_write, write_whole
 from depthguard.errors import InputError, check_real
 
 #: Sample spacing, metres; also the rho of the monitor queried at the samples.
@@ -67,9 +67,20 @@ SPACING = 0.03
 CLEARANCE = 0.02
 #: At most this many poses are taken from a trajectory, evenly spread over its rows.
 MAX_POSES = 20
-#: Scenario B's times (seconds) whose poses are used by default with the iiwa, besides its posture: a quarter lap
-#: of the hexagon apart.
-SCENARIO_B_TIMES = (0.0, 0.9375, 1.875, 2.8125)
+#: The default poses of pybullet_data's KUKA iiwa: scenario B's posture and its poses at 0, 0.9375, 1.875 and
+#: 2.8125 s, a quarter lap of the hexagon apart (the lab's scenario_b.yaml, the joints its trajectory gives then),
+#: radians in the robot's joint order.
+IIWA_POSES = (
+    ("posture", (0.0, 0.5, 0.0, -1.5, 0.0, 0.8, 0.0)),
+    ("t=0 s", (0.24693957322781496, 0.32832450781954975, 0.21194599440962722, -1.3930643345102558,
+               0.03900507001940794, 0.7852892567540108, 5.192295566304192e-18)),
+    ("t=0.9375 s", (-0.00042396856440594087, 0.12240663577118355, 0.00043187817167778344, -1.1984038647325612,
+                    0.00025339576458312545, 0.7400656004643819, 4.931631850646225e-19)),
+    ("t=1.875 s", (-0.24436479870928343, 0.3260082965334595, -0.210244788056201, -1.3957893566169253,
+                   -0.038302586401182864, 0.7857805854044835, 1.8870710037391187e-18)),
+    ("t=2.8125 s", (-2.1688753924421333e-05, 0.49676386943502565, 4.297538063542834e-07, -1.6588200763669645,
+                    0.00012220082368162436, 0.855948331183612, 1.1728351199773781e-18)),
+)
 #: Control points count as far from everything when farther than rho + this from the floor (fusion-workcell's
 #: "useful" margin).
 USEFUL_MARGIN = 0.05
@@ -201,22 +212,23 @@ TABLE_HEADER = (f"{'pose':22s} {'samples':>8s} {'not clearable':>14s} {'occupied
 # ------------------------------------------------------------------------------------------------------- poses
 
 def default_poses(robot) -> list[tuple[str, np.ndarray]]:
-    """(label, joints) of the default poses: with pybullet_data's KUKA iiwa, scenario B's posture and its poses
-    at :data:`SCENARIO_B_TIMES`; with any other robot, its zero configuration (clipped into the joint limits)."""
+    """(label, joints) of the default poses: with pybullet_data's KUKA iiwa, :data:`IIWA_POSES` (scenario B's
+    posture and four poses of its trajectory); with any other robot, its zero configuration (clipped into the joint
+    limits)."""
     from depthguard.robots import default_robot_path
 
-    if Path(robot.urdf_path).resolve() == default_robot_path().resolve():
-        from depthguard.simulation import default_workcell
-
-        workcell = default_workcell()
-        if workcell.robot.joint_names == robot.joint_names:
-            poses = []
-            posture = getattr(workcell.trajectory, "posture", None)
-            if posture is not None:
-                poses.append(("posture", np.asarray(posture, dtype=np.float64)))
-            return poses + [(f"t={t:g} s", workcell.joints_at(t)) for t in SCENARIO_B_TIMES]
+    if robot.n_joints == len(IIWA_POSES[0][1]) and _same_file(robot.urdf_path, default_robot_path):
+        return [(label, np.array(q, dtype=np.float64)) for label, q in IIWA_POSES]
     zero = np.clip(np.zeros(robot.n_joints), robot.lower, robot.upper)
     return [("zero", zero)]
+
+
+def _same_file(path, default) -> bool:
+    """Whether ``path`` is the file ``default()`` names (False when that file is not installed)."""
+    try:
+        return Path(path).resolve() == default().resolve()
+    except Exception:  # the built-in robots' data is not installed (the robots extra): not that robot
+        return False
 
 
 def trajectory_poses(robot, path, max_poses: int = MAX_POSES) -> list[tuple[str, np.ndarray]]:
@@ -482,8 +494,14 @@ def main(rig, robot="iiwa", trajectory=None, rho: float = config.DEFAULT_RHO, ou
     numbers = {"rig": str(rig_path), **result.summary()}
     print("  " + table_row("all poses", numbers))
     out.mkdir(parents=True, exist_ok=True)
-    picture = plot(result, out / "coverage.png")
-    numbers["picture"] = str(picture)
+    try:
+        import matplotlib  # noqa: F401 - the plots extra
+    except ImportError:
+        picture = None
+    else:
+        picture = plot(result, out / "coverage.png")
+    numbers["picture"] = None if picture is None else str(picture)
     write_whole(out / "coverage.json", json.dumps(numbers, indent=2))
-    print(f"{len(result.poses)} poses in {result.seconds:.1f} s; wrote {out / 'coverage.json'} and {picture}")
+    drawn = f"and {picture}" if picture is not None else "(no picture: matplotlib is not installed, depthguard[plots])"
+    print(f"{len(result.poses)} poses in {result.seconds:.1f} s; wrote {out / 'coverage.json'} {drawn}")
     return 0

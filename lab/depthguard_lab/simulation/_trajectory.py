@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from depthguard import config
+from depthguard_lab import config as lab_config
 from depthguard.errors import InputError, SceneError
 
 
@@ -123,8 +123,8 @@ class HexagonTrajectory(RobotTrajectory):
     IK (per sample time, continuing from the previous solution): dq = J^T (J J^T + lambda^2 I)^-1 e
     + (I - J^+ J) k (q_posture - q), J the end-effector's (3, n) positional Jacobian
     (``RobotModel.control_point_jacobians``), e the position error; then the same without the posture pull until
-    |e| <= ``config.SIM_IK_TOLERANCE``. Joint values are clipped to the limits. The largest remaining error is
-    :attr:`tracking_error` (metres); a path the arm cannot follow within ``config.SIM_IK_MAX_ERROR`` raises
+    |e| <= ``lab_config.SIM_IK_TOLERANCE``. Joint values are clipped to the limits. The largest remaining error is
+    :attr:`tracking_error` (metres); a path the arm cannot follow within ``lab_config.SIM_IK_MAX_ERROR`` raises
     :class:`SceneError`.
     """
 
@@ -146,7 +146,7 @@ class HexagonTrajectory(RobotTrajectory):
         for k, target in enumerate(targets):
             q, errors[k] = _solve(robot, ee, target, q, self.posture)
             joints[k] = q
-            if errors[k] > config.SIM_IK_MAX_ERROR:  # stop at the first frame the arm cannot follow
+            if errors[k] > lab_config.SIM_IK_MAX_ERROR:  # stop at the first frame the arm cannot follow
                 raise SceneError(f"the end-effector cannot follow the hexagon: {errors[k] * 1000:.1f} mm from its "
                                  f"target {targets[k].round(3).tolist()} at t = {sample_times[k]:.3f} s (out of "
                                  "reach or at a joint limit; move or shrink the hexagon, or change the posture)",
@@ -159,20 +159,20 @@ class HexagonTrajectory(RobotTrajectory):
 
 def _solve(robot, ee: int, target: np.ndarray, q: np.ndarray, posture: np.ndarray) -> tuple[np.ndarray, float]:
     """Damped least-squares IK of the end-effector control point towards ``target`` from ``q``; (q, |error|)."""
-    lam2 = config.SIM_IK_DAMPING**2
+    lam2 = lab_config.SIM_IK_DAMPING**2
     lower, upper = robot.lower, robot.upper
     n = robot.n_joints
     error = math.inf
-    for i in range(config.SIM_IK_ITERATIONS):
+    for i in range(lab_config.SIM_IK_ITERATIONS):
         positions, jacobians = robot.control_point_kinematics(q, check=False)
         e = target - positions[ee]
         error = float(np.linalg.norm(e))
-        if error <= config.SIM_IK_TOLERANCE:
+        if error <= lab_config.SIM_IK_TOLERANCE:
             break
         J = jacobians[ee]
         J_pinv = J.T @ np.linalg.inv(J @ J.T + lam2 * np.eye(3))
         dq = J_pinv @ e
         if i < 5:  # the posture pull only in the first iterations: it would otherwise hold the error above zero
-            dq = dq + (np.eye(n) - J_pinv @ J) @ (config.SIM_IK_POSTURE_GAIN * (posture - q))
+            dq = dq + (np.eye(n) - J_pinv @ J) @ (lab_config.SIM_IK_POSTURE_GAIN * (posture - q))
         q = np.clip(q + dq, lower, upper)
     return q, error

@@ -27,7 +27,7 @@ noise margin plus the fusion margin).
     surface) and of its holes that the fusion frees: the cost of the margin.
 (c) :func:`main` prints a summary and writes ``summary.json`` and three figures into its output folder.
 
-    python -c "from depthguard.experiments import real_room; real_room.main('out/real-room')"
+    python -c "from depthguard_lab.experiments import real_room; real_room.main('out/real-room')"
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ import numpy as np
 from scipy import ndimage
 
 import depthguard as dg
-from depthguard._files import atomic_write, write_whole
+from depthguard.files import atomic_write, write_whole
 from depthguard.depthgrid import DepthGridMap, build_map
 from depthguard.transforms import quaternion_to_matrix
 

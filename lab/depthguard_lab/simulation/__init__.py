@@ -3,21 +3,21 @@ truth (SPEC section 12, scenario B; issue 3).
 
 Typical use::
 
-    from depthguard.simulation import default_workcell, simulate, write_episode
+    from depthguard_lab.simulation import default_workcell, simulate, write_episode
     wc = default_workcell()                 # reference scenario B, from scenario_b.yaml
     for frame in simulate(wc, seed=0):      # one SimFrame per time step, at wc.rate Hz
         frame.depth["principal"]            # DepthImage, uint16 millimetres, timestamp = frame.time
         frame.truth.distance                # (9,) metres: each control point to the nearest obstacle
     write_episode(wc, "out/episode")        # PNGs, CSVs, rig.yaml, scene.yaml
 
-The scene file format is described in :mod:`depthguard.simulation._scene`; the people's actions in
-:mod:`depthguard.simulation._people`; the sensor model in :mod:`depthguard.simulation._sensors`; ground truth in
-:mod:`depthguard.simulation._truth`.
+The scene file format is described in :mod:`depthguard_lab.simulation._scene`; the people's actions in
+:mod:`depthguard_lab.simulation._people`; the sensor model in :mod:`depthguard_lab.simulation._sensors`; ground truth in
+:mod:`depthguard_lab.simulation._truth`.
 """
 
-from depthguard.simulation._episode import SceneRenderer, SimFrame, cosine_from_intensity, simulate, write_episode
-from depthguard.simulation._people import JOINTS, PART_NAMES, PARTS, ActionSpan, BasePose, BodyPart, Person, arm_ik
-from depthguard.simulation._scene import (
+from depthguard_lab.simulation._episode import SceneRenderer, SimFrame, cosine_from_intensity, simulate, write_episode
+from depthguard_lab.simulation._people import JOINTS, PART_NAMES, PARTS, ActionSpan, BasePose, BodyPart, Person, arm_ik
+from depthguard_lab.simulation._scene import (
     CarriedObject,
     StaticObject,
     Workcell,
@@ -26,15 +26,15 @@ from depthguard.simulation._scene import (
     save_workcell,
     workcell_from_dict,
 )
-from depthguard.simulation._sensors import (
+from depthguard_lab.simulation._sensors import (
     SensorModel,
     discontinuity_mask,
     grazing_mask,
     simulate_depth,
     simulate_intensity,
 )
-from depthguard.simulation._trajectory import Hexagon, HexagonTrajectory, JointTrajectory, RobotTrajectory
-from depthguard.simulation._truth import GroundTruth, TruthComputer
+from depthguard_lab.simulation._trajectory import Hexagon, HexagonTrajectory, JointTrajectory, RobotTrajectory
+from depthguard_lab.simulation._truth import GroundTruth, TruthComputer
 
 __all__ = [
     "JOINTS",

@@ -27,7 +27,7 @@ The task: the end-effector follows the workcell's scripted trajectory (its end-e
 desired velocity dx_ref/dt + ``gain`` (x_ref - x); the arm's redundancy pulls towards the scripted joints
 (``AvoidanceParams.posture_gain``), so the posture comes back after an avoidance.
 
-Exact ground truth (:class:`~depthguard.simulation.TruthComputer`: coal between the robot's collision meshes and the
+Exact ground truth (:class:`~depthguard_lab.simulation.TruthComputer`: coal between the robot's collision meshes and the
 obstacles) every ``truth_every`` control steps and at every camera frame.
 """
 
@@ -196,13 +196,13 @@ class LoopLog:
 def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None, start: float = 0.0,
                     settings: LoopSettings | None = None, seed: int | None = None, progress: bool = False,
                     renderer=None, keep_frames: bool = False) -> LoopLog:
-    """Run ``workcell`` (:class:`~depthguard.simulation.Workcell`) in closed loop from ``start`` for ``duration``
+    """Run ``workcell`` (:class:`~depthguard_lab.simulation.Workcell`) in closed loop from ``start`` for ``duration``
     seconds (default: to the episode's end) with ``mode`` ("none", "avoid", "ssm"). See the module's docstring.
     ``keep_frames``: keep every captured set of depth images in the log (``LoopLog.captures``, for a recording:
     about 0.6 MB per 640x480 image)."""
     import depthguard as dg
-    from depthguard.simulation._episode import SceneRenderer, check_seed, sense
-    from depthguard.simulation._truth import TruthComputer
+    from depthguard_lab.simulation._episode import SceneRenderer, check_seed, sense
+    from depthguard_lab.simulation._truth import TruthComputer
 
     if mode not in MODES:
         raise InputError(f"mode must be one of {', '.join(MODES)}, got {mode!r}", field="mode")

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from depthguard import config
+from depthguard_lab import config as lab_config
 
 
 @dataclass(frozen=True)
@@ -42,10 +42,10 @@ class SensorModel:
     """
 
     noise: bool = True
-    edge_threshold: float = config.SIM_EDGE_THRESHOLD
-    edge_dropout: float = config.SIM_EDGE_DROPOUT
-    grazing_angle: float = config.SIM_GRAZING_ANGLE
-    grazing_dropout: float = config.SIM_GRAZING_DROPOUT
+    edge_threshold: float = lab_config.SIM_EDGE_THRESHOLD
+    edge_dropout: float = lab_config.SIM_EDGE_DROPOUT
+    grazing_angle: float = lab_config.SIM_GRAZING_ANGLE
+    grazing_dropout: float = lab_config.SIM_GRAZING_DROPOUT
 
     def __post_init__(self):
         for name in ("edge_dropout", "grazing_dropout"):

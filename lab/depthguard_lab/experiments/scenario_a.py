@@ -32,8 +32,8 @@ import numpy as np
 
 import depthguard as dg
 from depthguard import baselines
-from depthguard._files import write_whole
-from depthguard.depthspace._distance import check_points
+from depthguard.files import write_whole
+from depthguard.depthspace import check_points
 from depthguard.scenes import Box, render_depth, scene_distance
 from depthguard.transforms import look_at
 
@@ -349,7 +349,7 @@ def main(out: str = "out/scenario-a", repeats: int = 20) -> int:
 
     ``repeats``: timing repetitions per control-point position (the per-position median is kept). Returns 0.
     """
-    from depthguard.experiments import _scenario_a_plots as plots
+    from depthguard_lab.experiments import _scenario_a_plots as plots
 
     started = time.perf_counter()
     os.makedirs(out, exist_ok=True)

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from depthguard._files import atomic_folder
+from depthguard.files import atomic_folder
 from depthguard.cameras import save_rig
 from depthguard.errors import InputError, check_path
 from depthguard.recordings import (
@@ -57,7 +57,7 @@ _TYPES = {
 
 
 def write_loop_bag(path, workcell, log, rho: float) -> Path:
-    """Write ``log`` (a :class:`~depthguard.simulation._closed_loop.LoopLog` run with ``keep_frames=True`` on
+    """Write ``log`` (a :class:`~depthguard_lab.simulation._closed_loop.LoopLog` run with ``keep_frames=True`` on
     ``workcell``) as an MCAP bag in the new folder ``path``; ``rho``: the monitor's rho (metres, for the colours).
     Returns ``path``."""
     from rosbags.rosbag2 import Writer

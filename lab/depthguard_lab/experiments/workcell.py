@@ -26,7 +26,7 @@ import numpy as np
 from tqdm import tqdm
 
 import depthguard as dg
-from depthguard._files import atomic_write, write_whole
+from depthguard.files import atomic_write, write_whole
 from depthguard.scenes import scene_distance
 
 RHO = 0.4
@@ -60,7 +60,7 @@ def run(workcell=None, duration: float | None = None, seed: int | None = None, p
         frames=None) -> Episode:
     """Simulate ``workcell`` (default: scenario B) and query every camera on its own, every frame (or the frame
     indices ``frames``; else the first ``duration`` seconds)."""
-    from depthguard.simulation import default_workcell, simulate
+    from depthguard_lab.simulation import default_workcell, simulate
 
     workcell = workcell or default_workcell()
     robot = workcell.robot

@@ -4,7 +4,7 @@ B's shadow and hidden-hand cases (the 2016 paper's Figs. 8, 9, 12 and 13, with n
 Each layout (scene file) is simulated and, every frame, the control points' distances are computed three ways:
 the principal camera alone, the second camera alone (the single-camera method, SPEC sections 3-7, robot filtered
 out) and both fused through the principal camera's depth grid (SPEC section 8). Each is compared with the exact
-ground truth of :mod:`depthguard.experiments.workcell` (the person, the box, the table and shelf, the floor, walls
+ground truth of :mod:`depthguard_lab.experiments.workcell` (the person, the box, the table and shelf, the floor, walls
 and pedestal).
 
 Two layouts are packaged. ``scenario_b.yaml`` is the reference scene: both cameras on the robot's front side, so a
@@ -34,9 +34,9 @@ import numpy as np
 from tqdm import tqdm
 
 import depthguard as dg
-from depthguard._files import atomic_write, write_whole
+from depthguard.files import atomic_write, write_whole
 from depthguard.errors import InputError
-from depthguard.experiments import workcell as single
+from depthguard_lab.experiments import workcell as single
 
 RHO = single.RHO
 #: The person's actions this experiment is about, in the order they happen.
@@ -107,7 +107,7 @@ def run(workcell=None, layout: str | None = None, frames=None, duration: float |
     """Simulate ``workcell`` (default: scenario B) and query each camera alone and all of them fused, every frame
     of ``frames`` (indices; default: the shadow and hidden-hand cases, :func:`case_frames`), or of the first
     ``duration`` seconds when that is given."""
-    from depthguard.simulation import default_workcell, simulate
+    from depthguard_lab.simulation import default_workcell, simulate
 
     layout = layout or ("scenario_b" if workcell is None else "workcell")
     workcell = workcell or default_workcell()
@@ -289,7 +289,7 @@ def scene_paths(names=SCENES) -> list[Path]:
     """The packaged layouts' scene files (``names``: file names, default all)."""
     from importlib import resources
 
-    folder = resources.files("depthguard.simulation")
+    folder = resources.files("depthguard_lab.simulation")
     return [Path(str(folder.joinpath(name))) for name in names]
 
 
@@ -298,7 +298,7 @@ def main(out="out/fusion-workcell", duration: float | None = None, scenes=None, 
     """Run every layout (``scenes``: scene files, default DEFAULT_SCENES), print the table, write one plot per
     case and layout and summary.json into ``out``. By default only the cases' frames (:func:`case_frames`) are
     simulated; ``all_frames`` simulates the whole episode, ``duration`` its first seconds."""
-    from depthguard.simulation import load_workcell
+    from depthguard_lab.simulation import load_workcell
 
     paths = [Path(p) for p in scenes] if scenes else scene_paths(DEFAULT_SCENES)
     if len({path.stem for path in paths}) < len(paths):

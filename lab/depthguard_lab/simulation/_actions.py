@@ -1,5 +1,5 @@
 """The people of a scene file: their ``actions`` lists compiled into :class:`Person` timelines (the keys are listed
-in :mod:`depthguard.simulation._scene`, what each action does in :mod:`depthguard.simulation._people`)."""
+in :mod:`depthguard_lab.simulation._scene`, what each action does in :mod:`depthguard_lab.simulation._people`)."""
 
 from __future__ import annotations
 
@@ -7,13 +7,13 @@ import math
 
 import numpy as np
 
-from depthguard import config
+from depthguard_lab import config as lab_config
 from depthguard.cameras import Rig
 from depthguard.errors import SceneError
 from depthguard.robots import RobotModel
-from depthguard.simulation._fields import Section, as_number, as_vector, new_name, pose_of
-from depthguard.simulation._people import LIMBS, Person
-from depthguard.simulation._trajectory import RobotTrajectory
+from depthguard_lab.simulation._fields import Section, as_number, as_vector, new_name, pose_of
+from depthguard_lab.simulation._people import LIMBS, Person
+from depthguard_lab.simulation._trajectory import RobotTrajectory
 
 
 class ActionContext:
@@ -87,9 +87,9 @@ def build_person(section: Section, names: set, floor: float, context: ActionCont
     start.done()
     person = Person(name, section.number("height", default=1.75, minimum=1.0, maximum=2.3), floor, position,
                     0.0 if heading is None else heading,
-                    section.number("walk_speed", default=config.SIM_WALK_SPEED, positive=True),
-                    section.number("clothes_albedo", default=config.SIM_CLOTHES_ALBEDO, minimum=0.01, maximum=1.0),
-                    section.number("skin_albedo", default=config.SIM_SKIN_ALBEDO, minimum=0.01, maximum=1.0),
+                    section.number("walk_speed", default=lab_config.SIM_WALK_SPEED, positive=True),
+                    section.number("clothes_albedo", default=lab_config.SIM_CLOTHES_ALBEDO, minimum=0.01, maximum=1.0),
+                    section.number("skin_albedo", default=lab_config.SIM_SKIN_ALBEDO, minimum=0.01, maximum=1.0),
                     _limbs(section))
     for index, item in enumerate(section.get("actions", default=[]) or []):
         field = f"{section.field('actions')}[{index}]"
@@ -127,7 +127,7 @@ def _walk(person, action, context, carried, robot_xy):
     start = person.time
     points = np.concatenate([action.points("via", 2, default=[]), action.vector("to", 2)[None]])
     person.walk(points, action.number("speed", default=person.walk_speed, positive=True),
-                action.number("leg_swing", default=config.SIM_LEG_SWING, minimum=0.0, maximum=1.0),
+                action.number("leg_swing", default=lab_config.SIM_LEG_SWING, minimum=0.0, maximum=1.0),
                 action.boolean("backwards", default=False))
     return start
 
@@ -163,7 +163,7 @@ def _reach(person, action, context, carried, robot_xy):
     target, point_at = _target_function(action, "target", context, standoff)
     side = action.string("hand", default="right", choices=("left", "right"))
     duration = action.number("duration", positive=True)
-    ramp = action.number("ramp", default=config.SIM_REACH_RAMP, minimum=0.0, maximum=duration / 2)
+    ramp = action.number("ramp", default=lab_config.SIM_REACH_RAMP, minimum=0.0, maximum=duration / 2)
     hold_start, heading = _go(person, action, robot_xy)
     if heading is None:
         d = point_at(person.time)[:2] - person.position
@@ -214,7 +214,7 @@ def _hidden_hand(person, action, context, carried, robot_xy):
     stand_off = action.number("stand_off", default=0.6, positive=True)
     side = action.string("hand", default="right", choices=("left", "right"))
     duration = action.number("duration", positive=True)
-    ramp = action.number("ramp", default=config.SIM_REACH_RAMP, minimum=0.0, maximum=duration / 2)
+    ramp = action.number("ramp", default=lab_config.SIM_REACH_RAMP, minimum=0.0, maximum=duration / 2)
     p0 = context.control_point(index, person.time)
     ray = p0 - eye
     horizontal = ray[:2] / np.linalg.norm(ray[:2])

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from depthguard import config
+from depthguard_lab import config as lab_config
 from depthguard.scenes import Box, Capsule
 
 #: The skeleton's joints.
@@ -217,7 +217,7 @@ class Person:
         self._key_xy = [np.asarray(start_position, dtype=np.float64)]
         self._heading_steps = [(0.0, float(start_heading))]  # (from time, heading)
         self._gait_steps = [(0.0, 0.0)]  # (from time, amplitude)
-        self._stride = config.SIM_STRIDE_PER_HEIGHT * self.height
+        self._stride = lab_config.SIM_STRIDE_PER_HEIGHT * self.height
 
     # ---------------------------------------------------------------------------------------- timeline building
 
@@ -266,7 +266,7 @@ class Person:
         """Walk (at :attr:`walk_speed`) to ``position`` (2,) through ``via`` points, if not there already."""
         points = [np.asarray(p, dtype=np.float64) for p in via] + [np.asarray(position, dtype=np.float64)]
         if np.linalg.norm(points[-1] - self.position) > 1e-9 or len(points) > 1:
-            self.walk(points, self.walk_speed, config.SIM_LEG_SWING)
+            self.walk(points, self.walk_speed, lab_config.SIM_LEG_SWING)
 
     def reach(self, side: str, target, duration: float, ramp: float) -> None:
         """Hold the ``side`` hand towards ``target(t, base, shoulder) -> (goal (3,), direction (3,) or None)`` for
@@ -320,7 +320,7 @@ class Person:
         self._fine_t = np.arange(n) / _FINE_RATE
         heading = _steps(self._heading_steps, self._fine_t, unwrap=True)
         amplitude = _steps(self._gait_steps, self._fine_t, unwrap=False)
-        width = max(1, int(round(config.SIM_PERSON_BLEND * _FINE_RATE)))
+        width = max(1, int(round(lab_config.SIM_PERSON_BLEND * _FINE_RATE)))
         self._fine_heading = _box_filter(heading, width)
         self._fine_amplitude = _box_filter(amplitude, width)
         self._key_t_array = np.asarray(self._key_t)

@@ -1,6 +1,6 @@
 """Scene files: a YAML description of a simulated workcell, read into a :class:`Workcell`.
 
-The file is read through ``depthguard._files``: a regular file of at most ``config.MAX_TEXT_FILE_BYTES`` bytes, parsed
+The file is read through ``depthguard.files``: a regular file of at most ``config.MAX_TEXT_FILE_BYTES`` bytes, parsed
 by a safe YAML loader (no tags that run code: ``!!python/...`` is refused; no anchors or aliases, no duplicate keys,
 nesting at most ``config.MAX_NESTING`` deep). Every key is
 checked: a missing, unknown or malformed key raises :class:`~depthguard.errors.SceneError` whose ``field`` is the
@@ -13,7 +13,7 @@ Top-level keys::
     rate: 30                  # frames per second (default 30)
     seed: 0                   # default seed of the sensors' random noise
     floor: -0.5               # world z of the floor people stand on (default 0)
-    render_segments: 24       # segments around rendered spheres and capsules (default config.SIM_PRIMITIVE_SEGMENTS)
+    render_segments: 24       # segments around rendered spheres and capsules (default lab_config.SIM_PRIMITIVE_SEGMENTS)
     depth_scale: 0.001        # metres per uint16 unit of the depth images (default 0.001)
     principal: principal      # the principal depth camera (rig key, SPEC section 2)
     workspace: [[x, y, z], [x, y, z]]   # optional rig key: the box watched (depth grid range, free-space memory)
@@ -30,7 +30,7 @@ A depth camera has the rig-file keys of SPEC section 2 (name, width, height, fx,
 {a, b, c, k}, depth_scale) with its pose either as ``T_world_camera`` (4x4, row-major, optical frame -> world) or
 as ``look_at: {eye: [x, y, z], target: [x, y, z], up: [0, 0, 1]}``, plus an optional
 ``sensor: {noise: true, edge_threshold: 0.05, edge_dropout: 0.5, grazing_angle: 1.36, grazing_dropout: 0.9}`` (see
-:class:`~depthguard.simulation.SensorModel`; the simulated noise is sigma(d) = a + b d + c d^2 of ``noise``) and
+:class:`~depthguard_lab.simulation.SensorModel`; the simulated noise is sigma(d) = a + b d + c d^2 of ``noise``) and
 ``noise_sigma``, the grey-level noise of its intensity (infrared-like) image (default 2). An intensity camera has
 the same intrinsics and pose keys plus ``noise_sigma``.
 
@@ -55,7 +55,7 @@ before it is first carried (without ``rest`` it appears only when carried).
 ``people``: ``name``, ``height`` (1.75), ``start: {position: [x, y], facing: angle | [x, y] | robot}``,
 ``walk_speed`` (1.3 m/s), ``clothes_albedo``, ``skin_albedo``, ``limbs`` (``default``, or ``thin``: forearms 45 mm
 across, hands 25 mm thick and a finger 15 mm across, the thin-limb judges' person), and ``actions``, a list of one-key mappings run one
-after another (see :mod:`depthguard.simulation._people` for what each does):
+after another (see :mod:`depthguard_lab.simulation._people` for what each does):
 
 - ``walk: {to: [x, y], via: [[x, y], ...], speed: 1.3, leg_swing: 0.35, backwards: false}`` (``backwards``:
   stepping back, facing the other way)
@@ -85,16 +85,17 @@ import numpy as np
 import yaml
 
 from depthguard import config
-from depthguard._files import read_yaml, write_whole
+from depthguard_lab import config as lab_config
+from depthguard.files import read_yaml, write_whole
 from depthguard.cameras import PinholeCamera, Rig, rig_from_dict
 from depthguard.errors import InputError, RigError, RobotError, SceneError
 from depthguard.robots import RobotModel
 from depthguard.scenes import Box, Capsule, Sphere
-from depthguard.simulation._actions import ActionContext, build_person
-from depthguard.simulation._fields import Section, new_name, pose_of
-from depthguard.simulation._people import ActionSpan, Person, box_primitive
-from depthguard.simulation._sensors import SensorModel
-from depthguard.simulation._trajectory import Hexagon, HexagonTrajectory, JointTrajectory, RobotTrajectory
+from depthguard_lab.simulation._actions import ActionContext, build_person
+from depthguard_lab.simulation._fields import Section, new_name, pose_of
+from depthguard_lab.simulation._people import ActionSpan, Person, box_primitive
+from depthguard_lab.simulation._sensors import SensorModel
+from depthguard_lab.simulation._trajectory import Hexagon, HexagonTrajectory, JointTrajectory, RobotTrajectory
 from depthguard.transforms import check_transform, look_at, yaw_pose
 
 DEFAULT_SCENE = "scenario_b.yaml"
@@ -334,7 +335,7 @@ def load_workcell(path, layout=None) -> Workcell:
 
 def default_workcell() -> Workcell:
     """Reference scenario B (SPEC section 12), from the package's ``scenario_b.yaml``."""
-    resource = resources.files("depthguard.simulation").joinpath(DEFAULT_SCENE)
+    resource = resources.files("depthguard_lab.simulation").joinpath(DEFAULT_SCENE)
     with resources.as_file(resource) as path:
         return load_workcell(path)
 
@@ -350,10 +351,10 @@ def workcell_from_dict(data, base_dir=".") -> Workcell:
     scene = copy.deepcopy(data)
     top = Section(data, "")
     duration = top.number("duration", positive=True)
-    rate = top.number("rate", default=config.SIM_RATE, positive=True)
+    rate = top.number("rate", default=lab_config.SIM_RATE, positive=True)
     seed = top.integer("seed", default=0, minimum=0)
     floor = top.number("floor", default=0.0)
-    segments = top.integer("render_segments", default=config.SIM_PRIMITIVE_SEGMENTS, minimum=6)
+    segments = top.integer("render_segments", default=lab_config.SIM_PRIMITIVE_SEGMENTS, minimum=6)
     depth_scale = top.number("depth_scale", default=config.DEFAULT_DEPTH_SCALE, positive=True)
     principal = top.get("principal", default=None)
     workspace = top.get("workspace", default=None)
@@ -456,7 +457,7 @@ def _depth_cameras(top: Section, depth_scale: float, principal, base_dir: Path, 
             entry["camera_info"] = str(base_dir / str(entry["camera_info"]))
         name = entry.get("name")
         sensors[name] = _sensor(section.section("sensor", default={}))
-        noise[name] = section.number("noise_sigma", default=config.SIM_INTENSITY_NOISE, minimum=0.0)
+        noise[name] = section.number("noise_sigma", default=lab_config.SIM_INTENSITY_NOISE, minimum=0.0)
         section.done()
         entries.append(entry)
     rig = _rig(entries, depth_scale, principal, "cameras", workspace)
@@ -466,11 +467,11 @@ def _depth_cameras(top: Section, depth_scale: float, principal, base_dir: Path, 
 def _sensor(section: Section) -> SensorModel:
     model = SensorModel(
         noise=section.boolean("noise", default=True),
-        edge_threshold=section.number("edge_threshold", default=config.SIM_EDGE_THRESHOLD, positive=True),
-        edge_dropout=section.number("edge_dropout", default=config.SIM_EDGE_DROPOUT, minimum=0.0, maximum=1.0),
-        grazing_angle=section.number("grazing_angle", default=config.SIM_GRAZING_ANGLE, minimum=0.0,
+        edge_threshold=section.number("edge_threshold", default=lab_config.SIM_EDGE_THRESHOLD, positive=True),
+        edge_dropout=section.number("edge_dropout", default=lab_config.SIM_EDGE_DROPOUT, minimum=0.0, maximum=1.0),
+        grazing_angle=section.number("grazing_angle", default=lab_config.SIM_GRAZING_ANGLE, minimum=0.0,
                                      maximum=math.pi / 2),
-        grazing_dropout=section.number("grazing_dropout", default=config.SIM_GRAZING_DROPOUT, minimum=0.0,
+        grazing_dropout=section.number("grazing_dropout", default=lab_config.SIM_GRAZING_DROPOUT, minimum=0.0,
                                        maximum=1.0),
     )
     section.done()
@@ -487,7 +488,7 @@ def _intensity_cameras(top: Section, depth_scale: float, base_dir: Path, taken: 
         name = entry.get("name")
         if name in taken:
             raise SceneError(f"camera name {name!r} is already a depth camera's", field=section.field("name"))
-        noise[name] = section.number("noise_sigma", default=config.SIM_INTENSITY_NOISE, minimum=0.0)
+        noise[name] = section.number("noise_sigma", default=lab_config.SIM_INTENSITY_NOISE, minimum=0.0)
         section.done()
         entries.append(entry)
     return _rig(entries, depth_scale, None, "intensity_cameras"), noise
@@ -528,7 +529,7 @@ def _robot(section: Section, sample_times: np.ndarray, base_dir: Path):
     except RobotError as exc:
         raise SceneError(exc.message + (f" ({exc.field})" if exc.field else ""),
                          field=section.field("model" if has_model else "urdf")) from None
-    albedo = section.number("albedo", default=config.SIM_ROBOT_ALBEDO, minimum=0.01, maximum=1.0)
+    albedo = section.number("albedo", default=lab_config.SIM_ROBOT_ALBEDO, minimum=0.01, maximum=1.0)
     trajectory = _trajectory(section.section("trajectory"), robot, sample_times)
     section.done()
     return robot, albedo, trajectory
@@ -604,7 +605,7 @@ def _static_object(section: Section, names: set) -> StaticObject:
         primitive = Capsule(tuple(shape.vector("p0", 3)), tuple(shape.vector("p1", 3)),
                             shape.number("radius", positive=True))
     shape.done()
-    obj = StaticObject(name, primitive, section.number("albedo", default=config.SIM_OBJECT_ALBEDO, minimum=0.01,
+    obj = StaticObject(name, primitive, section.number("albedo", default=lab_config.SIM_OBJECT_ALBEDO, minimum=0.01,
                                                        maximum=1.0), section.boolean("obstacle", default=True))
     section.done()
     return obj
@@ -616,7 +617,7 @@ def _carried_object(section: Section, names: set) -> CarriedObject:
     if np.any(size <= 0):
         raise SceneError(f"must be positive, got {size.tolist()}", field=section.field("size"))
     rest = pose_of(section.section("rest")) if section.has("rest") else None
-    obj = CarriedObject(name, size, rest, section.number("albedo", default=config.SIM_OBJECT_ALBEDO, minimum=0.01,
+    obj = CarriedObject(name, size, rest, section.number("albedo", default=lab_config.SIM_OBJECT_ALBEDO, minimum=0.01,
                                                          maximum=1.0))
     section.done()
     return obj

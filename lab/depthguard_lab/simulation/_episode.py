@@ -17,15 +17,16 @@ import yaml
 from PIL import Image
 
 from depthguard import config
-from depthguard._files import atomic_write, write_whole
+from depthguard_lab import config as lab_config
+from depthguard.files import atomic_write, write_whole
 from depthguard.cameras import save_rig
 from depthguard.depth import depth_image
 from depthguard.errors import InputError
 from depthguard.rendering import MeshInstance, Renderer, RenderResult, primitive_mesh
 from depthguard.scenes import Box, Capsule
-from depthguard.simulation._scene import Workcell
-from depthguard.simulation._sensors import simulate_depth, simulate_intensity
-from depthguard.simulation._truth import GroundTruth, TruthComputer
+from depthguard_lab.simulation._scene import Workcell
+from depthguard_lab.simulation._sensors import simulate_depth, simulate_intensity
+from depthguard_lab.simulation._truth import GroundTruth, TruthComputer
 from depthguard.transforms import rotation_with_z
 
 
@@ -202,7 +203,7 @@ def sense_at(workcell: Workcell, times, seed: int = 0) -> list[SimFrame]:
     """What every camera captures at each of ``times`` (seconds) with the robot where its script puts it (frame
     index round(t * rate), the sensor noise of ``seed``): for probes and benchmarks that need a few moments of a
     scene, not a whole episode."""
-    from depthguard.simulation._truth import TruthComputer
+    from depthguard_lab.simulation._truth import TruthComputer
 
     truth = TruthComputer(workcell.robot)
     parts = {name: workcell.part_names(name) for name in workcell.obstacle_names}
@@ -262,7 +263,7 @@ def write_episode(workcell: Workcell, out_dir, seed: int | None = None, progress
         timeline.csv: ``person, index, action, start, hold_start, end`` (seconds) of every scripted action.
         scene.yaml: the scene (a copy of its data; a relative URDF path is made absolute).
 
-    Every file is written whole (:func:`depthguard._files.atomic_write`), and frames.csv last, once every frame is
+    Every file is written whole (:func:`depthguard.files.atomic_write`), and frames.csv last, once every frame is
     written: a folder without frames.csv is an episode that did not finish
     (:func:`~depthguard.recordings.open_recording` refuses it), never a shorter one that reads as complete.
     """
@@ -326,10 +327,10 @@ def write_episode(workcell: Workcell, out_dir, seed: int | None = None, progress
 
 def _write_frame(out: Path, frame: SimFrame) -> None:
     """The frame's depth PNGs (16-bit grey, as ``depthguard.depth.write_depth_png`` writes them, but with zlib level
-    ``config.SIM_PNG_COMPRESSION``: level 6 takes about 4 times as long for a 5 % smaller noisy depth image) and
+    ``lab_config.SIM_PNG_COMPRESSION``: level 6 takes about 4 times as long for a 5 % smaller noisy depth image) and
     intensity PNGs (8-bit grey)."""
     stem = f"{frame.index:06d}.png"
-    level = config.SIM_PNG_COMPRESSION
+    level = lab_config.SIM_PNG_COMPRESSION
     for name, image in frame.depth.items():
         data = np.asarray(image.data)
         if data.dtype != np.uint16 or data.ndim != 2:

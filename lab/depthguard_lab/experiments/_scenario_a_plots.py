@@ -12,8 +12,8 @@ import numpy as np  # noqa: E402
 from matplotlib.ticker import FuncFormatter  # noqa: E402
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: E402
 
-from depthguard._files import atomic_write  # noqa: E402
-from depthguard.experiments import scenario_a as sa  # noqa: E402
+from depthguard.files import atomic_write  # noqa: E402
+from depthguard_lab.experiments import scenario_a as sa  # noqa: E402
 
 COLORS = {"point cloud": "tab:orange", "min": "tab:blue", "mean": "tab:green", "hybrid": "tab:purple",
           "paper min": "tab:gray"}

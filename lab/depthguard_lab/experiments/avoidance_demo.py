@@ -4,7 +4,7 @@ Scene ``scenario_b_reach.yaml``: a KUKA iiwa traces the 2016 paper's vertical he
 up, reaches into its end-effector and walks away; four simulated 640x480 depth cameras (Kinect noise, edge dropouts) at 30 Hz,
 issue 8's reference layout (``scenario_b_four.yaml``: the scene's two front cameras and two in the back corners;
 ``cameras=2`` keeps the front two), are fused through the depth grid with the free-space memory; control runs at 500 Hz
-(:func:`depthguard.simulation._closed_loop.run_closed_loop`). The same episode is run per mode:
+(:func:`depthguard_lab.simulation._closed_loop.run_closed_loop`). The same episode is run per mode:
 
 - ``none``: the task alone (the baseline: it shows the collision that would happen);
 - ``avoid``: the papers' avoidance (SPEC section 9: repulsive velocity at the end-effector, risk-shaped joint
@@ -41,7 +41,7 @@ It writes a plot per mode like the 2016 paper's Fig. 15 (``demo_<mode>.png``: th
 task's, the distances over time, the repulsive speed and the speed factor), ``summary.json``, and the run with the
 papers' avoidance as a recording a user can open in Foxglove or rerun (``bag_avoid/``, an MCAP file: depth images,
 joint states, the robot's capsules and control points coloured by distance, the distances over time;
-:mod:`depthguard.simulation._loop_bag`; about 0.6 MB per depth image, 150 MB for the whole run).
+:mod:`depthguard_lab.simulation._loop_bag`; about 0.6 MB per depth image, 150 MB for the whole run).
 
     depthguard demo [--out DIR] [--duration S] [--mode none|avoid|ssm ...] [--cameras 4|2] [--no-bag]
                     [--ssm-in-layout]
@@ -80,7 +80,7 @@ RESUMED_HOLD = 0.1
 
 
 def resumption(log) -> tuple[float | None, float | None, float | None]:
-    """When the task resumed after the obstacles left (:class:`~depthguard.simulation._closed_loop.LoopLog`):
+    """When the task resumed after the obstacles left (:class:`~depthguard_lab.simulation._closed_loop.LoopLog`):
     (the time the obstacles left, seconds: from then on every control point is truly farther than
     :data:`LEFT_BEYOND` from every obstacle; the seconds from then until the task error falls below
     :data:`RESUMED_WITHIN` and stays there for :data:`RESUMED_HOLD`; the median task error from then to the end,
@@ -105,19 +105,19 @@ def resumption(log) -> tuple[float | None, float | None, float | None]:
 
 def load_scene(cameras: int = 4):
     """The demo's workcell with ``cameras`` (2 or 4) depth cameras (:data:`LAYOUTS`)."""
-    from depthguard.simulation import load_workcell
+    from depthguard_lab.simulation import load_workcell
 
     if cameras not in LAYOUTS:
         from depthguard.errors import InputError
 
         raise InputError(f"the demo runs with 2 or 4 cameras, got {cameras!r}", field="cameras")
-    folder = Path(str(resources.files("depthguard.simulation")))
+    folder = Path(str(resources.files("depthguard_lab.simulation")))
     layout = None if LAYOUTS[cameras] is None else folder / LAYOUTS[cameras]
     return load_workcell(folder / SCENE, layout=layout)
 
 
 def summarize(log, dt: float) -> dict:
-    """The figures of one run (:class:`~depthguard.simulation._closed_loop.LoopLog`) listed in the module
+    """The figures of one run (:class:`~depthguard_lab.simulation._closed_loop.LoopLog`) listed in the module
     docstring. ``dt``: the control period, seconds."""
     contact = log.clearance <= 0.0
     collisions = int(contact[0]) + int(np.count_nonzero(contact[1:] & ~contact[:-1])) if len(contact) else 0
@@ -191,7 +191,7 @@ def plot(log, mode_summary: dict, path: Path, control_points, rho: float) -> Non
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from depthguard._files import atomic_write
+    from depthguard.files import atomic_write
 
     fig, axes = plt.subplots(3, 1, figsize=(9, 10), gridspec_kw={"height_ratios": [1.2, 1, 0.8]})
     ax = axes[0]
@@ -230,10 +230,10 @@ BAG_MODE = "avoid"  # the run written as a recording
 
 def ssm_scene():
     """(workcell, settings) of mode ``ssm`` in :data:`SSM_LAYOUT`."""
-    from depthguard.simulation import load_workcell
-    from depthguard.simulation._closed_loop import LoopSettings
+    from depthguard_lab.simulation import load_workcell
+    from depthguard_lab.simulation._closed_loop import LoopSettings
 
-    folder = resources.files("depthguard.simulation")
+    folder = resources.files("depthguard_lab.simulation")
     workcell = load_workcell(Path(str(folder / SCENE)), layout=Path(str(folder / SSM_LAYOUT)))
     return workcell, LoopSettings(ssm_capability=True, known_solids=True)
 
@@ -243,8 +243,8 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
     """Run the scene once per mode, print a table, write the plots and summary.json into ``out`` (and, with
     ``bag``, the ``avoid`` run as a recording in ``out/bag_avoid``, replacing an earlier one). ``ssm_cell``: mode
     ``ssm`` in :data:`SSM_LAYOUT` (else in the others' layout)."""
-    from depthguard._files import write_whole
-    from depthguard.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
+    from depthguard.files import write_whole
+    from depthguard_lab.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
 
     modes = list(MODES) if not modes else list(dict.fromkeys(modes))
     out = Path(out)
@@ -282,7 +282,7 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
         if record:
             import shutil
 
-            from depthguard.simulation._loop_bag import write_loop_bag
+            from depthguard_lab.simulation._loop_bag import write_loop_bag
 
             folder = out / f"bag_{mode}"
             if folder.is_dir() and (folder / "metadata.yaml").is_file():
