@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -44,3 +47,59 @@ def person_scene(seed: int = 0):
         if 0.03 < d < 0.5 and scene_distance(primitives[:2], p[None])[0] > 0.3:
             points.append(p)
     return camera, depth, primitives, np.array(points)
+
+
+#: Where each benchmark writes its report (docs/figures/<script>.md): the README links these, never copies them.
+FIGURES = Path(__file__).resolve().parent.parent / "docs" / "figures"
+
+
+class _Tee(io.TextIOBase):
+    """Writes to the terminal and keeps a copy."""
+
+    def __init__(self, stream):
+        self.stream, self.copy = stream, io.StringIO()
+
+    def write(self, text):
+        self.copy.write(text)
+        return self.stream.write(text)
+
+    def flush(self):
+        self.stream.flush()
+
+
+@contextlib.contextmanager
+def report(script: str):
+    """Run a benchmark's ``main()`` inside this: what it prints goes to the terminal as before and, when it ends
+    without an exception, to ``docs/figures/<script's name>.md`` (written whole), headed by the command, the date,
+    the machine (CPU, cores, numba threads) and the commit. A failed run leaves the last report as it was."""
+    import datetime
+    import os
+    import platform
+    import subprocess
+    import sys
+
+    import numba
+
+    from depthguard.files import write_whole
+
+    tee = _Tee(sys.stdout)
+    with contextlib.redirect_stdout(tee):
+        yield
+    name = Path(script).stem
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                cwd=FIGURES.parent.parent, timeout=10).stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        commit = "unknown"
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), cpu)
+    except OSError:
+        pass
+    command = " ".join(["benchmarks/" + Path(script).name] + sys.argv[1:])
+    header = (f"# {name}\n\n`.venv/bin/python {command}`, {datetime.date.today().isoformat()}, commit {commit}; "
+              f"{cpu}, {os.cpu_count()} cores, numba {numba.config.NUMBA_NUM_THREADS} threads.\n\n"
+              "Written by the benchmark itself (`benchmarks/_common.py: report`); run it again to refresh.\n\n")
+    FIGURES.mkdir(parents=True, exist_ok=True)
+    write_whole(FIGURES / f"{name}.md", header + "```\n" + tee.copy.getvalue().rstrip("\n") + "\n```\n")

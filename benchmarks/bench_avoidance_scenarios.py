@@ -34,6 +34,7 @@ from depthguard_lab.experiments.avoidance_demo import resumed_cell, summarize
 from depthguard_lab.simulation import load_workcell
 from depthguard.errors import InputError
 from depthguard_lab.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
+from _common import report
 
 WINDOWS = {"scenario_b_reach.yaml": (1.9, 3.6), "scenario_b_board.yaml": (1.6, 4.4),
            "scenario_b_elbow.yaml": (2.4, 4.6)}
@@ -83,4 +84,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

@@ -28,6 +28,7 @@ import numpy as np
 from depthguard.errors import InputError
 from depthguard_lab.simulation import load_workcell
 from depthguard_lab.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
+from _common import report
 
 
 def main() -> None:
@@ -55,4 +56,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

@@ -28,17 +28,19 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from _common import report
 
 REPO = Path(__file__).resolve().parents[1]
 
 
-def run(argv, cwd, label):
-    """Run ``python -m depthguard.cli ARGV`` from the copy; (wall seconds, CPU seconds, stdout)."""
+def run(argv, cwd, label, module="depthguard.cli"):
+    """Run ``python -m MODULE ARGV`` (the library's command line, or the lab's, ``depthguard_lab.cli``) from the
+    copy; (wall seconds, CPU seconds, stdout)."""
     env = dict(os.environ, PYTHONPATH=str(cwd))
     env.pop("NUMBA_CACHE_DIR", None)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "depthguard.cli", *map(str, argv)], cwd=cwd, env=env,
+    done = subprocess.run([sys.executable, "-m", module, *map(str, argv)], cwd=cwd, env=env,
                           capture_output=True, text=True)
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -78,7 +80,7 @@ def main(argv=None) -> None:
         rows = []
         if args.without_warmup:
             cold = fresh_copy(tmp / "cold")
-            run(["simulate", "--out", sim, "--duration", "0.1"], cold, "simulate")
+            run(["simulate", "--out", sim, "--duration", "0.1"], cold, "simulate", "depthguard_lab.cli")
             for p in cold.rglob("*.nb[ic]"):
                 p.unlink()
             (s_wall, s_cpu, _), (f_wall, f_cpu, _) = first_answers(cold, sim)
@@ -92,7 +94,7 @@ def main(argv=None) -> None:
         wall, cpu, _ = run(["warmup"], copy, "warmup again")
         rows.append(("depthguard warmup, everything cached", wall, cpu))
         if not sim.exists():
-            run(["simulate", "--out", sim, "--duration", "0.1"], copy, "simulate")
+            run(["simulate", "--out", sim, "--duration", "0.1"], copy, "simulate", "depthguard_lab.cli")
         (s_wall, s_cpu, _), (f_wall, f_cpu, _) = first_answers(copy, sim)
         rows += [("first single-camera answer after the warm-up (new process)", s_wall, s_cpu),
                  ("first fused answer after the warm-up (new process)", f_wall, f_cpu)]
@@ -106,4 +108,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

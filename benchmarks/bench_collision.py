@@ -37,6 +37,7 @@ from depthguard.collision import (
 )
 from depthguard.robots import RobotModel
 from depthguard.transforms import look_at
+from _common import report
 
 
 def _camera(name, eye, target=(0.2, 0.0, 0.5), width=704, height=576, f=600.0):
@@ -140,4 +141,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

@@ -28,6 +28,7 @@ from depthguard.robots import RobotModel
 from depthguard.scenes import Box, render_depth, standing_person
 from depthguard.self_filter import RobotSilhouette
 from depthguard.transforms import look_at
+from _common import report
 
 EYES = {"principal": [1.5, -2.0, 1.8], "second": [1.5, 2.0, 1.8], "third": [-1.8, -1.6, 2.0],
         "fourth": [-1.8, 1.6, 2.0]}
@@ -133,4 +134,5 @@ def measure(all_cameras, names, robot, frames, steps, q, repeats):
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

@@ -24,6 +24,7 @@ import depthguard as dg
 from depthguard import config
 from depthguard_lab.simulation import load_workcell
 from depthguard_lab.simulation._episode import sense_at
+from _common import report
 
 
 def _seconds(function) -> tuple[float, object]:
@@ -75,4 +76,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

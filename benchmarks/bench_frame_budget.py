@@ -57,6 +57,7 @@ from depthguard.robots import RobotModel  # noqa: E402
 from depthguard.scenes import Box, render_depth, standing_person  # noqa: E402
 from depthguard.self_filter import RobotSilhouette  # noqa: E402
 from bench_depth_grid import EYES, cameras  # noqa: E402
+from _common import report
 
 WORKSPACE = [[-1.2, -1.5, 0.0], [1.8, 1.5, 2.0]]  # the robot (base at the origin) and the person's reach
 RHO = 0.4
@@ -709,4 +710,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

@@ -1,4 +1,4 @@
-"""The free-space memory's figures (SPEC section 8a): per frame, the voxels the cameras see free and the memory's
+"""The free-space memory's figures (design §8a): per frame, the voxels the cameras see free and the memory's
 update, with 1 and 2 numba threads, and the memory it holds.
 
 The scene: the depth grid benchmark's room seen by two and four 640x480 cameras (525 px focal length, 0.5-7 m), a
@@ -35,6 +35,7 @@ from depthguard.depthgrid import free_image
 from depthguard.freespace import FreeSpaceMemory, VoxelBox, seen_free_voxels, squared_distance_transform
 from depthguard.scenes import Box, render_depth, standing_person
 from depthguard.transforms import look_at
+from _common import report
 
 EYES = {"principal": [1.5, -2.0, 1.8], "second": [1.5, 2.0, 1.8], "third": [-1.8, -1.6, 2.0],
         "fourth": [-1.8, 1.6, 2.0]}
@@ -129,4 +130,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

@@ -21,7 +21,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
 
-from _common import timings  # noqa: E402
+from _common import report, timings  # noqa: E402
 
 from depthguard.collision._plan import wave_propagation  # noqa: E402
 
@@ -98,4 +98,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

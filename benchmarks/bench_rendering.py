@@ -33,7 +33,7 @@ from depthguard.rendering import MeshInstance, Renderer, primitive_mesh  # noqa:
 from depthguard.robots import RobotModel  # noqa: E402
 from depthguard.scenes import Capsule  # noqa: E402
 from depthguard.transforms import look_at  # noqa: E402
-from _common import timings  # noqa: E402
+from _common import report, timings  # noqa: E402
 
 GOAL_MS = 3.0
 CAPSULE_SEGMENTS = 16
@@ -172,4 +172,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

@@ -21,6 +21,7 @@ import numpy as np
 import depthguard as dg
 from depthguard import baselines
 from depthguard_lab.experiments import scenario_a as sa
+from _common import report
 
 GOAL_MIN_WORST = 0.3e-3  # seconds
 
@@ -75,4 +76,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

@@ -22,7 +22,7 @@ from depthguard.robots import RobotModel  # noqa: E402
 from depthguard.scenes import Box, render_depth  # noqa: E402
 from depthguard.self_filter import RobotSilhouette  # noqa: E402
 from depthguard.transforms import look_at  # noqa: E402
-from _common import timings  # noqa: E402
+from _common import report, timings  # noqa: E402
 
 
 def main(argv=None) -> None:
@@ -74,4 +74,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

@@ -37,7 +37,7 @@ from depthguard_lab.simulation import (  # noqa: E402
     simulate_depth,
     write_episode,
 )
-from _common import timings  # noqa: E402
+from _common import report, timings  # noqa: E402
 
 
 def frame_times(generator, n: int) -> np.ndarray:
@@ -130,4 +130,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

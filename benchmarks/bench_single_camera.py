@@ -19,7 +19,7 @@ sys.path.insert(0, os.path.dirname(__file__))
 
 import depthguard as dg  # noqa: E402
 from depthguard import baselines  # noqa: E402
-from _common import person_scene, timings  # noqa: E402
+from _common import person_scene, report, timings  # noqa: E402
 
 RHO = 0.4
 
@@ -67,4 +67,5 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

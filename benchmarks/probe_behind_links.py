@@ -25,6 +25,7 @@ import depthguard as dg
 from depthguard.depthgrid import _kernels
 from depthguard_lab.experiments import fusion_workcell as fw
 from depthguard_lab.simulation import load_workcell, simulate
+from _common import report
 
 CELLS = 12  # cells probed behind blind_from; the last bin counts runs of CELLS - 1 or more
 
@@ -75,4 +76,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

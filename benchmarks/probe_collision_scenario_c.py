@@ -1,4 +1,4 @@
-"""Reference scenario C (SPEC section 12, issue 10): the image-based collision test on the simulated workcell of
+"""Reference scenario C (design §12, issue 10): the image-based collision test on the simulated workcell of
 ``scenario_c.yaml`` (four 704 x 576 cameras, a UFACTORY xArm 6, a person walking in and reaching, the light dimming by
 20 %), for intensity and depth images, judged by the exact ground truth (coal: the robot's collision meshes against
 the person's capsules).
@@ -25,6 +25,7 @@ import numpy as np
 from depthguard.collision import ConfigurationTable, ImageCollisionTest
 from depthguard_lab.simulation import load_workcell, simulate
 from depthguard_lab.simulation._truth import TruthComputer
+from _common import report
 
 FALSE_ALARM_CLEARANCE = 0.15
 
@@ -99,4 +100,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

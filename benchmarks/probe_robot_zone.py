@@ -20,6 +20,7 @@ import depthguard as dg
 from depthguard_lab.experiments import fusion_workcell as fw
 from depthguard_lab.experiments.workcell import scene_distance
 from depthguard_lab.simulation import load_workcell, simulate
+from _common import report
 
 USEFUL_MARGIN = 0.05  # issue 8: pairs truly farther than rho + 5 cm
 
@@ -65,4 +66,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

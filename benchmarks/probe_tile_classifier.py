@@ -1,4 +1,4 @@
-"""Step 2's two classifiers on scenario C (SPEC section 10; the paper's section 3.2: "Linear and statistical Bayes
+"""Step 2's two classifiers on scenario C (design §10; the paper's section 3.2: "Linear and statistical Bayes
 classification can achieve correct classification of ca. 97% of foreground tiles"): the thresholds (the linear
 classifier, (12 grey levels, 0.1 tile heights)) and a Bayes classifier trained on the simulation's exact labels.
 
@@ -18,6 +18,7 @@ import numpy as np
 
 from depthguard.collision import BayesTileClassifier, ImageCollisionTest, labelled_tiles, light_gain, tile_features
 from depthguard_lab.simulation import load_workcell, simulate
+from _common import report
 
 
 def main() -> None:
@@ -57,4 +58,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    with report(__file__):
+        main()

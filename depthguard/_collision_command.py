@@ -1,4 +1,4 @@
-"""The ``depthguard collide`` and ``depthguard plan`` commands (issue 10): the image-based collision test and the
+"""The ``depthguard collide`` and ``depthguard plan`` commands (design §10): the image-based collision test and the
 wave-propagation planner on image files, as a user runs them on recorded or simulated cameras.
 
 Both read a rig file (the cameras' intrinsics and poses; its ``workspace`` bounds the epipolar bands unless
@@ -32,7 +32,7 @@ DEFAULT_PLAN_MARGIN = 0.5
 
 def add_arguments(parser, *, plan: bool) -> None:
     """The options ``collide`` and ``plan`` share, then each one's own."""
-    parser.add_argument("--rig", required=True, help="rig YAML file: the cameras (SPEC section 2)")
+    parser.add_argument("--rig", required=True, help="rig YAML file: the cameras (design §2)")
     parser.add_argument("--reference", action="append", required=True, metavar="NAME=GLOB",
                         help="images of camera NAME without obstacles, the robot in several configurations (their "
                              "per-pixel median is the reference); a glob, quoted; repeat for every camera")
@@ -137,7 +137,7 @@ def _robot(args):
 
 
 def _joints(robot, text: str, option: str) -> np.ndarray:
-    from depthguard.cli import parse_joints
+    from depthguard._options import parse_joints
 
     values = parse_joints(text, option)  # its errors name the option
     try:

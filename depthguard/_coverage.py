@@ -1,4 +1,4 @@
-"""Camera placement (issue 8, item 6): which space within rho of the robot no camera of a rig can clear.
+"""Camera placement: which space within rho of the robot no camera of a rig can clear.
 
 "A correct positioning of the cameras is crucial" (2016 paper). For a rig and a robot, at a few robot poses, this
 renders what each camera would see of the robot alone in an empty room (the robot and a floor, nothing else) and
@@ -18,10 +18,10 @@ asks the monitor itself, through the depth grid, which space near the robot it c
   below ``spacing``: some space that no camera clears lies within one sample spacing of it. Two kinds:
 
   - *occupied*: ``distance < spacing``, space the monitor counts as possibly occupied because no secondary camera
-    sees through it (SPEC section 8). This is what makes control points' distances small: false alarms.
+    sees through it (design §8). This is what makes control points' distances small: false alarms.
   - *unchecked*: only ``blind_distance < spacing``, space hidden behind the robot that the monitor does not check
     and flags ``robot_blind_spot``. With one camera, everything behind the robot as it sees it; with several, the
-    space between two links along a principal pixel, which the depth grid takes for the robot (README, "Several
+    space between two links along a principal pixel, which the depth grid takes for the robot (docs/design.md, "Several
     cameras"). It depends on the principal camera's view only, not on where the other cameras are.
 
   The fractions are of the samples, per pose and over all poses.
@@ -40,7 +40,7 @@ the volume around the robot.
 A rig of one camera is not refused: the monitor answers by the single-camera method, whose blind spot is everything
 behind the robot as that camera sees it, and every sample there is not clearable (unchecked).
 
-Left out: sensor dropouts, other objects and walls (their shadows), people, and the free-space memory (SPEC section
+Left out: sensor dropouts, other objects and walls (their shadows), people, and the free-space memory (design section
 8a), which clears more over time.
 
     depthguard coverage --rig RIG.yaml [--robot URDF|iiwa|panda] [--trajectory joint_states.csv] [--rho 0.4]
@@ -234,9 +234,9 @@ def _same_file(path, default) -> bool:
 def trajectory_poses(robot, path, max_poses: int = MAX_POSES) -> list[tuple[str, np.ndarray]]:
     """(label, joints) of at most ``max_poses`` rows, evenly spread, of a ``time,<joint names...>`` CSV file (a
     recording's joint_states.csv). Its columns must be the robot's joints (any order)."""
-    from depthguard.recordings import _read_joint_states_csv
+    from depthguard.recordings import read_joint_states_csv
 
-    names, times, positions = _read_joint_states_csv(Path(path))
+    names, times, positions = read_joint_states_csv(Path(path))
     missing = [n for n in robot.joint_names if n not in names]
     unknown = [n for n in names if n not in robot.joint_names]
     if missing or unknown:

@@ -1,6 +1,6 @@
 """Numba kernels shared by the single-camera depth-space distance (:mod:`depthguard.depthspace`) and the depth grid's
-fusion (:mod:`depthguard.depthgrid`): a pixel frustum's exact nearest point (SPEC section 4), the surveillance region
-(SPEC section 5), the aggregation of contributors into one answer (SPEC section 6), and the noise margin.
+fusion (:mod:`depthguard.depthgrid`): a pixel frustum's exact nearest point (design §4), the surveillance region
+(design §5), the aggregation of contributors into one answer (design §6), and the noise margin.
 
 Everything here works in one camera's optical frame (x right, y down, z forward; metres) and trusts its inputs: the
 public functions validate them. A pixel (u, v) spans the tangents [a0, a1] x [b0, b1] with
@@ -39,7 +39,7 @@ MIN_RHO2 = 2.2250738585072014e-308
 
 @kernel(inline=True)
 def noise_margin(d, m0, m1, m2):
-    """m(d) = max(m0 + m1 d + m2 d^2, 0), metres: the noise margin of a measurement at depth d (SPEC section 3), from
+    """m(d) = max(m0 + m1 d + m2 d^2, 0), metres: the noise margin of a measurement at depth d (design §3), from
     the camera's NoiseModel.coefficients()."""
     return max(m0 + (m1 + m2 * d) * d, 0.0)
 
@@ -225,7 +225,7 @@ def view_boundary(X, Y, Z, tx0, tx1, ty0, ty1, z_min, z_max):
 
 @kernel(inline=True)
 def cube_window(X, Y, Z, rho, fx, fy, cx, cy, width, height, near_eps):
-    """Pixels to visit for P: the image bounding box of the cube [P - rho, P + rho] (SPEC section 5).
+    """Pixels to visit for P: the image bounding box of the cube [P - rho, P + rho] (design §5).
 
     Returns (u_lo, u_hi, v_lo, v_hi), inclusive, clamped to the image (u_lo > u_hi when it is empty). If a corner
     lies at or behind the near plane z = near_eps, the whole image.
@@ -315,7 +315,7 @@ def ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, 
 
 
 @kernel()
-def _nearest_in_blocks(X, Y, Z, rho, z_start, z_end, bounded, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi,
+def nearest_in_blocks(X, Y, Z, rho, z_start, z_end, bounded, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi,
                        v_lo, v_hi, near_eps, spans):
     """The nearest contributing pixel for ``min``: visit blocks of pixels in rings around P's pixel, skipping a
     block whose minimum start depth lies behind the region or whose bounding frustum is farther than the best
@@ -395,7 +395,7 @@ def _nearest_in_blocks(X, Y, Z, rho, z_start, z_end, bounded, invalid, block_min
 
 
 @kernel()
-def _guess_piece_row(X, Y, Z, b0, b1, z_in, z_hi_in, u_in, m, inv_fx, cx, d2_out, z_out):
+def guess_piece_row(X, Y, Z, b0, b1, z_in, z_hi_in, u_in, m, inv_fx, cx, d2_out, z_out):
     """:func:`guessed_piece` for m pixels of one row (tangents b0, b1): pixel k has column u_in[k] and segment
     [z_in[k], z_hi_in[k]]. Writes d2_out[k] = g(z*) and z_out[k] = z*, or d2_out[k] = -1 where the guessed piece does
     not hold the minimiser and the caller must walk. A loop of its own, so that it vectorises."""
@@ -474,7 +474,7 @@ def surveillance_region(X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_ma
 
 
 @kernel(inline=True)
-def _finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, inside_tol, out_direction):
+def finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, inside_tol, out_direction):
     """``min``'s answer from the nearest pixel (squared distance best2, its unit direction (ex, ey, ez), whether it
     had no measurement) and the observed volume's boundary (distance unseen_d, inward normal). Returns (distance,
     count, invalid_count, flags) and writes the direction."""
@@ -496,19 +496,19 @@ def _finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, in
 
 
 @kernel(inline=True)
-def _finish_min_at_pixel(X, Y, Z, best2, best_u, best_v, best_z, best_invalid, fx, fy, cx, cy, unseen_d, nx, ny, nz,
+def finish_min_at_pixel(X, Y, Z, best2, best_u, best_v, best_z, best_invalid, fx, fy, cx, cy, unseen_d, nx, ny, nz,
                          flags, inside_tol, out_direction):
-    """:func:`_finish_min` when the nearest point lies on pixel (best_u, best_v)'s frustum at depth best_z: its unit
+    """:func:`finish_min` when the nearest point lies on pixel (best_u, best_v)'s frustum at depth best_z: its unit
     direction towards P is derived here."""
     ex = ey = ez = 0.0
     if inside_tol * inside_tol < best2 < np.inf:
         ex, ey, ez = frustum_direction(X, Y, Z, (best_u - 0.5 - cx) / fx, (best_u + 0.5 - cx) / fx,
                                        (best_v - 0.5 - cy) / fy, (best_v + 0.5 - cy) / fy, best_z, np.sqrt(best2))
-    return _finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, inside_tol, out_direction)
+    return finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, inside_tol, out_direction)
 
 
 @kernel(inline=True)
-def _finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, unseen_d, nx, ny, nz, flags, inside_tol,
+def finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, unseen_d, nx, ny, nz, flags, inside_tol,
                 min_direction, out_direction):
     """``mean``'s and ``hybrid``'s answer from the sums over the contributing pixels and the observed volume's
     boundary (distance unseen_d, inward normal, one more contributor when finite). Returns (distance, count,

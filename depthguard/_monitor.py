@@ -11,11 +11,8 @@ import numpy as np
 
 from depthguard import config
 from depthguard.cameras import Rig
-from depthguard.depth import DepthImage, OccupancyImage, depth_image, prepare_depth
-from depthguard.depth._prepare import filled_space
-from depthguard.depth._image import checked_frame
-from depthguard.depthspace import check_points, single_camera_distances
-from depthguard.depthspace._distance import check_options
+from depthguard.depth import DepthImage, OccupancyImage, checked_frame, depth_image, filled_space, prepare_depth
+from depthguard.depthspace import check_options, check_points, single_camera_distances
 from depthguard.errors import InputError, check_real, short_repr
 from depthguard.results import DetectableResult, DistanceResult, Flag
 
@@ -27,24 +24,24 @@ class DistanceMonitor:
         rig: the cameras (:func:`depthguard.load_rig`).
         rho: radius of each control point's surveillance region, metres, in [``config.RHO_MIN``,
             ``config.RHO_MAX``]; obstacles farther away are ignored.
-        aggregate: ``"min"``, ``"mean"`` or ``"hybrid"`` (SPEC section 6).
+        aggregate: ``"min"``, ``"mean"`` or ``"hybrid"`` (design §6).
         invalid: policy for pixels without a valid measurement: ``"occupied"`` (fail-safe), ``"neighbors"`` or
-            ``"free"`` (SPEC section 3).
+            ``"free"`` (design §3).
         unseen: policy for space no camera observes: ``"occupied"`` (fail-safe) or ``"free"``.
-        method: ``"exact"`` (SPEC) or ``"paper"`` (the 2015 paper's unsafe formulas, for comparison only).
+        method: ``"exact"`` (design) or ``"paper"`` (the 2015 paper's unsafe formulas, for comparison only).
         max_age: seconds, in (0, ``config.MAX_AGE_LIMIT``]; a frame older than this at query time (``now``) makes
             its camera blind and the result flagged, and so does a frame without a timestamp. ``"auto"`` (default):
             ``config.DEFAULT_MAX_AGE`` (0.1 s, three frame periods at 30 Hz) for every frame that carries a
             timestamp; frames without one cannot age. None: frames do not go stale by age (see :meth:`query` for the
             other rules of time).
         hole_pixels: largest hole filled by ``invalid="neighbors"``, pixels, in [0, ``config.MAX_HOLE_PIXELS``].
-        robot: a :class:`depthguard.robots.RobotModel` to filter out of every frame (SPEC section 7); then each new
+        robot: a :class:`depthguard.robots.RobotModel` to filter out of every frame (design §7); then each new
             frame needs the robot's joint positions at its capture time (``query(..., joints=...)``).
         self_filter: the geometry rendered for self-filtering: ``"hulls"`` (default), ``"capsules"`` or
             ``"meshes"`` (:mod:`depthguard.self_filter`).
         self_filter_tolerance: metres, in [0, ``config.SELF_FILTER_TOLERANCE_MAX``], by which a measurement may lie
             in front of the rendered robot and still be the robot (on top of the noise margin).
-        principals: with frames of several cameras, the principal cameras of the depth grid (SPEC section 8): a list
+        principals: with frames of several cameras, the principal cameras of the depth grid (design §8): a list
             or tuple of camera names (a bare string is refused); default: the rig's principal, else its first
             camera. Each point gets the largest of the principals' fused distances among those whose view holds
             its whole surveillance region (each is a lower bound).
@@ -53,7 +50,7 @@ class DistanceMonitor:
         fusion_margin: metres (finite, >= 0) a secondary camera must have seen beyond a cell to clear it (the rig's
             calibration error, on top of the noise margin). fusion_pixels: pixels, in [0,
             ``config.MAX_FUSION_PIXELS``], by which a cell's footprint grows in a secondary camera.
-        memory: remember free space over time (SPEC section 8a): space no camera sees now counts free while no person
+        memory: remember free space over time (design §8a): space no camera sees now counts free while no person
             moving at ``v_max`` could have reached it since it was last seen free. It needs frame timestamps and the
             rig's ``workspace`` (the box remembered, in voxels of ``memory_voxel`` metres); without a workspace,
             or with a rig of one camera, there is no memory (``self.memory`` is None). Fused answers only; an answer
@@ -91,8 +88,8 @@ class DistanceMonitor:
     A frame passed as a :class:`DepthImage` is prepared once (and filtered with the joints given with it) and reused
     while the same object is passed again; a plain array is checked and prepared on every query.
 
-    Which method answers is decided once per query by one rule (:meth:`plan`): the single-camera method (SPEC
-    sections 3-7) when one camera has a usable frame, the depth grid (SPEC section 8) when several have.
+    Which method answers is decided once per query by one rule (:meth:`plan`): the single-camera method (design
+    sections 3-7) when one camera has a usable frame, the depth grid (design §8) when several have.
     """
 
     def __init__(self, rig: Rig, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
@@ -178,7 +175,7 @@ class DistanceMonitor:
 
     def _detectable_space(self, static, capability, voxel) -> None:
         from depthguard.freespace import DetectableSpace, VoxelBox, solid_voxels
-        from depthguard.freespace._detectable import closed_faces
+        from depthguard.freespace import closed_faces
 
         capability = check_real(capability, "detection_capability", minimum=0.0, above_minimum=True,
                                 maximum=config.COORDINATE_LIMIT, unit="metres", field="detection_capability")
@@ -211,7 +208,7 @@ class DistanceMonitor:
 
     def query_hidden_band(self) -> tuple[float, str]:
         """(metres, what): the thickest layer next to a surface in which :meth:`query` may not see an object, for
-        speed and separation monitoring on its distances (the effective detection capability, SPEC section 9):
+        speed and separation monitoring on its distances (the effective detection capability, design §9):
 
         - with a robot, the self-filter's shell: the capsules' padding and gap to the meshes
           (``RobotModel.capsule_gap``), what the rendered geometry adds beyond the capsules, ``self_filter_tolerance``
@@ -296,7 +293,7 @@ class DistanceMonitor:
         ``t`` (the latest capture time of the frames, as the fused answers take them), on ``box``'s finer voxels
         (none unless the two boxes share their near corner and the memory's voxel is a whole number of ``box``'s).
         Returns ``out``."""
-        from depthguard.freespace._detectable import _or_coarse
+        from depthguard.freespace import or_coarse
 
         out = np.zeros(box.shape, dtype=bool) if out is None else out
         ratio = self.memory.box.voxel / box.voxel
@@ -304,7 +301,7 @@ class DistanceMonitor:
         coarse = self.memory.box
         if whole >= 1 and abs(whole - ratio) <= 1e-9 and np.allclose(coarse.lo, box.lo, rtol=0, atol=1e-12) and \
                 all(coarse.shape[a] * whole >= box.shape[a] for a in range(3)):
-            _or_coarse(out, self.memory.free_at(t), whole)
+            or_coarse(out, self.memory.free_at(t), whole)
         return out
 
     def _principals(self, principals) -> tuple[str, ...]:
@@ -416,7 +413,7 @@ class DistanceMonitor:
                 that froze alone is caught only with ``now``: pass it).
             check: validate the points (``False`` for a hot loop that passes a checked (n, 3) float64 array).
 
-        Time (SPEC section 8): a frame is stale, and counts as blind (it clears nothing, results flag
+        Time (design §8): a frame is stale, and counts as blind (it clears nothing, results flag
         ``STALE_CAMERA``), when
 
         - its timestamp is NaN or infinite (whatever ``max_age``);
@@ -499,7 +496,7 @@ class DistanceMonitor:
                            prepare_seconds=time.perf_counter() - tick)
 
     def _concessions(self, plan: "QueryPlan", usable: dict) -> "Concessions":
-        """Where the concessions of this set of frames counted space free that no camera saw free (SPEC section
+        """Where the concessions of this set of frames counted space free that no camera saw free (design section
         11a): the robot zone (fused answers and the detectable space), the known solids' bands, the filled holes."""
         zone = None
         zoned = (plan.kind == "fused" or self.detectable is not None) and self.robot is not None and self.robot_zone
@@ -526,7 +523,7 @@ class DistanceMonitor:
         return Concessions(zone, solids, fills, zone_in_query=plan.kind == "fused", shell=shell)
 
     def _remember(self, usable: dict) -> None:
-        """Take the usable frames the memory has not seen into it (SPEC section 8a), as of the earliest capture time
+        """Take the usable frames the memory has not seen into it (design §8a), as of the earliest capture time
         among them: a voxel a frame saw free at t_j was free at t_j, and dating it earlier only shortens how long it
         is remembered. A frame without a timestamp, or older than the memory's last update, adds nothing."""
         last = self.memory.time if self.memory.time is not None else -math.inf
@@ -536,7 +533,7 @@ class DistanceMonitor:
             return
         from depthguard.freespace import seen_free_voxels
 
-        from depthguard.freespace._near import surface_voxels
+        from depthguard.freespace import surface_voxels
 
         t = min(state.occupancy.timestamp for state in new)
         seen = seen_free_voxels(self.memory.box, [state.camera for state in new], [state.free for state in new],
@@ -557,9 +554,9 @@ class DistanceMonitor:
         missing:
 
         - no usable frame: no camera answers; every point gets distance 0 (``DistanceResult.blind``);
-        - one usable frame: the single-camera method on it (SPEC sections 3-7), the same answer whatever other
+        - one usable frame: the single-camera method on it (design §3-7), the same answer whatever other
           cameras the rig holds;
-        - several: the depth grid (SPEC section 8) of each principal camera with a usable frame; when none of the
+        - several: the depth grid (design §8) of each principal camera with a usable frame; when none of the
           principals has one, the first camera of the rig that has takes their place. Every other camera of the rig
           is a secondary camera; a stale or missing one is blind (it clears nothing).
 
@@ -652,7 +649,7 @@ class PreparedSet:
     the flag), where the concessions counted space free (:class:`Concessions`), and its times:
 
     - ``time``: the OLDEST capture time among the usable frames (seconds, or None): the set is as old as that, since
-      each camera's free space is what it saw when it captured its frame (SPEC section 9, T_r);
+      each camera's free space is what it saw when it captured its frame (design §9, T_r);
     - ``newest``: the newest capture time among them;
     - ``now``: the clock the set was prepared at (the ``now`` given, else ``newest``);
     - ``prepare_seconds``: wall-clock seconds :meth:`DistanceMonitor.prepare_set` took (SSM's reaction time counts
@@ -686,7 +683,7 @@ class PreparedSet:
                        else clock - state.occupancy.timestamp) for name, state in self.usable.items()}
 
     def reaction_time(self, now: float, control_period: float) -> float:
-        """SSM's reaction time T_r at ``now`` (seconds, the frames' clock), SPEC section 9: the age of the oldest
+        """SSM's reaction time T_r at ``now`` (seconds, the frames' clock), design §9: the age of the oldest
         usable frame at ``now`` + the measured preparation of this set (``prepare_seconds``) + one control period
         (seconds, > 0). inf when no usable frame carries a timestamp (nothing says how old the answer is)."""
         now = check_real(now, "now", unit="seconds", field="now")
@@ -718,7 +715,7 @@ class PreparedSet:
         if self.detectable is None:
             raise InputError("this monitor has no detection_capability: pass DistanceMonitor(detection_capability="
                              "...) for detectable distances", field="detection_capability")
-        from depthguard.freespace._detectable import check_limit
+        from depthguard.freespace import check_limit
 
         points = check_points(points_world) if check else points_world
         limit = check_limit(limit)
@@ -741,7 +738,7 @@ class PreparedSet:
     def _flag_remembered(self, points, distance, rho, flags):
         """``flags`` with ``REMEMBERED`` added where space nearer than min(distance, rho) counts free only because
         the memory remembers it (no frame of the last update saw it free)."""
-        from depthguard.freespace._near import voxels_within
+        from depthguard.freespace import voxels_within
 
         if self.free_now is None:
             return flags
@@ -801,14 +798,14 @@ _FAR = 1e3
 
 @dataclass(frozen=True)
 class Concessions:
-    """Where one set of frames' concessions (SPEC section 11a) counted space free that no camera saw free:
+    """Where one set of frames' concessions (design §11a) counted space free that no camera saw free:
 
     - ``zone``: None, or (capsules (n, 7) float64: p0, p1, radius with the padding, metres, world frame, at every
       usable frame's joints; thickness, metres): the robot zone takes space within thickness of a capsule for the
       robot. It applies to fused answers (``zone_in_query``) and to the detectable space.
     - ``solids``: None, or (boxes, band metres): every replaced measurement lies within band of a known solid
       (``StaticSolids.substitute_band``). Queries only: the detectable space takes the frames as measured.
-    - ``fills``: occupancy images of the space filled holes counted free (``depth._prepare.filled_space``), in
+    - ``fills``: occupancy images of the space filled holes counted free (``depthguard.depth.filled_space``), in
       queries and in the detectable space alike.
     - ``shell``: None, or (capsules as ``zone``'s, thickness): self-filtering takes a measurement within the
       rendered geometry plus the tolerance and the noise margin for the robot, and the depth grid as much behind it;

@@ -136,7 +136,7 @@ def _run_workloads() -> None:
             monitor.query({"principal": images["principal"]}, pts)
             monitor.query(images, pts)
         baselines.cartesian_region_distances(images["principal"], rig.cameras["principal"], several, 0.3)
-    # The free-space memory (SPEC 8a): the voxels both cameras see free, two updates (without and with a robot).
+    # The free-space memory (design §8a): the voxels both cameras see free, two updates (without and with a robot).
     box = VoxelBox([-0.5, -0.5, 0.0], [0.5, 0.5, 1.0], 0.1)
     cameras = list(rig.cameras.values())
     seen = seen_free_voxels(box, cameras, [free_image(images[c.name], c) for c in cameras], margin=0.01, pad=1)
@@ -145,7 +145,7 @@ def _run_workloads() -> None:
     memory.update(0.1, seen, robot=np.zeros(box.shape, dtype=bool))
     squared_distance_transform(seen)
     # The monitor with the memory (a rig with a workspace, stamped frames), and the test behind its flag.
-    from depthguard.freespace._near import voxels_within
+    from depthguard.freespace import voxels_within
 
     remembering = dg.DistanceMonitor(dg.Rig(rig.cameras, principal="principal", workspace=[box.lo, box.hi]), rho=0.3,
                                      memory_voxel=0.1, detection_capability=0.06, detectable_voxel=0.03)
@@ -169,7 +169,7 @@ def _run_workloads() -> None:
     tangents = np.array([[-0.1, 0.1, -0.1, 0.1], [0.0, 0.2, 0.0, 0.2]])
     dg.frustum_distance([0.0, 0.0, 1.0], tangents, [0.5, np.inf])
     dg.paper_frustum_distance([0.0, 0.0, 1.0], tangents, [0.5, np.inf])
-    # The collision test's epipolar bands (SPEC 10), between the small rig's two cameras.
+    # The collision test's epipolar bands (design §10), between the small rig's two cameras.
     from depthguard.collision import EpipolarBands, TileGrid
 
     grids = [TileGrid(camera, 6, 8) for camera in rig.cameras.values()]
@@ -188,7 +188,7 @@ def _run_workloads() -> None:
                 np.ascontiguousarray(T[:3, 3]), cam.fx, cam.fy, cam.cx, cam.cy, grids[0].col_edges,
                 grids[0].row_edges, grids[0].words, np.zeros((1, grids[0].words), dtype=np.uint64))
     # The wave-propagation planner over a small configuration grid, around a wall.
-    from depthguard.collision._plan import ConfigurationGrid, plan_path
+    from depthguard.collision import ConfigurationGrid, plan_path
 
     free = np.ones((4, 3), dtype=bool)
     free[1, :2] = False

@@ -29,6 +29,7 @@ import os
 import sys
 
 from depthguard import config
+from depthguard._options import parse_joints
 from depthguard.errors import DepthguardError
 
 
@@ -85,7 +86,7 @@ def _build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     distance = commands.add_parser("distance", help="distances from control points to what the cameras see")
-    distance.add_argument("--rig", required=True, help="rig YAML file (SPEC section 2)")
+    distance.add_argument("--rig", required=True, help="rig YAML file (docs/design.md §2)")
     distance.add_argument("--depth", action="append", required=True, metavar="NAME=PATH",
                           help="depth image of camera NAME (16-bit PNG/PGM in depth_scale units, .npy, float TIFF)")
     distance.add_argument("--points", required=True, help="control points: CSV with header x,y,z or JSON list of "
@@ -98,7 +99,7 @@ def _build_parser() -> argparse.ArgumentParser:
     distance.add_argument("--unseen", choices=config.UNSEEN_POLICIES, default=config.DEFAULT_UNSEEN,
                           help="space no camera observes: occupied (fail-safe) or free")
     distance.add_argument("--method", choices=config.METHODS, default=config.DEFAULT_METHOD,
-                          help="exact (SPEC) or paper (the 2015 paper's unsafe formulas, for comparison)")
+                          help="exact (design) or paper (the 2015 paper's unsafe formulas, for comparison)")
     distance.add_argument("--robot", metavar="URDF",
                           help="filter this robot out of the images (a URDF file, or 'iiwa' / 'panda' for the models "
                                "shipped with pybullet_data); needs --joints")
@@ -113,7 +114,7 @@ def _build_parser() -> argparse.ArgumentParser:
                                "the rig")
     distance.add_argument("--json", action="store_true", help="print one JSON array, one object per point")
 
-    build = commands.add_parser("build-map", help="build the depth grid map of a rig's principal camera (SPEC "
+    build = commands.add_parser("build-map", help="build the depth grid map of a rig's principal camera (design "
                                                   "section 8) and save it")
     build.add_argument("--rig", required=True, help="rig YAML file")
     build.add_argument("--principal", help="principal camera (default: the rig's principal, else its first camera)")
@@ -126,7 +127,7 @@ def _build_parser() -> argparse.ArgumentParser:
                             f"{config.DEPTH_GRID_MAX_CELLS} cells in all)")
     build.add_argument("--out", required=True, help="map file to write (.npz)")
 
-    replay = commands.add_parser("replay", help="run a recording (folder or ROS 2 bag, SPEC section 12a) through the "
+    replay = commands.add_parser("replay", help="run a recording (folder or ROS 2 bag, docs/design.md §12a) through the "
                                                 "monitor in capture-time order, one answer per set of frames")
     replay.add_argument("recording", metavar="RECORDING", help="a recording folder (rig.yaml, frames.csv, depth/, "
                                                                 "joint_states.csv), a rosbag2 folder or an .mcap file")
@@ -148,7 +149,7 @@ def _build_parser() -> argparse.ArgumentParser:
     memory = replay.add_mutually_exclusive_group()
     memory.add_argument("--v-max", type=_SPEED, default=config.FREESPACE_V_MAX,
                         help="the free-space memory's fastest person, metres/second (default "
-                             f"{config.FREESPACE_V_MAX:g}, ISO 13855's hand speed; SPEC section 8a); the memory "
+                             f"{config.FREESPACE_V_MAX:g}, ISO 13855's hand speed; docs/design.md §8a); the memory "
                              "needs a workspace in the rig")
     memory.add_argument("--no-memory", action="store_true",
                         help="do not remember free space: only what the cameras see now clears space")
@@ -156,7 +157,7 @@ def _build_parser() -> argparse.ArgumentParser:
 
     coverage = commands.add_parser("coverage", help="camera placement: the space within rho of the robot that no "
                                                     "camera of a rig can clear, as fractions and a picture")
-    coverage.add_argument("--rig", required=True, help="rig YAML file (SPEC section 2)")
+    coverage.add_argument("--rig", required=True, help="rig YAML file (docs/design.md §2)")
     coverage.add_argument("--robot", default="iiwa", metavar="URDF",
                           help="the robot: a URDF file, or 'iiwa' / 'panda' for the models shipped with pybullet_data "
                                "(default: iiwa)")
@@ -172,7 +173,7 @@ def _build_parser() -> argparse.ArgumentParser:
 
     from depthguard import _collision_command as _command
 
-    collide = commands.add_parser("collide", help="the image-based collision test (Henrich & Gecks, SPEC section 10): "
+    collide = commands.add_parser("collide", help="the image-based collision test (Henrich & Gecks, docs/design.md §10): "
                                                   "would these configurations or this motion collide with what the "
                                                   "cameras see?")
     _command.add_arguments(collide, plan=False)
@@ -414,33 +415,6 @@ def _robot_and_joints(args):
     robot = {"iiwa": RobotModel.default, "panda": RobotModel.panda}.get(args.robot)
     robot = robot() if robot is not None else RobotModel.from_urdf(args.robot)
     return robot, robot.joint_vector(parse_joints(args.joints))
-
-
-def parse_joints(text: str, option: str = "--joints"):
-    """``"a=0.1,b=0.2"`` -> {"a": 0.1, "b": 0.2}; ``"0.1,0.2"`` -> [0.1, 0.2]. InputError naming ``option`` if
-    malformed."""
-    from depthguard.errors import InputError
-
-    items = [item.strip() for item in text.split(",") if item.strip()]
-    if not items:
-        raise InputError(f"{option}: no values in {text!r}")
-    named = ["=" in item for item in items]
-    if any(named) and not all(named):
-        raise InputError(f"{option} mixes name=value and plain values: {text!r}")
-    pairs = [item.split("=", 1) if "=" in item else (None, item) for item in items]
-    try:
-        values = [float(value) for _, value in pairs]
-    except ValueError:
-        raise InputError(f"{option}: not numbers: {text!r}") from None
-    if not all(math.isfinite(value) for value in values):
-        raise InputError(f"{option}: values must be finite numbers (radians, or metres for prismatic joints): "
-                         f"{text!r}")
-    if not all(named):
-        return values
-    names = [name.strip() for name, _ in pairs]
-    if len(set(names)) != len(names):
-        raise InputError(f"{option} names a joint twice: {text!r}")
-    return dict(zip(names, values))
 
 
 #: The commands: name -> the function that runs it on the parsed arguments (its exit status).

@@ -16,17 +16,17 @@ DEFAULT_DEPTH_RANGE = (0.0, math.inf)
 #: Radius of the surveillance region around each control point, metres.
 DEFAULT_RHO = 0.4
 
-#: Aggregation of the contributors of one control point (SPEC section 6).
+#: Aggregation of the contributors of one control point (design §6).
 DEFAULT_AGGREGATE = "hybrid"
 AGGREGATES = ("min", "mean", "hybrid")
 
-#: Policies for pixels without a valid measurement and for space no camera looks at (SPEC section 3).
+#: Policies for pixels without a valid measurement and for space no camera looks at (design §3).
 DEFAULT_INVALID = "occupied"
 INVALID_POLICIES = ("occupied", "neighbors", "free")
 DEFAULT_UNSEEN = "occupied"
 UNSEEN_POLICIES = ("occupied", "free")
 
-#: ``exact`` is SPEC section 4-5; ``paper`` is the 2015 paper's formulas (eqs. 7-11), kept for comparison only.
+#: ``exact`` is design §4-5; ``paper`` is the 2015 paper's formulas (eqs. 7-11), kept for comparison only.
 DEFAULT_METHOD = "exact"
 METHODS = ("exact", "paper")
 
@@ -35,7 +35,7 @@ METHODS = ("exact", "paper")
 #: pixels is about 3 x 3 cm at 2 m, too small to hide a hand.
 DEFAULT_NEIGHBOR_HOLE_PIXELS = 64
 
-#: Depth noise model sigma(d) = a + b*d + c*d**2 (metres) times k gives the noise margin m(d) (SPEC section 3).
+#: Depth noise model sigma(d) = a + b*d + c*d**2 (metres) times k gives the noise margin m(d) (design §3).
 #: The default is the axial noise of a Kinect v1 measured by Nguyen, Izadi and Lovell (3DIMPVT 2012),
 #: sigma(d) = 0.0012 + 0.0019*(d - 0.4)**2, expanded into a + b*d + c*d**2, with k = 3.
 DEFAULT_NOISE_SIGMA = (0.0012 + 0.0019 * 0.16, -2.0 * 0.4 * 0.0019, 0.0019)
@@ -57,7 +57,7 @@ NEAR_PLANE_EPSILON = 1e-6
 BLOCK_SIZE = 8
 
 #: Self-filtering: metres by which a measurement may lie in front of the rendered robot and still count as the robot
-#: (calibration and joint-state timing), on top of the noise margin (SPEC section 7).
+#: (calibration and joint-state timing), on top of the noise margin (design §7).
 SELF_FILTER_TOLERANCE = 0.02
 
 # ------------------------------------------------------------------------------------------------------------ robots
@@ -155,9 +155,9 @@ SELF_FILTER_HULL_PLANES = 64
 
 # ------------------------------------------------------------------------------------------------ the depth grid
 
-#: The depth grid's cells are DEPTH_GRID_DELTA_D metres deep along the principal camera's z (SPEC section 12's
+#: The depth grid's cells are DEPTH_GRID_DELTA_D metres deep along the principal camera's z (design §12's
 #: scenario B), coarser only when the grid's range needs more than DEPTH_GRID_MAX_CELLS of them. The range itself
-#: comes from the rig (SPEC section 8, "Grid range"; :func:`depthguard.depthgrid.grid_range`): the depths at which
+#: comes from the rig (design §8, "Grid range"; :func:`depthguard.depthgrid.grid_range`): the depths at which
 #: the principal sees the rig's workspace, within its depth_range.
 DEPTH_GRID_DELTA_D = 0.01
 
@@ -193,7 +193,7 @@ MAX_MAP_FILE_BYTES = 2 << 30  # one depth-grid map: 2 GiB
 MAX_NESTING = 32
 
 # ------------------------------------------------------------------------------------------- ranges of input values
-# Values outside these ranges are refused with a named error (README, "Bad input and faults"): inside them, the
+# Values outside these ranges are refused with a named error (docs/bad-input.md): inside them, the
 # kernels' float64 arithmetic represents every quantity they form (squares of coordinates, projections) exactly
 # enough; outside them it might not, and a wrong number is never an answer.
 
@@ -268,7 +268,7 @@ SELF_FILTER_GEOMETRIES = ("hulls", "capsules", "meshes")
 MAX_URDF_BYTES = 16 << 20
 MAX_MESH_FILE_BYTES = 128 << 20
 
-# ----------------------------------------------------------------------------- time-bounded free space (SPEC 8a)
+# ----------------------------------------------------------------------------- time-bounded free space (design §8a)
 
 #: Fastest a person (a hand) may move, metres/second: remembered free space shrinks at this speed from wherever a
 #: person may be (ISO 13855's approach speed for hands). A body part moving faster is outside the guarantee.
@@ -279,10 +279,10 @@ FREESPACE_V_MAX = 2.0
 #: is a quarter of SSM's default 40 mm: bands thinner than 2 cm vanish, ones thicker than 7.5 cm stay.
 DETECTABLE_VOXEL = 0.01
 
-#: The monitor remembers free space (SPEC 8a) by default, in voxels of FREESPACE_VOXEL metres over the rig's workspace.
+#: The monitor remembers free space (design §8a) by default, in voxels of FREESPACE_VOXEL metres over the rig's workspace.
 DEFAULT_MEMORY = True
 #: DistanceMonitor(robot_zone=...), metres: fused answers may take space within this much of the robot's padded
-#: capsules for the robot, in every direction (the robot zone; README, "Several cameras"). An object wholly inside it
+#: capsules for the robot, in every direction (the robot zone; docs/design.md, "Several cameras"). An object wholly inside it
 #: is not seen, and a distance to one that reaches into it may exceed the truth by up to this much. Off (0) by default:
 #: it removes few false alarms at a thickness that stays safe (benchmarks/probe_robot_zone.py).
 DEFAULT_ROBOT_ZONE = 0.0
@@ -292,7 +292,7 @@ ROBOT_ZONE_MAX = 0.2
 #: tolerance (2 cm) in front of the robot for the robot, and the fusion clears space only beyond the noise margin
 #: (Kinect v1, 3 sigma, 3-4 cm at the robot's 2.5-3.3 m from the cameras) plus the fusion margin (1 cm). Nothing
 #: clears that shell, and it moves with the links: every control point read 0.07-0.15 m from it, the avoidance pushed
-#: the arm away from its own shadow and the task never resumed (issue 9). Measured in the demo's scene with four
+#: the arm away from its own shadow and the task never resumed. Measured in the demo's scene with four
 #: cameras (36 frames, no person): 3 cm removes none of it, 6 cm nearly all (4.5 cm: the task did not resume). The
 #: loop takes it as a stated tolerance: a distance may exceed the truth by up to this much for an object reaching
 #: within it, so the avoidance takes it off every distance (AvoidanceParams.tolerance) and SSM adds it to Z_d.
@@ -318,7 +318,7 @@ FREESPACE_ROUNDING = 1e-12
 #: (a power of 2): where a camera sees a whole block free, its voxels cost nothing more.
 FREESPACE_BLOCK = 8
 
-# ------------------------------------------------------------------------------------------ avoidance (SPEC 9)
+# ------------------------------------------------------------------------------------------ avoidance (design §9)
 #: The papers' avoidance parameters (2015 paper section 5.3): rho 0.4 m, the end-effector's largest repulsive speed
 #: V_max 1.5 m/s and the shape factor alpha 5 of the repulsive speed and of the risk function.
 AVOID_V_MAX = 1.5
@@ -331,7 +331,7 @@ JOINT_ACCELERATION = 10.0
 DLS_EPSILON = 0.04
 DLS_LAMBDA_MAX = 0.04
 
-# ------------------------------------------------------------------- speed and separation monitoring (SPEC 9)
+# ------------------------------------------------------------------- speed and separation monitoring (design §9)
 
 #: The human's approach speed, m/s: ISO 13855's K = 1600 mm/s, and K = 2000 mm/s when the separation is at most
 #: 500 mm (a hand or arm within reach moves faster than walking).
@@ -370,7 +370,7 @@ SSM_MAXIMA = {"human_speed": 10.0, "human_speed_near": 10.0, "near_separation": 
               "stopping_distance_extra": 10.0, "detection_capability": SSM_INTRUSION_LIMIT, "sensing_uncertainty": 10.0,
               "robot_uncertainty": 10.0}
 
-#: Image-based collision test (SPEC 10): the range of the room light's gain (an image's brightness relative to the
+#: Image-based collision test (design §10): the range of the room light's gain (an image's brightness relative to the
 #: reference images) that the difference images follow; outside it a camera sees every tile as foreground.
 LIGHT_GAIN_RANGE = (0.5, 2.0)
 

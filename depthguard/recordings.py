@@ -1,11 +1,11 @@
-"""Recordings: depth frames of a rig and the robot's joint states over time, read back for replay (SPEC section 12a).
+"""Recordings: depth frames of a rig and the robot's joint states over time, read back for replay (design §12a).
 
 Two layouts hold the same data:
 
 - **A recording folder** (``depthguard simulate`` writes one; a user can write one from any sensor)::
 
       RECORDING/
-        rig.yaml                      the rig (SPEC section 2)
+        rig.yaml                      the rig (design §2)
         frames.csv                    camera,frame,time: one row per depth image, capture time in seconds
         depth/<camera>/<frame>.png    16-bit PNG in depth_scale units, frame as six digits (000042.png)
         joint_states.csv              time,<joint name>,...: radians (metres for prismatic joints), at any rate
@@ -305,7 +305,7 @@ def _open_folder(path: Path, rig) -> Recording:
             file, what="depth image (listed in frames.csv)", max_bytes=config.MAX_DEPTH_FILE_BYTES,
             error=DepthImageError, camera=record.camera)
     joints_path = path / "joint_states.csv"
-    names, times, positions = _read_joint_states_csv(joints_path)
+    names, times, positions = read_joint_states_csv(joints_path)
     frames.sort(key=lambda r: r.time)  # stable: rows of one time keep their order
 
     def read(sets):
@@ -361,7 +361,7 @@ def _read_frames_csv(path: Path, rig: Rig) -> list[FrameRecord]:
     return frames
 
 
-def _read_joint_states_csv(path: Path):
+def read_joint_states_csv(path: Path):
     """(names, (k,) times, (k, n) positions) from joint_states.csv."""
     text = read_text(path, what="joint states file", max_bytes=MAX_CSV_BYTES)
     header, rows = _csv_rows(text, path)

@@ -1,4 +1,4 @@
-"""What every distance query returns (SPEC section 11)."""
+"""What every distance query returns (design §11)."""
 
 from __future__ import annotations
 
@@ -19,20 +19,20 @@ class Flag(enum.IntFlag):
     - ``INVALID_PIXELS_USED``: pixels without a valid measurement contributed (see ``DistanceResult.invalid_count``).
     - ``STALE_CAMERA``: a camera's latest frame was older than the allowed age, so it counted as blind.
     - ``MISSING_CAMERA``: a camera the query needed had no frame, so it counted as blind.
-    - ``ROBOT_BLIND_SPOT``: space hidden behind the robot, which one camera cannot see (SPEC section 7), comes
+    - ``ROBOT_BLIND_SPOT``: space hidden behind the robot, which one camera cannot see (design §7), comes
       closer to the point than the reported distance (see ``DistanceResult.blind_distance``): an obstacle there
       could be nearer than the answer.
     - ``OUTSIDE_GRID``: fused cameras only: the surveillance region reaches depths the principal camera's depth grid
-      does not span (SPEC section 8, "Grid range"); what the principal cannot see there counted occupied, whatever
+      does not span (design §8, "Grid range"); what the principal cannot see there counted occupied, whatever
       the other cameras saw. Give the rig a ``workspace`` or ``depth_range`` that holds the region.
-    - ``REMEMBERED``: fused cameras with the free-space memory (SPEC section 8a): space nearer than the reported
+    - ``REMEMBERED``: fused cameras with the free-space memory (design §8a): space nearer than the reported
       distance counted free only because it was seen free a moment ago and no person moving at ``v_max`` can have
       reached it since; no camera sees it free now.
 
-    Concessions (SPEC section 11a): space counted free on purpose, to make answers useful, although no camera saw it
+    Concessions (design §11a): space counted free on purpose, to make answers useful, although no camera saw it
     free. Each flag says that such space lies nearer to the point than the reported distance, so that an object
     hidden there could be nearer than the answer; ``DistanceResult.concession_distance`` says how near. What each
-    can hide is stated where it is configured (``DistanceMonitor``) and in the README ("Concessions").
+    can hide is stated where it is configured (``DistanceMonitor``) and in docs/design.md (§11a, "Concessions").
 
     - ``ROBOT_ZONE``: the robot zone (``DistanceMonitor(robot_zone=...)``): space within that much of the robot's
       padded capsules counted as the robot.
@@ -40,7 +40,7 @@ class Flag(enum.IntFlag):
       self-filter's tolerance plus the noise margin of its surface counted as the solid.
     - ``HOLE_FILLED``: a hole in a frame filled from its neighbours (``invalid="neighbors"``): a pixel with no
       measurement counted free up to the nearest surface round it.
-    - ``ROBOT_SHELL``: self-filtering (SPEC section 7): space within the self-filter's shell of the robot (its
+    - ``ROBOT_SHELL``: self-filtering (design §7): space within the self-filter's shell of the robot (its
       padded geometry, plus the tolerance and twice the noise margin) counted as the robot. A thin object lying on
       the robot is not told from it.
     - ``DETECTION_OPENING``: SSM's detectable distances only (:meth:`PreparedSet.detectable_distances`): possibly
@@ -132,7 +132,7 @@ class DistanceResult:
     @property
     def age(self) -> float | None:
         """Seconds: the age of the oldest frame the answer used (None when no frame had a timestamp, inf when no
-        camera answered). Speed and separation monitoring's reaction time starts here (SPEC section 9)."""
+        camera answered). Speed and separation monitoring's reaction time starts here (design §9)."""
         if not self.cameras:
             return math.inf
         known = [a for a in self.ages.values() if a is not None]

@@ -1,4 +1,4 @@
-"""Robot self-filtering (SPEC section 7): render the robot's padded collision geometry into each camera, so that
+"""Robot self-filtering (design §7): render the robot's padded collision geometry into each camera, so that
 frame preparation can tell the robot's pixels from obstacles.
 
 The geometry rendered must contain the robot wherever it really is (a pixel of the robot left unfiltered makes the
@@ -121,7 +121,7 @@ class RobotSilhouette:
 
     def render_far(self, camera: PinholeCamera, q) -> np.ndarray:
         """(h, w) float32 metres: where the robot's padded geometry ends along each pixel of ``camera`` (its farthest
-        surface), 0 where the robot is not. The depth grid checks the space behind it (SPEC section 8, case iv)."""
+        surface), 0 where the robot is not. The depth grid checks the space behind it (design §8, case iv)."""
         return self.renderer.render_depth_max(camera, self.instances(q))
 
     def render_first_exit(self, camera: PinholeCamera, q) -> np.ndarray:

@@ -67,11 +67,11 @@ class StaticSolids:
     entry depth; one nearer is something in front of the solid, one deeper means the solid is not where it is known
     to be, and both are kept as measured.
 
-    What this gives up, stated (a concession, SPEC section 11a; answers that rest on it are flagged ``known_solid``):
+    What this gives up, stated (a concession, design §11a; answers that rest on it are flagged ``known_solid``):
     an object lying on a solid's surface, within the tolerance + twice the noise margin of it (the acceptance reaches
     the tolerance + the margin, and the object's own measurement may read a margin deeper), is taken for the solid:
     a hand 25 mm thick flat on a table 2-3 m from a Kinect-class camera (2 cm + 2 x 1.3-3.8 cm) vanishes, as an
-    object that close to the robot's surface is taken for the robot (SPEC section 7). A distance may then exceed
+    object that close to the robot's surface is taken for the robot (design §7). A distance may then exceed
     the truth by any amount, but never by more than the distance from the point to that band
     (``DistanceResult.concession_distance``). So is the sliver of a pixel's frustum between its measured depth
     and a slanted surface (within about a pixel's footprint of the surface), and, where the robot stands in front of

@@ -29,7 +29,7 @@ Expected values come from this geometry, never from depthguard's own output. A r
   while exact >= rho (nothing within rho), for ``min`` and ``hybrid``;
 - it is exactly 0, flagged ``inside_obstacle`` / ``region_outside_view`` (or ``stale_camera`` /
   ``missing_camera``), for a point clearly outside P (by more than TOL), whatever the aggregation and rho;
-- for ``mean`` (the mean over the contributors, which may exceed the nearest distance, SPEC section 6): 0 as above,
+- for ``mean`` (the mean over the contributors, which may exceed the nearest distance, design §6): 0 as above,
   and, when exact < rho, a finite value below rho (there is a contributor closer than rho, and every contributor is).
 
 Anything that only removes information (a pixel without a measurement, a stale camera, a masked value) can only make

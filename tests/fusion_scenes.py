@@ -8,7 +8,7 @@ Tolerance of a fused distance (:func:`fused_bound`). Let Q be the true nearest o
 some point B is certainly occupied for the fused query, then fused <= |P - B| <= |P - Q| + |Q - B|; the tolerance is
 the distance from Q to the nearest such B. It is worked out from the rendered images the library was given (pybullet's
 output, noise-free float32 metres: a pixel's value is the depth of the first drawn surface on its centre ray), with
-what SPEC sections 3 and 8 say stays occupied:
+what design §3 and §8 say stays occupied:
 
 - Q unseen by the principal camera: 0; otherwise the distance from Q to the boundary of its observed volume
   (unseen space counts as occupied);
@@ -123,7 +123,7 @@ TIE = 1e-6
 def cell_confirmed(principal: dg.PinholeCamera, u: int, v: int, z0: float, z1: float, cam: dg.PinholeCamera,
                    depth: np.ndarray, margin: float, pad: int) -> bool:
     """Whether secondary camera ``cam`` (its rendered ``depth``) confirms the principal's grid cell [z0, z1] of pixel
-    (u, v) under SPEC section 8's rule, computed here from the cameras alone: the cell's 8 corners projected into
+    (u, v) under design §8's rule, computed here from the cameras alone: the cell's 8 corners projected into
     ``cam``; confirmed if a corner is nearer than its minimum range, if the footprint (pixels whose square meets the
     corners' bounding box, grown by ``pad``) leaves the image, or if one footprint pixel measured nothing or a surface
     nearer than the cell's far depth plus ``margin``. Ties go against confirming (the footprint is shrunk by TIE)."""
@@ -156,7 +156,7 @@ def fused_bound(principal: dg.PinholeCamera, depth: np.ndarray, nearest_world, g
     Args:
         principal: the principal camera; depth: its rendered (h, w) optical z, metres (inf: nothing drawn).
         nearest_world: (n, 3) the true nearest obstacle point Q of each control point, world frame.
-        grid: the depth grid map (only its d_min, delta_d and n_cells: SPEC section 12's grid).
+        grid: the depth grid map (only its d_min, delta_d and n_cells: design §12's grid).
         secondaries: list of (camera, rendered depth) of the secondary cameras.
         margin, pad: the monitor's ``fusion_margin`` (metres) and ``fusion_pixels``.
         maybe_robot: (h, w) bool, principal pixels that may show the robot's padded geometry.

@@ -14,14 +14,14 @@ TIE = 1e-9
 
 
 def g_of_z(X, Y, Z, a0, a1, b0, b1, z):
-    """SPEC section 4's g(z) = dx(z)^2 + dy(z)^2 + (Z - z)^2, elementwise."""
+    """design §4's g(z) = dx(z)^2 + dy(z)^2 + (Z - z)^2, elementwise."""
     dx = np.maximum(np.maximum(a0 * z - X, 0.0), X - a1 * z)
     dy = np.maximum(np.maximum(b0 * z - Y, 0.0), Y - b1 * z)
     return dx * dx + dy * dy + (Z - z) ** 2
 
 
 def frustum_distance_pieces(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
-    """SPEC section 4 literally: cut [z_lo, z_hi] at the breakpoints, minimise each piece's quadratic in closed form
+    """design §4 literally: cut [z_lo, z_hi] at the breakpoints, minimise each piece's quadratic in closed form
     (clamped to the piece), take the smallest. Elementwise over broadcast arrays; returns (D, z*)."""
     X, Y, Z, a0, a1, b0, b1, z_lo, z_hi = np.broadcast_arrays(*(np.asarray(x, np.float64) for x in
                                                                 (X, Y, Z, a0, a1, b0, b1, z_lo, z_hi)))
@@ -346,12 +346,12 @@ def camera_clears_reference(corners_j, offset_j, free_j, z_near_j, z0, z1, u, v,
 
 def fused_query_reference(grid, principal, frees, z_nears, points_world, rho, unseen, robot_far=None, margin=0.01,
                           pad=1, inside_tol=1e-12, robot_slack=0.0, robot_near=None, min_direction=1e-9):
-    """The fused query of SPEC section 8 by brute force: for every principal pixel, every grid cell that comes
+    """The fused query of design §8 by brute force: for every principal pixel, every grid cell that comes
     within rho is classified (certain, candidate confirmed by all secondaries, or cleared) and the pixel's distance
     is the smallest over its occupied pieces.
 
     Returns {aggregate: :class:`FusedAnswer`} for "min", "mean" and "hybrid": distances, counts, unit directions
-    (from the nearest obstacle point towards the control point, SPEC section 6; world frame), invalid counts (the
+    (from the nearest obstacle point towards the control point, design §6; world frame), invalid counts (the
     contributing pixels whose nearest point is a candidate of a pixel without a measurement), flag bits and the
     directions ``min`` may answer with on a tie. Flags: INSIDE_OBSTACLE, REGION_OUTSIDE_VIEW, INVALID_PIXELS_USED
     and OUTSIDE_GRID (the region's depths [Z - rho, Z + rho], within the camera's range, leave [d_min, d_max]).

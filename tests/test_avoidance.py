@@ -1,4 +1,4 @@
-"""The papers' avoidance (SPEC section 9): repulsive speed and risk, damped pseudo-inverse, saturation in the null
+"""The papers' avoidance (design §9): repulsive speed and risk, damped pseudo-inverse, saturation in the null
 space, joint velocity bounds, and the joints' limits, judged by formulas written out here, numpy's pseudo-inverse and
 scipy's linear programming."""
 
@@ -270,7 +270,7 @@ def test_from_surface_takes_the_links_radius_off_every_distance(iiwa):
 
 def test_distances_are_taken_from_the_links_surfaces_unless_the_papers_rule_is_asked_for():
     """A departure from the papers, on by default: with the papers' distances (from control points on the links'
-    axes) the board and the elbow scenarios collided (README, "Avoidance")."""
+    axes) the board and the elbow scenarios collided (docs/design.md, "Avoidance")."""
     assert AvoidanceParams().from_surface is True
     assert AvoidanceParams(from_surface=False).from_surface is False
 

@@ -1,7 +1,7 @@
 """The monitor under bad runtime input: invalid pixels, unseen points, stale or missing frames, malformed points.
 
 Whatever means "could not see" must give the conservative answer (distance 0 or a smaller distance) and a flag,
-never a silently optimistic one (SPEC sections 3 and 11).
+never a silently optimistic one (design §3 and §11).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Cameras, rigs and camera_info files: validation, geometry, YAML round trips, and refusal of bad files.
 
-Every error about one camera must name the camera and the field (SPEC section 2, STYLE "Errors").
+Every error about one camera must name the camera and the field (design §2, STYLE "Errors").
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ The in-process runs happen in a persistent worker process (``campaign_support.Cl
 campaign run found a segfault) or a hang the alarm cannot interrupt then fails its case, not the whole session.
 
 Safe readings: unknown or misspelled keys in a rig are refused (a typo of ``depth_range`` must not silently give the
-default range; the brief asks for it, although SPEC section 2 lets the contract grow); a rig that uses YAML anchors
+default range; the brief asks for it, although design §2 lets the contract grow); a rig that uses YAML anchors
 or aliases is refused even when harmless; a rig or points file above the size caps in ``depthguard.config`` is
 refused; ``--rho 1e-200`` is refused (below ``config.RHO_MIN``); ``demo --duration 1e-9`` (less than one frame) is
 refused. Generated variants (truncations, flipped bits, junk) may by chance still be valid files: then exit 0 is

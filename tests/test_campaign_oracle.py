@@ -5,7 +5,7 @@ transforms of the whole setup. The geometry and the rule are in ``tests/campaign
 ``s`` stands beside it on the same side of the wall (up to 0.3 m away, turned by up to ~8 degrees) and sees the same
 wall: each of its pixels reports the nearest wall depth over its footprint, so it never claims to see beyond the
 wall. The real obstacles are the wall and everything behind it (neither camera sees behind it), and the depth grid of
-principal ``p`` counts p's unseen space as occupied (SPEC sections 3 and 8: space outside the principal's image or
+principal ``p`` counts p's unseen space as occupied (design §3 and §8: space outside the principal's image or
 depth range, and a surveillance region leaving the grid, are occupied). So the fused free space is the same polytope
 P as for ``p`` alone, and the fused answer obeys the same oracle: reported <= the distance to the complement of P,
 which is the distance to the wall's occupied half-space and to the principal's unseen space.
@@ -79,7 +79,7 @@ def test_fused_never_above_the_exact_distance(G, wall, layout, secondary_kind, d
 
 def test_the_oracle_is_tight_for_a_clean_single_camera():
     """The oracle itself: with no noise margin and the exact method, ``min`` on a clean wall gives exactly the
-    distance to the complement of P (SPEC sections 4 and 6), so the oracle is the true answer, not a loose bound."""
+    distance to the complement of P (design §4 and §6), so the oracle is the true answer, not a loose bound."""
     D = 2.0
     points = np.array([[0.0, 0.0, 1.0], [0.5, 0.2, 1.5], [0.0, 0.3, 1.8], [-0.4, -0.25, 0.5], [0.1, 0.0, 0.4],
                        [0.0, 0.0, 1.7]])

@@ -5,7 +5,7 @@ stamped in the future (100 s ahead, and just beyond the clock skew tolerance). F
 ``dg.depth_image`` (which checks the timestamp), directly as ``dg.DepthImage(...)`` (a frozen dataclass: this skips
 every check, so the monitor itself must not trust the stamp), or given as plain arrays (no timestamp).
 
-The rule (README, SPEC sections 8 and 11): a frame older than ``max_age`` at ``now`` is stale; so is a frame stamped
+The rule (docs/design.md §8 and §11): a frame older than ``max_age`` at ``now`` is stale; so is a frame stamped
 later than ``now`` by more than ``SKEW`` (0.01 s, stated in campaign_support; the library's
 ``config.CLOCK_SKEW_TOLERANCE`` may not be looser): its time is wrong. A stale frame never counts as fresh: the
 monitor raises a DepthguardError, or answers distance 0 with the flag STALE_CAMERA for every point (for a stale

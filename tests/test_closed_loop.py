@@ -187,7 +187,7 @@ def test_the_board_is_mostly_hidden_from_the_principal_camera():
 @pytest.mark.parametrize("layout, capability", [("scenario_b.yaml", False), ("scenario_b_ssm.yaml", True),
                                                  ("scenario_b_ssm.yaml", False)])
 def test_ssm_is_refused_where_its_distances_can_hide_more_than_iso_covers(layout, capability):
-    """SPEC section 9: C from the detection capability of the distances SSM uses, up to 70 mm. The loop's distances
+    """design §9: C from the detection capability of the distances SSM uses, up to 70 mm. The loop's distances
     (the depth grid's, or SSM's detectable ones) can leave out an object lying on the robot: within its robot zone
     (6 cm) beyond its capsules (2 cm padding, up to 6.7 cm from the iiwa's meshes), or the self-filter's shell (2 cm
     + twice the noise margin), or in a hole the loop's invalid="neighbors" fills (9 pixels wide at the workspace's
@@ -205,7 +205,7 @@ def test_ssm_is_refused_where_its_distances_can_hide_more_than_iso_covers(layout
 
 
 def test_the_loops_ssm_brakes_along_its_path_within_the_stopping_time_and_distance():
-    """SPEC section 9: T_s and S_s from the robot's braking. From full speed on every joint (the URDF's velocity
+    """design §9: T_s and S_s from the robot's braking. From full speed on every joint (the URDF's velocity
     limits, 10 rad/s on the iiwa) the loop's SSM command (_ssm_command) with factor 0 stops the arm within
     T_s = max |dq_i| / a_i of SpeedSeparationMonitor(braking=a), every joint within its acceleration limit, and each
     point covering the robot travels at most S_s = |v| T_s / 2 (the robot keeps its path while it brakes) plus what

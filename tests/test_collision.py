@@ -1,4 +1,4 @@
-"""The collision test of Henrich & Gecks (SPEC section 10): the paper's Tables I-IV row by row, the Fig. 3-5 example
+"""The collision test of Henrich & Gecks (design §10): the paper's Tables I-IV row by row, the Fig. 3-5 example
 images, and the epipolar bands judged by sampling the tiles' frusta (the projection by the cameras' own model)."""
 
 from __future__ import annotations

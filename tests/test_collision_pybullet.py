@@ -1,5 +1,5 @@
-"""The image-based collision test of Henrich & Gecks (SPEC section 10) judged by code the project did not write
-(SPEC section 13): pybullet draws the images and pybullet measures the truth.
+"""The image-based collision test of Henrich & Gecks (design §10) judged by code the project did not write
+(design §13): pybullet draws the images and pybullet measures the truth.
 
 Scene. pybullet (DIRECT mode) holds the UFactory xArm 6 of ``pybullet_data`` (``xarm/xarm6_robot.urdf``, fixed base
 at the origin), a floor of grey patches and, as the unknown obstacle, a dark violet box where many configurations of
@@ -9,7 +9,7 @@ matrix derived from the depthguard camera (``tests/pybullet_scenes.py`` states t
 to 8-bit grey (ITU-R BT.601 luma). depthguard models the same robot from the same URDF (``RobotModel.from_urdf``);
 joints are mapped to pybullet's by name.
 
-The run, per resolution (352x288 in 32x32 tiles, and scenario C's 704x576 in 64x64 tiles; SPEC section 12):
+The run, per resolution (352x288 in 32x32 tiles, and scenario C's 704x576 in 64x64 tiles; design §12):
 reference images from nine configurations without the box; one set of images with the box and the robot at a current
 configuration 0.2 m or more from it; then the verdicts (``ConfigurationTable``) of 660 future configurations, seeded:
 150 uniform within the joint limits, and every configuration of a seeded pool of 6,000 that penetrates the box or

@@ -1,4 +1,4 @@
-"""The depth grid (SPEC section 8): the map, the fused query against its brute-force twin, the corrected
+"""The depth grid (design §8): the map, the fused query against its brute-force twin, the corrected
 confirmation rule, and fusion's bounds (never above the truth, never below the principal camera alone)."""
 
 import numpy as np
@@ -412,7 +412,7 @@ def test_fused_kernel_equals_twin_with_robot_far_and_holes():
 def test_space_between_two_links_is_flagged_not_checked():
     """Two links one behind the other along the principal camera's rays, a ball in the gap between them, which the
     second camera sees. The depth grid takes the space up to where the robot's padded geometry ends for the robot,
-    so it misses the ball (a known gap, README); with robot_exit (where each ray first leaves the geometry) the
+    so it misses the ball (a known gap, docs/design.md); with robot_exit (where each ray first leaves the geometry) the
     result says so: robot_blind_spot, and blind_distance no farther than the ball."""
     links = [Capsule((0.5, 0.0, 0.3), (0.5, 0.0, 1.0), 0.06), Capsule((-0.3, 0.0, 0.3), (-0.3, 0.0, 1.0), 0.06)]
     ball = Sphere((0.1, 0.0, 0.62), 0.035)  # in the gap, hidden from p by the nearer link

@@ -1,4 +1,4 @@
-"""The free-space memory (SPEC section 8a): the distance transform against scipy, the voxels seen free against a slow
+"""The free-space memory (design §8a): the distance transform against scipy, the voxels seen free against a slow
 judge of the confirmation rule, the memory's arrival times against brute-force box-to-box distances (never later than
 the recursion's exact arrival, at most a voxel diagonal earlier), and its promises in time."""
 
@@ -35,7 +35,7 @@ def scipy_squared(sites):
 
 
 def judge_seen_free(box, cameras, free_images, margin, pad):
-    """SPEC section 8's confirmation rule for every voxel and every pixel, in plain Python: the voxel's 8 corners in
+    """design §8's confirmation rule for every voxel and every pixel, in plain Python: the voxel's 8 corners in
     front of the camera, every pixel whose footprint meets the corners' projected box (grown by pad) in the image
     and free at least to the largest corner depth plus margin."""
     nx, ny, nz = box.shape

@@ -1,4 +1,4 @@
-"""The exact point-to-frustum distance of SPEC section 4, against brute force and the SPEC's piecewise form."""
+"""The exact point-to-frustum distance of design §4, against brute force and the design's piecewise form."""
 
 import numpy as np
 import pytest
@@ -38,7 +38,7 @@ def test_exact_distance_matches_brute_force_and_pieces():
     assert np.abs(distance - brute).max() < 1e-8
     assert np.abs(distance - pieces).max() < 1e-12
     # The same nearest point as the twin's (a convex set's nearest point is unique), hence the same direction, the
-    # unit vector from it towards the point (SPEC section 6), where the distance is positive; both are the point
+    # unit vector from it towards the point (design §6), where the distance is positive; both are the point
     # itself where it is 0. Below a millimetre the direction's rounding grows as 1e-16 / distance: compared there
     # through the nearest point only.
     expected = naive.frustum_point(*points.T, *tangents.T, z_star)
@@ -78,7 +78,7 @@ def test_distance_is_invariant_to_scaling_the_scene():
 
 
 def test_papers_formula_is_an_upper_bound_that_overestimates(capsys):
-    """SPEC section 4: the papers' fixed-depth distance lies on the frustum, so it can only be larger than the
+    """design §4: the papers' fixed-depth distance lies on the frustum, so it can only be larger than the
     exact distance, and for points within 0.4 m of the frusta it often is, by up to about a quarter."""
     rng = np.random.default_rng(2)
     points, tangents, z_range = random_pairs(rng, 3000, finite_top=0.0)

@@ -99,7 +99,7 @@ def test_the_across_layout_moves_only_the_second_camera(across):
     a_second, b_second = dict(a_second), dict(b_second)
     assert a_second.pop("look_at")["target"] == b_second.pop("look_at")["target"] and a_second == b_second
     eyes = {name: cam.T_world_camera[:3, 3] for name, cam in across.rig.cameras.items()}
-    assert 3.5 < np.linalg.norm(eyes["second"] - eyes["principal"]) < 4.5  # SPEC: about 4 m apart
+    assert 3.5 < np.linalg.norm(eyes["second"] - eyes["principal"]) < 4.5  # design: about 4 m apart
     # Inside the room (walls at x = -2.2, y = +-3.0, up to z = 2.0), and across the robot: seen from the point both
     # cameras look at, more than 150 degrees apart (the reference layout: 114).
     assert -2.2 < eyes["second"][0] and abs(eyes["second"][1]) < 3.0 and eyes["second"][2] < 2.0
@@ -140,7 +140,7 @@ def test_shadow_case_fusion_removes_only_what_a_camera_saw(episode, allowed):
 
     The issue's "two cameras remove at least 90 % of the single camera's false alarms" fails here: the side of the
     links that faces the principal camera is hidden from the second camera by the links themselves, so no camera
-    sees it and it stays occupied (README, "Several cameras"; the closing note of issue 4). The 90 % holds where no
+    sees it and it stays occupied (docs/design.md, "Several cameras"; the closing note of issue 4). The 90 % holds where no
     robot hides anything: tests/test_judge_fusion.py."""
     rows = _case(episode, "shadow")
     truth = episode.truth[rows]

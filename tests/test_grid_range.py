@@ -1,4 +1,4 @@
-"""The depth grid spans what the rig says (SPEC section 8, "Grid range"; issue 8, item 1).
+"""The depth grid spans what the rig says (design §8, "Grid range"; issue 8, item 1).
 
 Each principal's grid spans the depths at which it sees the rig's ``workspace`` box, within its ``depth_range``;
 ``build_map``, the command line's ``build-map`` and the monitor use the same default, and a surveillance region that

@@ -1,4 +1,4 @@
-"""Fused distances (the depth grid, SPEC section 8) judged by code the project did not write (issue 4).
+"""Fused distances (the depth grid, design §8) judged by code the project did not write (issue 4).
 
 pybullet renders every camera (TinyRenderer through ``getCameraImage``, the conventions of ``pybullet_scenes``, which
 ``test_judge_pybullet`` checks) and pybullet's ``getClosestPoints`` and coal say how far each control point truly is

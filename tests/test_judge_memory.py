@@ -1,4 +1,4 @@
-"""The free-space memory (SPEC section 8a) judged by pybullet over time (issue 8, "Must show"): memory never makes an
+"""The free-space memory (design §8a) judged by pybullet over time (issue 8, "Must show"): memory never makes an
 answer optimistic while people move no faster than v_max, and above v_max every optimistic answer says it rests on
 memory.
 
@@ -19,7 +19,7 @@ What memory can do here, and why the second camera drops out. A voxel seen free 
 t + (D - voxel * sqrt(3)) / v_max, D its distance to the nearest voxel where a person may be; at 30 Hz it outlives one
 frame only if D > 13.6 cm. The pockets no camera sees in this scene (behind each link, for both cameras) move with the
 links by a few centimetres a frame and border the links, whose volume the monitor counts as possible people (it does
-not pass SPEC 8a's Robot_k to the memory): a correct memory then has nothing to remember there (measured: it raises
+not pass design §8a's Robot_k to the memory): a correct memory then has nothing to remember there (measured: it raises
 no distance in a frame without a dropout). Space becomes unseen at once when a camera loses part of its image: the
 second camera reads 0 (no measurement, as an infrared dropout gives) over the part of its image that shows the robot
 (``DROPOUT``) for three frames while the hand is away and again while it reaches in at 1.9 m/s; the memory then keeps
@@ -400,7 +400,7 @@ def remembered_place(world: World, mon: dg.DistanceMonitor, q, t: float):
     """Where the hand (HAND, oriented as in scenario 1) lies behind the robot at joints q as the principal camera
     sees it (the robot blocks the lines of sight to 10 points of its surface), at least 3 cm from the robot, with
     every voxel of its bounding cube (grown by a voxel) certified free at time t by ``mon``'s memory (arrival time
-    later than t, SPEC 8a): the candidate whose voxels stay free longest, and that time. Candidates: along the
+    later than t, design §8a): the candidate whose voxels stay free longest, and that time. Candidates: along the
     principal's lines of sight through points of the arm, 0.12 to 0.6 m behind them. (None, t) if there is none."""
     memory = mon.memory
     box, arrival = memory.box, memory.arrival
@@ -434,7 +434,7 @@ def remembered_place(world: World, mon: dg.DistanceMonitor, q, t: float):
 
 
 def test_above_v_max_a_hand_a_camera_sees_is_not_cleared(world):
-    """Above v_max, as documented (SPEC 8a, ``DistanceMonitor``: "a body part moving faster than v_max is outside the
+    """Above v_max, as documented (design §8a, ``DistanceMonitor``: "a body part moving faster than v_max is outside the
     guarantee"): the hand waits in the room's corner (FAR) while the robot moves, is teleported in one frame (more
     than 2 m in 1/30 s) behind the robot into voxels the memory certifies free at that time (found from the memory's
     own arrival times, ``remembered_place``), stays there 4 frames and is teleported back. Any optimistic answer must

@@ -1,4 +1,4 @@
-"""depthguard's single-camera distances judged by code the project did not write (SPEC section 13, issue 2).
+"""depthguard's single-camera distances judged by code the project did not write (design §13, issue 2).
 
 The depth images come from pybullet's TinyRenderer (``getCameraImage``, DIRECT mode) and the true distances from
 pybullet's ``getClosestPoints`` and coal's ``distance``; ``tests/pybullet_scenes.py`` builds the scenes (random boxes,
@@ -295,7 +295,7 @@ def _optimistic_points(j: Judged, camera=None, method: str = "exact") -> int:
 
 
 def test_judge_can_fail(judged_scenes):
-    """The judge is not toothless: the papers' formulas (SPEC sections 4-5 call them unsafe) and a principal point
+    """The judge is not toothless: the papers' formulas (design §4-5 call them unsafe) and a principal point
     off by a tenth of a pixel are both caught on the same scenes (measured: 409 and 27 optimistic points)."""
     paper = sum(_optimistic_points(j, method="paper") for j in judged_scenes[:10])
     shifted = sum(_optimistic_points(j, camera=j.camera.replace(cx=j.camera.cx + 0.1)) for j in judged_scenes[:10])

@@ -92,7 +92,7 @@ def test_filtered_distances_never_exceed_pybullet_and_are_not_the_robot(world, s
         near = true < RHO
         assert near.sum() >= 3
         # Where the true nearest obstacle point lies behind the robot as the camera sees it, or among the pixels the
-        # filter gives to the (padded) robot, one camera cannot know it: SPEC section 7's blind spot, flagged.
+        # filter gives to the (padded) robot, one camera cannot know it: design §7's blind spot, flagged.
         occupancy = monitor.prepare("cam", image)
         u, v, z = camera.project(camera.world_to_camera(np.nan_to_num(nearest)))
         u = np.clip(np.round(u), 0, camera.width - 1).astype(int)

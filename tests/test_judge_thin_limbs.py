@@ -1,4 +1,4 @@
-"""Thin limbs beside the robot (SPEC section 11a): a finger 15 mm thick, a hand 25 mm thick and a forearm 45 mm thick
+"""Thin limbs beside the robot (design §11a): a finger 15 mm thick, a hand 25 mm thick and a forearm 45 mm thick
 lying along a link, flat on a known solid, between two links and reaching past the end-effector, judged by code the
 project did not write (pybullet renders the depth images, coal and pybullet's getClosestPoints give the distances;
 ``thin_limbs`` builds the scenes and holds the judge, whose rules and stated regions its docstring derives).

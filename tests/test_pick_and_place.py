@@ -1,4 +1,4 @@
-"""Pick-and-place (SPEC section 10, step 8; Henrich & Gecks section 4.1): the tiles a box may be seen in, judged by an
+"""Pick-and-place (design §10, step 8; Henrich & Gecks section 4.1): the tiles a box may be seen in, judged by an
 independent polygon test and a ray-cast rendering; the reference image update loop (U, R, E, O) over a scripted
 pick-and-place of a KUKA iiwa seen by four cameras, with and without a hand held next to the place."""
 
@@ -14,7 +14,8 @@ from scipy.spatial import ConvexHull
 import depthguard as dg
 from depthguard.collision import OBSTACLE, ImageCollisionTest, TileGrid
 from depthguard.collision import _update_kernels
-from depthguard.collision._update import NEAR_PLANE, ReferenceUpdate, box_tiles, moved_box
+from depthguard.collision._boxes import NEAR_PLANE, box_tiles, moved_box
+from depthguard.collision._update import ReferenceUpdate
 from depthguard.errors import InputError
 from depthguard.scenes import Box, render_depth
 from depthguard.transforms import invert, look_at

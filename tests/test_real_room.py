@@ -9,7 +9,7 @@ against what the data and the rule imply, not against figures copied from a run:
   itself (every difference 0);
 - the chosen fusion margin against its definition (the percentile of the see-past excess, recomputed from the
   direct differences) and what it promises (it covers that share of the same-surface pixels);
-- what the depth grid's fusion clears, against the rule (SPEC section 8: a cell is free only if some secondary
+- what the depth grid's fusion clears, against the rule (design §8: a cell is free only if some secondary
   camera measured beyond its far depth plus its noise margin and the fusion margin, on every pixel of its grown
   footprint), evaluated here on the raw images: a point is never cleared unless a camera saw past it (necessary),
   and always cleared where a camera clearly saw past everything near it and the principal has no surface there
@@ -112,7 +112,7 @@ def direct_reprojection(folder, source: int, target: int):
 
 
 def noise_margin(noise, d):
-    """m(d) = max(k (a + b d + c d^2), 0) metres (README, "Noise margin"), from the model's coefficients."""
+    """m(d) = max(k (a + b d + c d^2), 0) metres (docs/design.md, "Noise margin"), from the model's coefficients."""
     return np.maximum(noise.k * (noise.a + noise.b * d + noise.c * d * d), 0.0)
 
 

@@ -1,4 +1,4 @@
-"""Recordings (SPEC section 12a): ``simulate`` writes frames.csv (and with ``--bag`` a ROS 2 bag), the recording
+"""Recordings (design §12a): ``simulate`` writes frames.csv (and with ``--bag`` a ROS 2 bag), the recording
 reader (folders and bags), and ``depthguard replay``.
 
 Judges:

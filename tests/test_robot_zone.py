@@ -1,4 +1,4 @@
-"""The robot zone (``DistanceMonitor(robot_zone=...)``, README "Several cameras"): fused answers may take space within a
+"""The robot zone (``DistanceMonitor(robot_zone=...)``, docs/design.md "Several cameras"): fused answers may take space within a
 stated thickness of the robot's padded capsules for the robot, in every direction.
 
 - The kernel's cell test (``zoned_cells``) against a slow judge written here: every cell it puts in the zone has its 8

@@ -93,7 +93,9 @@ def test_timing_protocol_returns_one_median_per_position(scenario):
 
 def test_main_writes_the_figures_and_summary(tmp_path, capsys):
     out = tmp_path / "scenario-a"
-    assert sa.main(out=str(out), repeats=1) == 0
+    from depthguard_lab.experiments import _scenario_a_plots as report
+
+    assert report.main(out=str(out), repeats=1) == 0
     expected = {"scenario_a_overview.png", "scenario_a_fig7_point_cloud.png", "scenario_a_fig8_min.png",
                 "scenario_a_fig9_mean.png", "scenario_a_fig10_hybrid.png", "scenario_a_fig11_timing.png",
                 "scenario_a_noisy.png"}

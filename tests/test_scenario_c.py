@@ -1,4 +1,4 @@
-"""Reference scenario C (SPEC section 12, issue 10): the image-based collision test of Henrich & Gecks on the
+"""Reference scenario C (design §12, issue 10): the image-based collision test of Henrich & Gecks on the
 simulated workcell of ``scenario_c.yaml`` (four 704 x 576 depth cameras, pybullet_data's xArm 6, a person walking in
 and reaching, the room's light dimming by 20 % between 3.5 and 4 s).
 

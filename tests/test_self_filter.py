@@ -1,4 +1,4 @@
-"""Self-filtering (SPEC section 7) in the frame preparation and the single-camera kernels, on ray-cast scenes whose
+"""Self-filtering (design §7) in the frame preparation and the single-camera kernels, on ray-cast scenes whose
 "robot" is a chain of capsules (the robot model and its rendering are tested elsewhere)."""
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""The single-camera query kernels against their full-scan NumPy twin, the corrections of SPEC sections 4-5 on
+"""The single-camera query kernels against their full-scan NumPy twin, the corrections of design §4-5 on
 constructed scenes, and real data."""
 
 import json
@@ -119,7 +119,7 @@ def test_never_above_exact_geometry_on_exact_images():
 
 
 def test_gray_area_obstacle_closer_than_papers_distance():
-    """SPEC section 4 on a constructed scene: a plate off the optical axis hides an obstacle in its gray area. The
+    """design §4 on a constructed scene: a plate off the optical axis hides an obstacle in its gray area. The
     papers' fixed-depth distance says that obstacle is farther away than it is; the exact distance does not."""
     camera = dg.PinholeCamera("cam", 640, 480, 525.0, 525.0, 319.5, 239.5, np.eye(4), depth_range=(0.2, 10.0),
                               noise=dg.NoiseModel.none())
@@ -142,7 +142,7 @@ def test_gray_area_obstacle_closer_than_papers_distance():
 
 
 def test_papers_window_misses_an_obstacle_the_corrected_region_finds():
-    """SPEC section 5: rho = 0.4 m, P at 2 m depth, an obstacle 0.3 m beside P at the same depth."""
+    """design §5: rho = 0.4 m, P at 2 m depth, an obstacle 0.3 m beside P at the same depth."""
     camera = dg.PinholeCamera("cam", 640, 480, 525.0, 525.0, 319.5, 239.5, np.eye(4), depth_range=(0.2, 10.0),
                               noise=dg.NoiseModel.none())
     obstacle = Box.from_bounds([0.29, -0.05, 1.95], [0.39, 0.05, 2.05])

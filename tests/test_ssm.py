@@ -1,4 +1,4 @@
-"""Speed and separation monitoring (depthguard.avoidance._ssm; SPEC section 9, ISO/TS 15066).
+"""Speed and separation monitoring (depthguard.avoidance._ssm; design §9, ISO/TS 15066).
 
 The expected values are written out from the formula S_p = v_h (T_r + T_s) + v_r T_r + S_s + C + Z_d + Z_r with
 S_s = v_r T_s / 2 (uniform deceleration) and ISO 13855's C and v_h, independently of the module's code.

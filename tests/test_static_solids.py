@@ -169,7 +169,7 @@ def test_the_workcell_with_its_background_known_is_never_farther_than_the_truth(
     monitor's tolerance (2.5 principal footprints + 1 mm, as tests/test_closed_loop.py, + the robot zone), and the
     known solids move some distances out. Only a little here (measured: the upper arm's first point 1 cm farther at
     0.5 s and 2.2 s): what is nearest the arm without a person is the space its own links hide round its base, and
-    the top of what the principal camera sees (README, "Avoidance")."""
+    the top of what the principal camera sees (docs/design.md, "Avoidance")."""
     from depthguard_lab.simulation import load_workcell
     from depthguard_lab.simulation._episode import SceneRenderer, sense
     from depthguard_lab.simulation._truth import TruthComputer

@@ -1,4 +1,4 @@
-"""A simulated person with thin limbs (SPEC section 11a): forearms 45 mm across, hands 25 mm thick, a finger 15 mm
+"""A simulated person with thin limbs (design §11a): forearms 45 mm across, hands 25 mm thick, a finger 15 mm
 across. The simulated people were never thinner than 9 cm before, so nothing checked what the cameras make of a
 finger. Judged by the exact ground truth (coal between the robot's control points and the person's capsules)."""
 

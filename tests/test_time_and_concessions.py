@@ -1,4 +1,4 @@
-"""Time and concessions in every answer (SPEC sections 9, 11, 11a): a set is as old as its oldest frame, max_age is on
+"""Time and concessions in every answer (design sections 9, 11, 11a): a set is as old as its oldest frame, max_age is on
 by default, every answer that rests on a concession names it and says how near the conceded space comes, and a blind
 answer stops the robot. Judged with exact geometry (depthguard.scenes' ray casting and distances) and brute force,
 not with the monitor's own code."""
@@ -213,7 +213,7 @@ def test_flag_names_are_stable():
 
 
 def test_ssm_refuses_detectable_distances_of_another_capability():
-    """SPEC section 9: SSM's d and the monitor's are one value: C is taken for the distances' effective capability
+    """design §9: SSM's d and the monitor's are one value: C is taken for the distances' effective capability
     (d + the band the monitor's concessions hide), and SSM refuses distances of another."""
     from depthguard.avoidance import SpeedSeparationMonitor, SSMParams
 

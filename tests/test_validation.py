@@ -1,7 +1,7 @@
 """Issue 12: every input is validated where it enters, and bad input gets a named DepthguardError, never a crash or a
 silently optimistic answer.
 
-Expected values come from the rules (README, SPEC sections 2, 8 "Time" and 11, ``depthguard.config``'s ranges), not
+Expected values come from the rules (docs/design.md §2, §8 "Time" and §11, ``depthguard.config``'s ranges), not
 from what the program happens to print.
 """
 
@@ -621,7 +621,7 @@ def test_prepare_depth_refuses_what_its_kernels_cannot_take(top, clean):
 
 
 # --------------------------------------------------------------------------------------------------------------------
-# time (SPEC section 8 "Time")
+# time (design §8 "Time")
 
 
 def hand_frame(data, name, timestamp):

@@ -1,4 +1,4 @@
-"""Thin body parts beside the KUKA iiwa, rendered and measured by code the project did not write (SPEC section 11a's
+"""Thin body parts beside the KUKA iiwa, rendered and measured by code the project did not write (design §11a's
 judge with thin limbs), and the judge itself.
 
 The scene. pybullet's iiwa (``pybullet_data/kuka_iiwa``, its collision meshes drawn as its visuals, as in
@@ -30,7 +30,7 @@ The shell S, restated from depthguard's documentation, not computed by its code.
 self-filter renders (``self_filter="hulls"``, the default; ``self_filter.padded_hull``) is, for each link, the
 intersection of the half-spaces n . x <= max_v n . v + padding over 64 unit normals n of a Fibonacci lattice (v: the
 link's mesh vertices, link frame); the judge builds the same half-spaces from the STL files and pybullet's link
-poses. SPEC section 7 takes a measurement within the self-filter's tolerance (+ the noise margin: once for the
+poses. design §7 takes a measurement within the self-filter's tolerance (+ the noise margin: once for the
 acceptance, once for the object's own noise) in front of that geometry for the robot, looking one pixel round each
 pixel (its 3 x 3 neighbourhood); the depth grid also takes the same depth behind the geometry's far side for the
 robot. A point X on camera ray r (optical z = 1) within d = tolerance + 2 m of depth in front of or behind a surface
@@ -47,7 +47,7 @@ false accusation.
 The rules, for a :class:`depthguard.DistanceResult` (distance, blind_distance, concession_distance, flags):
 
 1. ``min(distance, blind_distance, concession_distance) <= outside_shell + tolerance``: the answer without
-   concessions (SPEC 11a) never hides more than the self-filter's shell;
+   concessions (design §11a) never hides more than the self-filter's shell;
 2. ``min(distance, blind_distance) <= outside_stated + tolerance``: a concession hides an object only inside its
    stated region, flag or not;
 3. where ``distance > outside_shell + tolerance``, a flag says why and the distance it names covers the excess:
@@ -627,7 +627,7 @@ def offsets(centre, outward, faces, steps=(0.02, 0.04, 0.08), lateral=()) -> np.
 
 
 def make_cases(world: IiwaWorld, robot) -> list[Case]:
-    """The four cases of SPEC section 11a, unrendered (see :func:`build`)."""
+    """The four cases of design §11a, unrendered (see :func:`build`)."""
     cases = []
 
     # 1. A hand on top of link 3 and a forearm beside link 5, each 1 cm from the link's mesh.

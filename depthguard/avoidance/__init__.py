@@ -1,4 +1,4 @@
-"""Collision avoidance from the monitor's distances (SPEC section 9): the papers' repulsive velocity and joint
+"""Collision avoidance from the monitor's distances (design §9): the papers' repulsive velocity and joint
 velocity bounds with saturation in the null space, and speed and separation monitoring (ISO/TS 15066)."""
 
 from depthguard.avoidance._controller import (

@@ -1,4 +1,4 @@
-"""The papers' collision avoidance (SPEC section 9; 2015 paper section 5, 2016 paper section VII).
+"""The papers' collision avoidance (design §9; 2015 paper section 5, 2016 paper section VII).
 
 From one :class:`~depthguard.DistanceResult` of the robot's control points (the end-effector's among them) and a
 desired end-effector velocity, :class:`AvoidanceController` gives the joint velocities of the next control step:
@@ -64,7 +64,7 @@ def damped_pinv(J: np.ndarray, epsilon: float = config.DLS_EPSILON,
 
 @dataclass(frozen=True)
 class AvoidanceParams:
-    """The avoidance's parameters (SPEC section 9), defaults as the 2015 paper's experiments used them, except
+    """The avoidance's parameters (design §9), defaults as the 2015 paper's experiments used them, except
     ``from_surface``.
 
     Attributes:
@@ -139,7 +139,7 @@ class AvoidanceCommand:
 
 
 class AvoidanceController:
-    """The papers' avoidance for one robot (SPEC section 9): see the module's docstring.
+    """The papers' avoidance for one robot (design §9): see the module's docstring.
 
     Args:
         robot: the :class:`~depthguard.robots.RobotModel` whose control points the distances are of (its

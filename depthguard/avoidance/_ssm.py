@@ -1,4 +1,4 @@
-"""Speed and separation monitoring (SPEC section 9; ISO/TS 15066 with ISO 13855's human speeds and intrusion).
+"""Speed and separation monitoring (design §9; ISO/TS 15066 with ISO 13855's human speeds and intrusion).
 
 The protective separation distance, metres, between a control point of the robot and an obstacle (a person) is
 
@@ -446,7 +446,7 @@ class SpeedSeparationMonitor:
 def check_capability(params: SSMParams, result: DetectableResult) -> None:
     """Refuse detectable distances whose effective detection capability (the monitor's d plus the band its
     concessions can hide, :attr:`DetectableResult.effective_capability`) is not SSM's ``detection_capability``: C
-    is taken for SSM's d, and one smaller than the monitor's would not cover what the monitor leaves out (SPEC
+    is taken for SSM's d, and one smaller than the monitor's would not cover what the monitor leaves out (design
     section 9: one d). Raises :class:`InputError` naming ``detection_capability``."""
     if abs(result.effective_capability - params.detection_capability) > 1e-9:
         raise InputError(f"SSM's detection_capability ({params.detection_capability:g} m) is not the detectable "

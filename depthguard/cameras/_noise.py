@@ -16,7 +16,7 @@ from depthguard.errors import short_repr as _short
 class NoiseModel:
     """Axial depth noise sigma(d) = a + b*d + c*d**2 (metres, d in metres); the margin is m(d) = k * sigma(d).
 
-    The margin moves the start of each pixel's possibly-occupied set towards the camera (SPEC section 3), so a
+    The margin moves the start of each pixel's possibly-occupied set towards the camera (design §3), so a
     surface measured a little too far away is still counted. ``m(d)`` is clamped at 0 from below.
 
     Ranges: |a| (m), |b| (m/m) and |c| (1/m) at most ``config.NOISE_COEFFICIENT_LIMIT``; k in

@@ -1,4 +1,4 @@
-"""Rigs: several named cameras in one world frame, read from and written to YAML (SPEC section 2).
+"""Rigs: several named cameras in one world frame, read from and written to YAML (design §2).
 
 A rig file holds exactly these keys; any other key (a typo such as ``fxx``, ``depth_rnage`` or ``principle``) is an
 error that lists them:
@@ -59,7 +59,7 @@ class Rig:
         principal: the principal camera's name for the depth grid, or None.
         workspace: (2, 3) float64 metres, world frame, or None: the box [lo, hi] that holds everything to be watched,
             the robot and every control point's surveillance region (rho around it). Each principal's depth grid
-            spans the depths at which it sees this box (SPEC section 8, "Grid range"); without it, the camera's
+            spans the depths at which it sees this box (design §8, "Grid range"); without it, the camera's
             depth_range.
     """
 
@@ -128,7 +128,7 @@ class Rig:
 # ------------------------------------------------------------------------------------------------- the rig schema
 #
 # Why pydantic: a rig is nested YAML (cameras -> entries -> matrices and noise models). One declarative schema per
-# level states every key with its type and range, in one place a reader can check against the README. pydantic
+# level states every key with its type and range, in one place a reader can check against docs/usage.md. pydantic
 # refuses unknown keys (extra="forbid"), so a misspelled key is an error instead of a silent default, and it locates
 # every error by its path (cameras[1].T_world_camera[2][3]), which _rig_error turns into a RigError naming the camera
 # and the field, with the known keys when a key is unknown. strict=True: no coercion, so "525" or true is not a
@@ -188,7 +188,7 @@ class _CameraEntry(BaseModel):
 
 
 class _RigFile(BaseModel):
-    """The whole rig file (SPEC section 2)."""
+    """The whole rig file (design §2)."""
 
     model_config = _STRICT
     depth_scale: _DepthScale = config.DEFAULT_DEPTH_SCALE
@@ -242,7 +242,7 @@ def save_rig(rig: Rig, path) -> None:
 
 
 def rig_from_dict(data, base_dir=".") -> Rig:
-    """Build a :class:`Rig` from the parsed YAML contract of SPEC section 2 (keys: module docstring).
+    """Build a :class:`Rig` from the parsed YAML contract of design §2 (keys: module docstring).
 
     ``data`` is what a YAML file holds (numpy arrays and scalars are accepted too); ``base_dir`` resolves relative
     ``camera_info`` paths. An unknown key, a wrong type or a value out of range raises :class:`RigError` naming the

@@ -1,4 +1,4 @@
-"""The image-based multi-camera collision test of Henrich & Gecks (SPEC section 10; issue 10).
+"""The image-based multi-camera collision test of Henrich & Gecks (design §10).
 
 - Tile grids and the epipolar bands between cameras (:class:`TileGrid`, :class:`EpipolarBands`).
 - Steps 1-2: the reference image (:func:`reference_image`, optionally leaving the robot out where the joints say it
@@ -35,7 +35,8 @@ from depthguard.collision._epipolar import EpipolarBands, TileGrid, workspace_de
 from depthguard.collision._plan import MAX_GRID_CELLS, ConfigurationGrid, plan_path, wave_propagation
 from depthguard.collision._robot_image import RobotProjector
 from depthguard.collision._test import ConfigurationTable, ImageCollisionTest
-from depthguard.collision._update import ReferenceUpdate, box_tiles
+from depthguard.collision._boxes import box_tiles
+from depthguard.collision._update import ReferenceUpdate
 from depthguard.collision._tables import (
     BACKGROUND,
     ERROR,

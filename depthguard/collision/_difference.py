@@ -1,4 +1,4 @@
-"""Steps 1-3 of the collision test (SPEC section 10; Henrich & Gecks sections 3.1-3.3) at tile resolution: the
+"""Steps 1-3 of the collision test (design §10; Henrich & Gecks sections 3.1-3.3) at tile resolution: the
 reference image, the tiles' features and the difference image, and the robot's tile image.
 
 Images are (height, width) arrays of one camera; tile images are (rows, cols) arrays of its :class:`TileGrid`.

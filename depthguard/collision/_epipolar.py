@@ -1,4 +1,4 @@
-"""Epipolar bands between the tile grids of calibrated cameras (SPEC section 10, step 5; Henrich & Gecks section
+"""Epipolar bands between the tile grids of calibrated cameras (design §10, step 5; Henrich & Gecks section
 3.4): for each tile of one camera, the tiles of another that could show what the first sees in that tile within the
 workspace's depth range. A tile's "epipolar line" in the paper is this band: the projection of the tile's viewing
 frustum, cut to the depths at which it can meet the workspace."""

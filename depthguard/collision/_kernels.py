@@ -1,4 +1,4 @@
-"""Numba kernels of the image-based collision test (SPEC section 10): the epipolar bands between two cameras' tile
+"""Numba kernels of the image-based collision test (design §10): the epipolar bands between two cameras' tile
 grids. They trust their inputs; ``_epipolar.py`` checks them."""
 
 import numpy as np

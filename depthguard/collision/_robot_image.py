@@ -1,4 +1,4 @@
-"""The robot's tile images (SPEC section 10, steps 3 and 7; Henrich & Gecks sections 3.3 and 3.6), projected
+"""The robot's tile images (design §10, steps 3 and 7; Henrich & Gecks sections 3.3 and 3.6), projected
 analytically from the robot's padded capsules: no rendering, a few microseconds per configuration and camera.
 
 Each capsule is the convex hull of its two end balls, so its image is the convex hull of the balls' images; a ball's

@@ -1,4 +1,4 @@
-"""The collision test of Henrich & Gecks (SPEC section 10, steps 4-6) on tile images: the obstacle image (paper
+"""The collision test of Henrich & Gecks (design §10, steps 4-6) on tile images: the obstacle image (paper
 Table I), the revised obstacle image (Table III, for C cameras and occlusion threshold theta), the intersection with
 a robot image (Table II) and the verdict with its class A-D (Table IV, section 3.5).
 
@@ -112,7 +112,7 @@ def verdict(obstacle: Sequence[bool], possible: Sequence[bool], theta: int, unse
     """The classes of Table IV generalised to C cameras (section 3.5) from each camera's (Coll_RO, Coll_RP).
 
     ``unseen``: what a configuration that meets possible obstacles (space the current robot hides from a camera)
-    but fewer than C - theta cameras' obstacles is: "occupied" (fail-safe, SPEC section 11: class B collides) or
+    but fewer than C - theta cameras' obstacles is: "occupied" (fail-safe, design §11: class B collides) or
     "free" (the paper's rule: class B is collision-free because "any obstacle is visible in at least C - theta
     cameras"; false for a hand held next to the robot, which the robot's tiles cover in most cameras: scenario C's
     probe finds such misses, benchmarks/probe_collision_scenario_c.py)."""

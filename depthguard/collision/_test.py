@@ -1,4 +1,4 @@
-"""The collision test of Henrich & Gecks over C calibrated cameras, steps 1-6 together (SPEC section 10):
+"""The collision test of Henrich & Gecks over C calibrated cameras, steps 1-6 together (design §10):
 reference images once, then per set of images the revised obstacle images, then any number of configurations
 tested against them."""
 
@@ -11,6 +11,7 @@ import numpy as np
 
 from depthguard import config
 from depthguard.cameras import Rig
+from depthguard.collision._boxes import box_corners, grid_bits
 from depthguard.collision._difference import (
     depth_metres,
     depth_difference_image,
@@ -234,7 +235,7 @@ class ImageCollisionTest:
 
 
 class ConfigurationTable:
-    """Section 3.3's table made cheap (issue 10, item 3): the robot's tile images of many configurations, per camera,
+    """Section 3.3's table made cheap (design §10): the robot's tile images of many configurations, per camera,
     as bitsets, so that the verdict for every configuration against one set of revised obstacle images costs a few
     bitwise operations per configuration.
 
@@ -257,8 +258,6 @@ class ConfigurationTable:
         self.bits = test.robot_bits(configurations)
         self.configurations = np.asarray(configurations, dtype=np.float64)
         if piece is not None:
-            from depthguard.collision._update import _grid_bits, box_corners
-
             robot = test.robot
             link = robot.control_points[robot.end_effector_index].link
             local = box_corners(piece, "piece")
@@ -267,7 +266,7 @@ class ConfigurationTable:
                 T = robot.link_poses(q, check=False)[link]
                 corners[k] = local @ T[:3, :3].T + T[:3, 3]
             for c, grid in enumerate(test.grids):
-                self.bits[c, :, : grid.words] |= _grid_bits(grid, corners)
+                self.bits[c, :, : grid.words] |= grid_bits(grid, corners)
 
     def verdicts(self, revised=None) -> tuple[np.ndarray, np.ndarray]:
         """(collision (K,) bool, class (K,) str "A"-"D") of every configuration against ``revised`` (per camera, the

@@ -1,4 +1,4 @@
-"""Numba kernel of the reference image update (SPEC section 10, step 8; Henrich & Gecks section 4.1): the tiles of one
+"""Numba kernel of the reference image update (design §10, step 8; Henrich & Gecks section 4.1): the tiles of one
 camera that boxes (work pieces) may be seen in. It trusts its inputs; ``_update.py`` checks them."""
 
 import numpy as np

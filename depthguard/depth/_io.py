@@ -3,7 +3,7 @@
 Raw values are kept as they are: ``uint16`` in units of the camera's ``depth_scale`` (0 = no measurement), or
 ``float32`` metres (0, NaN or inf = no measurement).
 
-A depth image file is input from outside, and reading it is bounded (issue 12):
+A depth image file is input from outside, and reading it is bounded (docs/bad-input.md):
 
 - The file is read through :mod:`depthguard._files`: a regular file of at most ``config.MAX_DEPTH_FILE_BYTES`` bytes
   (a FIFO, a device or a folder is refused before it is opened).

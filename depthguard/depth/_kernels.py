@@ -58,7 +58,7 @@ def block_minimum(z_start, block, out):
 
 @kernel(parallel=True)
 def robot_filter(z_start, invalid, policy_start, robot_near, robot_far, has_far, tolerance, m0, m1, m2, z_end, blind):
-    """Self-filtering (SPEC section 7): remove the robot from what a frame says is possibly occupied.
+    """Self-filtering (design §7): remove the robot from what a frame says is possibly occupied.
 
     robot_near: (h, w) float32 metres, the nearest rendered robot surface per pixel (0 where the robot is not
     rendered). A pixel whose start depth could be the robot shows the robot: z_start >= d_r' - tolerance - m(d_r'),

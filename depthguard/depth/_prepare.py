@@ -1,4 +1,4 @@
-"""From a depth image to what one camera says is possibly occupied (SPEC section 3).
+"""From a depth image to what one camera says is possibly occupied (design §3).
 
 Pixel (u, v) is possibly occupied along its frustum from ``z_start[v, u]`` on: the measured depth minus the noise
 margin m(d) for a valid pixel; for a pixel without a valid measurement, what the invalid-pixel policy says:
@@ -9,7 +9,7 @@ margin m(d) for a valid pixel; for a pixel without a valid measurement, what the
   larger holes stay occupied;
 - ``"free"``: nothing (``inf``), what the papers do.
 
-With the robot rendered into the camera (SPEC section 7, :func:`prepare_depth`'s ``robot_near``), pixels that show
+With the robot rendered into the camera (design §7, :func:`prepare_depth`'s ``robot_near``), pixels that show
 the robot are free up to it and blind behind it, and a pixel without a measurement is occupied only up to the robot.
 """
 
@@ -49,7 +49,7 @@ class OccupancyImage:
         filled: None, or (height, width) float32 metres: where ``invalid="neighbors"`` filled a hole, the depth up to
             which the fill counted the pixel's frustum free although nothing was measured there (the fill's start,
             or the rendered robot where the fill was taken for the robot), 0 elsewhere: the space the concession
-            counted free (SPEC section 11a, flag ``hole_filled``). None when no hole was filled.
+            counted free (design §11a, flag ``hole_filled``). None when no hole was filled.
     """
 
     camera: PinholeCamera

@@ -1,4 +1,4 @@
-"""Online fusion of several depth cameras through the depth grid (SPEC section 8)."""
+"""Online fusion of several depth cameras through the depth grid (design §8)."""
 
 from __future__ import annotations
 
@@ -11,10 +11,10 @@ from numba import parallel_chunksize
 from depthguard import config
 from depthguard.cameras import PinholeCamera, Rig
 from depthguard.depth import DepthImage, OccupancyImage
-from depthguard.depth._kernels import block_minimum
+from depthguard.depth import block_minimum
 from depthguard.depthgrid import _kernels
 from depthguard.depthgrid._map import DepthGridMap
-from depthguard.depthspace._distance import check_options, check_points, query_arrays
+from depthguard.depthspace import check_options, check_points, query_arrays
 from depthguard.errors import InputError, check_real, short_repr
 from depthguard.results import DistanceResult, Flag
 
@@ -50,7 +50,7 @@ def fused_distances(grid: DepthGridMap, rig: Rig, principal: OccupancyImage, sec
                     robot_tolerance: float = config.SELF_FILTER_TOLERANCE, check: bool = True,
                     robot_near: np.ndarray | None = None, robot_exit: np.ndarray | None = None) -> DistanceResult:
     """Distances from control points to what the principal camera says is possibly occupied and no other camera
-    clears (SPEC section 8, cases i-iv, with the corrected confirmation rule): one query of a :class:`FusedFrames`.
+    clears (design §8, cases i-iv, with the corrected confirmation rule): one query of a :class:`FusedFrames`.
     To query the same frames again (a controller faster than its cameras), keep the :class:`FusedFrames`."""
     frames = FusedFrames(grid, rig, principal, secondaries, robot_far, margin, pad, robot_tolerance, check,
                          robot_near, robot_exit)
@@ -58,7 +58,7 @@ def fused_distances(grid: DepthGridMap, rig: Rig, principal: OccupancyImage, sec
 
 
 class FusedFrames:
-    """The frames of one moment fused through the principal camera's depth grid (SPEC section 8), for any number of
+    """The frames of one moment fused through the principal camera's depth grid (design §8), for any number of
     queries.
 
     A query classifies the grid cells it looks at and keeps their classes for the later queries on the same frames:
@@ -93,7 +93,7 @@ class FusedFrames:
         remembered: optional (free, box): the voxels of ``box`` (:class:`depthguard.freespace.VoxelBox`) that the
             free-space memory certifies free at these frames' time (``free``: box.shape bool, from
             :meth:`depthguard.freespace.FreeSpaceMemory.free_at`). A cell that no secondary camera clears is then free
-            when every voxel it touches is (SPEC section 8a). The caller flags the answers that rest on it.
+            when every voxel it touches is (design §8a). The caller flags the answers that rest on it.
         robot_zone: optional (capsules, thickness): capsules (n, 7) float64, world frame, metres, the robot's padded
             capsules when the principal frame was captured (p0 (3), p1 (3), radius with the padding;
             :meth:`RobotModel.capsules_world`), and thickness, metres. A cell within ``thickness`` of one of them is
@@ -204,7 +204,7 @@ class FusedFrames:
         camera = principal.camera
         grid = self.grid
         timestamp = principal.timestamp
-        if timestamp is not None and not math.isfinite(timestamp):  # SPEC 8 "Time": stale, never fresh
+        if timestamp is not None and not math.isfinite(timestamp):  # design §8 "Time": stale, never fresh
             return DistanceResult.blind(len(points_world), Flag.STALE_CAMERA, {camera.name: timestamp})
         points_camera, distance, direction_camera, count, invalid_count, flags = query_arrays(camera, points_world)
         unchecked = np.full(len(points_world), np.inf)

@@ -1,4 +1,4 @@
-"""Numba kernels of the depth-grid fusion (SPEC section 8). They trust their inputs; ``_fusion.py`` checks them.
+"""Numba kernels of the depth-grid fusion (design §8). They trust their inputs; ``_fusion.py`` checks them.
 
 Along each principal pixel's frustum, what the principal camera says is possibly occupied splits into:
 
@@ -6,7 +6,7 @@ Along each principal pixel's frustum, what the principal camera says is possibly
   frustum from the surface on when the surface is at or behind the control point (case ii), and anything outside
   the grid's depth span;
 - candidate cells, which the other cameras may clear: the gray area behind a surface in front of the control point
-  (case iii), the frustum of a pixel without a measurement (SPEC section 3), and the space behind the robot from
+  (case iii), the frustum of a pixel without a measurement (design §3), and the space behind the robot from
   where its body ends (case iv).
 
 A candidate cell is occupied only if every secondary camera confirms it. Camera j declares it free only if the
@@ -23,10 +23,10 @@ from numba import prange
 from depthguard._frustum_kernels import (
     AGG_MIN,
     FLAG_ROBOT_BLIND_SPOT,
-    _finish_min_at_pixel,
-    _finish_sum,
-    _guess_piece_row,
-    _nearest_in_blocks,
+    finish_min_at_pixel,
+    finish_sum,
+    guess_piece_row,
+    nearest_in_blocks,
     clamped_index,
     frustum_direction,
     frustum_nearest,
@@ -395,7 +395,7 @@ def _voxels_free(free, geo, lo0, hi0, lo1, hi1, lo2, hi2):
 @kernel()
 def remembered_cells(u, v, k_a, k_b, d_min, delta_d, memory):
     """Bit i set when cell k_a + i (k_a..k_b, at most 64) of principal pixel (u, v) lies wholly in voxels that the
-    free-space memory certifies free (SPEC section 8a). ``memory``: (free, geometry): free (nx, ny, nz) uint8, 1 for a
+    free-space memory certifies free (design §8a). ``memory``: (free, geometry): free (nx, ny, nz) uint8, 1 for a
     voxel no person can have reached yet, of zero size for no memory; geometry (MEM_GEOMETRY_SIZE,) float64 as
     MEM_LO.. describe. A cell lies within the box of its 8 corners (it is convex), whose voxels are checked."""
     free, geo = memory
@@ -769,7 +769,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
         b0 = (v - 0.5 - cy) / fy
         b1 = (v + 0.5 - cy) / fy
         # Gather the row's pixels with something possibly occupied in reach, and the depth span that holds it.
-        m = np.int64(0)  # not a literal 0, for which numba would compile _guess_piece_row once more
+        m = np.int64(0)  # not a literal 0, for which numba would compile guess_piece_row once more
         for u in range(spans[v, 0], spans[v, 1] + 1):
             zs = np.float64(z_start[v, u])
             bf = np.float64(blind_from[v, u])
@@ -784,7 +784,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
         if m == 0:
             continue
         # The nearest point of that span, a lower bound of the pixel's distance (vectorised).
-        _guess_piece_row(X, Y, Z, b0, b1, z_in, z_hi_in, u_in, m, inv_fx, cx, d2_row, z_row)
+        guess_piece_row(X, Y, Z, b0, b1, z_in, z_hi_in, u_in, m, inv_fx, cx, d2_row, z_row)
         for i in range(m):
             u = int(u_in[i])
             a0 = (u - 0.5 - cx) * inv_fx
@@ -871,7 +871,7 @@ def fused_region(X, Y, Z, rho, view, unseen_occupied, near_eps, inside_tol, span
         # The space between links: the nearest of it, as the single camera finds its blind spot (blocks in rings
         # round P's pixel, skipped by their nearest start depth). (``certain`` stands in for its per-pixel "invalid"
         # array, whose answer is not used here.)
-        u2 = _nearest_in_blocks(X, Y, Z, rho, view.unchecked_from, view.blind_from, np.bool_(True), view.certain,
+        u2 = nearest_in_blocks(X, Y, Z, rho, view.unchecked_from, view.blind_from, np.bool_(True), view.certain,
                                 view.unchecked_block_min, view.block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi, near_eps,
                                 spans)[0]
         if u2 < rho_squared(rho):
@@ -909,10 +909,10 @@ def fused_finish(X, Y, Z, aggregate, region, acc, view, inside_tol, min_directio
             for a in (ACC_BEST2, ACC_BEST_U, ACC_BEST_V, ACC_BEST_Z, ACC_BEST_INVALID):
                 total[a] = part[a]
     if aggregate == AGG_MIN:
-        return _finish_min_at_pixel(X, Y, Z, total[ACC_BEST2], int(total[ACC_BEST_U]), int(total[ACC_BEST_V]),
+        return finish_min_at_pixel(X, Y, Z, total[ACC_BEST2], int(total[ACC_BEST_U]), int(total[ACC_BEST_V]),
                                     total[ACC_BEST_Z], int(total[ACC_BEST_INVALID]), fx, fy, cx, cy, region[2],
                                     region[3], region[4], region[5], f, inside_tol, out_direction)
-    return _finish_sum(aggregate, int(total[ACC_COUNT]), int(total[ACC_INVALID]), total[ACC_INSIDE] != 0.0,
+    return finish_sum(aggregate, int(total[ACC_COUNT]), int(total[ACC_INVALID]), total[ACC_INSIDE] != 0.0,
                        total[ACC_SUM_D], total[ACC_SX], total[ACC_SY], total[ACC_SZ], total[ACC_BEST2], region[2],
                        region[3], region[4], region[5], f, inside_tol, min_direction, out_direction)
 

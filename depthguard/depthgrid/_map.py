@@ -1,4 +1,4 @@
-"""The depth grid map (SPEC section 8): from the principal camera's grid cells to the secondary cameras' pixels.
+"""The depth grid map (design §8): from the principal camera's grid cells to the secondary cameras' pixels.
 
 The principal camera's grid cell (u, v, k) is the frustum segment of pixel (u, v) between d_k = d_min + k*delta_d
 and d_{k+1}. All cells of one pixel lie on its frustum, whose four edges are the rays through the pixel's footprint
@@ -11,7 +11,7 @@ linear in z. The map stores A_c for every footprint corner of the principal imag
 neighbouring pixels) and B_j per secondary camera: memory proportional to pixels (about 7 MB per secondary camera at
 640x480), from which any cell's footprint in j costs a few operations online. It is built from the rig alone.
 
-The map is derived data, and never trusted silently (issue 12):
+The map is derived data, and never trusted silently (docs/bad-input.md):
 
 - The file (format ``depthguard-depth-grid-map/2``) is one ``.npz`` archive of exactly three plain arrays, nothing
   pickled: ``header`` (uint8, UTF-8 JSON), ``corners`` and ``offsets`` (little-endian float64). The header records
@@ -51,7 +51,7 @@ import numpy as np
 from depthguard import config
 from depthguard._files import atomic_write, read_bytes
 from depthguard.cameras import Rig
-from depthguard.depth._io import npy_header
+from depthguard.depth import npy_header
 from depthguard.errors import DepthguardError, InputError, short_repr
 
 MAP_FORMAT = "depthguard-depth-grid-map/2"
@@ -183,7 +183,7 @@ class DepthGridMap:
 
 
 def grid_range(rig: Rig, principal: str | None = None) -> tuple[float, float]:
-    """(d_min, d_max), metres along ``principal``'s optical z: the depths its depth grid spans by default (SPEC
+    """(d_min, d_max), metres along ``principal``'s optical z: the depths its depth grid spans by default (design
     section 8, "Grid range").
 
     The depths at which the camera sees the rig's workspace box (the smallest and largest z of its corners), within

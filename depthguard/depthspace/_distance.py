@@ -75,7 +75,7 @@ def query_arrays(camera, points_world: np.ndarray):
 def single_camera_distances(occupancy: OccupancyImage, points_world, rho: float = config.DEFAULT_RHO,
                             aggregate: str = config.DEFAULT_AGGREGATE, unseen: str = config.DEFAULT_UNSEEN,
                             method: str = config.DEFAULT_METHOD, check: bool = True) -> DistanceResult:
-    """Distances from control points to what one camera says is possibly occupied (SPEC sections 3-6).
+    """Distances from control points to what one camera says is possibly occupied (design §3-6).
 
     Args:
         occupancy: the prepared frame (:func:`depthguard.depth.prepare_depth`).
@@ -83,7 +83,7 @@ def single_camera_distances(occupancy: OccupancyImage, points_world, rho: float 
         rho: radius of the surveillance region, metres.
         aggregate: ``"min"``, ``"mean"`` or ``"hybrid"``.
         unseen: ``"occupied"`` (fail-safe) or ``"free"``.
-        method: ``"exact"`` (SPEC) or ``"paper"`` (the 2015 paper's unsafe formulas, for comparison only).
+        method: ``"exact"`` (design) or ``"paper"`` (the 2015 paper's unsafe formulas, for comparison only).
         check: validate arguments; ``False`` skips it for a hot loop that already holds checked arrays.
 
     A frame whose timestamp is NaN or infinite is stale: every point gets distance 0 and ``STALE_CAMERA``.
@@ -97,7 +97,7 @@ def single_camera_distances(occupancy: OccupancyImage, points_world, rho: float 
     camera = occupancy.camera
     n = points_world.shape[0]
     timestamp = occupancy.timestamp
-    if timestamp is not None and not math.isfinite(timestamp):  # SPEC 8 "Time": such a frame is stale, never fresh
+    if timestamp is not None and not math.isfinite(timestamp):  # design §8 "Time": such a frame is stale, never fresh
         return DistanceResult.blind(n, Flag.STALE_CAMERA, {camera.name: timestamp})
     points_camera, distance, direction_camera, count, invalid_count, flags = query_arrays(camera, points_world)
     blind_distance = np.full(n, np.inf)

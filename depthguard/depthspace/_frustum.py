@@ -1,4 +1,4 @@
-"""The exact point-to-frustum distance of SPEC section 4, for arrays of pairs (public face of the kernel)."""
+"""The exact point-to-frustum distance of design §4, for arrays of pairs (public face of the kernel)."""
 
 from __future__ import annotations
 
@@ -40,7 +40,7 @@ def _run(points_camera, tangents, z_range, paper):
 
 
 def frustum_distance(points_camera, tangents, z_range):
-    """Exact distances from points to pixel frustum segments (SPEC section 4).
+    """Exact distances from points to pixel frustum segments (design §4).
 
     Args:
         points_camera: (n, 3) float64, metres, optical frame (or (3,) for one point against every segment).

@@ -1,4 +1,4 @@
-"""Numba kernels of the single-camera depth-space distance (SPEC sections 4-6).
+"""Numba kernels of the single-camera depth-space distance (design §4-6).
 
 Everything here works in one camera's optical frame (x right, y down, z forward; metres) and trusts its inputs:
 ``_monitor.py`` validates them. A pixel (u, v) spans the tangents [a0, a1] x [b0, b1] with
@@ -14,11 +14,11 @@ from depthguard._frustum_kernels import (
     AGG_MIN,
     FLAG_REGION_OUTSIDE_VIEW,
     FLAG_ROBOT_BLIND_SPOT,
-    _finish_min,
-    _finish_min_at_pixel,
-    _finish_sum,
-    _guess_piece_row,
-    _nearest_in_blocks,
+    finish_min,
+    finish_min_at_pixel,
+    finish_sum,
+    guess_piece_row,
+    nearest_in_blocks,
     frustum_direction,
     frustum_nearest,
     frustum_nearest_paper,
@@ -34,7 +34,7 @@ from depthguard._jit import kernel
 @kernel(inline=True)
 def _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, v_lo, v_hi, spans, scratch):
     """Every contributing pixel for ``mean`` and ``hybrid``: per row, gather the silhouette span's pixels whose
-    start depth is not behind the region, take their exact distances (:func:`_guess_piece_row`, walking where the
+    start depth is not behind the region, take their exact distances (:func:`guess_piece_row`, walking where the
     guess fails), and sum the contributors' distances and unit directions. ``scratch`` is a (5, width) float64 array.
 
     Returns (count, invalid count, inside?, sum of d, sum of unit directions x, y, z, best d^2).
@@ -61,7 +61,7 @@ def _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, v_lo, v_
         b1 = (v + 0.5 - cy) * inv_fy
         row = z_start[v]
         row_end = z_end[v]
-        m = np.int64(0)  # not a literal 0, for which numba would compile _guess_piece_row once more
+        m = np.int64(0)  # not a literal 0, for which numba would compile guess_piece_row once more
         for u in range(spans[v, 0], spans[v, 1] + 1):
             zs = row[u]
             if zs <= z_far:  # else it and what it hides lie behind the region (also inf: nothing)
@@ -71,7 +71,7 @@ def _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, v_lo, v_
                 m += 1
         if m == 0:
             continue
-        _guess_piece_row(X, Y, Z, b0, b1, z_in, z_hi_in, u_in, m, inv_fx, cx, d2_row, z_row)
+        guess_piece_row(X, Y, Z, b0, b1, z_in, z_hi_in, u_in, m, inv_fx, cx, d2_row, z_row)
         for k in range(m):
             d2 = d2_row[k]
             z_star = z_row[k]
@@ -122,7 +122,7 @@ def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_b
     if unseen_here:
         return 0.0, 1, 0, flags
     if has_blind and v_lo <= v_hi:
-        blind2 = _nearest_in_blocks(X, Y, Z, rho, blind, blind, np.bool_(False), invalid, blind_block_min, block, fx,
+        blind2 = nearest_in_blocks(X, Y, Z, rho, blind, blind, np.bool_(False), invalid, blind_block_min, block, fx,
                                     fy, cx, cy, u_lo, u_hi, v_lo, v_hi, near_eps, spans)[0]
         out_blind[0] = np.sqrt(blind2)
 
@@ -130,10 +130,10 @@ def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_b
         best2 = np.inf
         best_invalid = 0
         if v_lo <= v_hi:
-            best2, best_v, best_u, best_z, best_invalid = _nearest_in_blocks(
+            best2, best_v, best_u, best_z, best_invalid = nearest_in_blocks(
                 X, Y, Z, rho, z_start, z_end, np.bool_(True), invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi,
                 v_lo, v_hi, near_eps, spans)
-        return _finish_min_at_pixel(X, Y, Z, best2, best_u, best_v, best_z, best_invalid, fx, fy, cx, cy, unseen_d, nx,
+        return finish_min_at_pixel(X, Y, Z, best2, best_u, best_v, best_z, best_invalid, fx, fy, cx, cy, unseen_d, nx,
                                     ny, nz, flags, inside_tol, out_direction)
 
     count = 0
@@ -147,7 +147,7 @@ def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_b
     if v_lo <= v_hi:
         count, n_invalid, inside, sum_d, sx, sy, sz, best2 = _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx,
                                                                           fy, cx, cy, v_lo, v_hi, spans, scratch)
-    return _finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, unseen_d, nx, ny, nz, flags,
+    return finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, unseen_d, nx, ny, nz, flags,
                        inside_tol, min_direction, out_direction)
 
 
@@ -224,9 +224,9 @@ def query_point_paper(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, z_m
             sz += ez
     unseen_d = s_view if (unseen_occupied and s_view < rho) else np.inf
     if aggregate == AGG_MIN:
-        return _finish_min(0.0 if inside else best2, best_invalid, best_dx, best_dy, best_dz, unseen_d, nx, ny, nz,
+        return finish_min(0.0 if inside else best2, best_invalid, best_dx, best_dy, best_dz, unseen_d, nx, ny, nz,
                            flags, inside_tol, out_direction)
-    return _finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, unseen_d, nx, ny, nz, flags,
+    return finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, unseen_d, nx, ny, nz, flags,
                        inside_tol, min_direction, out_direction)
 
 

@@ -1,10 +1,11 @@
-"""Time-bounded free space (SPEC section 8a): which voxels the cameras see free now, and a memory of when a person
+"""Time-bounded free space (design §8a): which voxels the cameras see free now, and a memory of when a person
 could next be in each voxel, so that space seen free a moment ago stays free while no one can have reached it; and,
 for speed and separation monitoring, where in the possibly occupied space a ball the size of the cameras' detection
 capability fits."""
 
-from depthguard.freespace._detectable import DetectableSpace, robot_voxels, solid_voxels
+from depthguard.freespace._detectable import DetectableSpace, check_limit, closed_faces, or_coarse, robot_voxels, solid_voxels
+from depthguard.freespace._near import surface_voxels, voxels_within
 from depthguard.freespace._memory import FreeSpaceMemory, VoxelBox, seen_free_voxels, squared_distance_transform
 
-__all__ = ["DetectableSpace", "FreeSpaceMemory", "VoxelBox", "robot_voxels", "seen_free_voxels", "solid_voxels",
-           "squared_distance_transform"]
+__all__ = ["DetectableSpace", "FreeSpaceMemory", "VoxelBox", "check_limit", "closed_faces", "or_coarse", "robot_voxels",
+           "seen_free_voxels", "solid_voxels", "squared_distance_transform", "surface_voxels", "voxels_within"]

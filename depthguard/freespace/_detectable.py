@@ -2,7 +2,7 @@
 sensors' detection capability, fits (ISO 13855).
 
 SSM's protective separation distance S_p counts the intrusion distance C = 8 (d - 14) mm: how far a body part thinner
-than d may reach, unseen, beyond the detected body it belongs to (SPEC section 9). A region of possibly occupied space
+than d may reach, unseen, beyond the detected body it belongs to (design §9). A region of possibly occupied space
 in which no ball of diameter d fits can hold only such a part: the band a depth camera's noise margin leaves along a
 solid's edge, the sliver behind a pixel dropped at the robot's silhouette. For SSM the distance to the *opening* of
 the possibly occupied set U by a ball of radius r = d / 2 is therefore enough:
@@ -213,7 +213,7 @@ def _erode(free, offsets, block, fits, counts):
 
 
 @kernel(parallel=True)
-def _or_coarse(free, coarse, ratio):
+def or_coarse(free, coarse, ratio):
     """free[i, j, k] |= coarse[i // ratio, j // ratio, k // ratio] (a coarser box of voxels ``ratio`` times as big
     with the same near corner)."""
     nx, ny, nz = free.shape

@@ -1,9 +1,9 @@
-"""Numba kernels of the time-bounded free space (SPEC section 8a). They trust their inputs; ``_memory.py`` checks them.
+"""Numba kernels of the time-bounded free space (design §8a). They trust their inputs; ``_memory.py`` checks them.
 
 Two jobs:
 
 - Which voxels of a box some camera sees entirely free now (:func:`seen_free_voxels`), by the depth grid's
-  confirmation rule (SPEC section 8): all 8 corners of the voxel in front of the camera, every pixel whose footprint
+  confirmation rule (design §8): all 8 corners of the voxel in front of the camera, every pixel whose footprint
   meets the corners' projected bounding box (grown by ``pad`` pixels) inside the image, and each of them free at
   least up to the voxel's largest corner depth plus ``margin``. A per-row sparse table of each free image (the
   minimum over every run of 2^l pixels of a row) answers "the smallest free value of row r between columns a and b"

@@ -1,7 +1,7 @@
-"""The free-space memory of SPEC section 8a: a voxel box, which voxels the cameras see entirely free now, and for
+"""The free-space memory of design §8a: a voxel box, which voxels the cameras see entirely free now, and for
 each voxel the earliest time a person could be in it.
 
-SPEC 8a's recursion F_k = erode(F_{k-1}, v_max (t_k - t_{k-1})) u Seen_k u Robot_k is kept in its complement: U_k,
+design §8a's recursion F_k = erode(F_{k-1}, v_max (t_k - t_{k-1})) u Seen_k u Robot_k is kept in its complement: U_k,
 where a person may be at t_k, is dilate(U_{k-1}, v_max (t_k - t_{k-1})) minus (Seen_k u Robot_k), starting from
 U_0 = everything (never seen = possibly occupied), and space outside the box always counts as U (a person may come
 from outside). It is stored as an arrival time per voxel, a lower bound of the earliest time a person could be
@@ -103,7 +103,7 @@ def seen_free_voxels(box: VoxelBox, cameras: Sequence[PinholeCamera], free_image
                      pad: int = 0, check: bool = True) -> np.ndarray:
     """Which voxels of ``box`` some camera sees entirely free now: (nx, ny, nz) bool.
 
-    Camera j sees voxel x free when (the depth grid's confirmation rule, SPEC section 8):
+    Camera j sees voxel x free when (the depth grid's confirmation rule, design §8):
 
     - all 8 corners of x lie in front of it: optical z >= max(depth_range[0], ``config.NEAR_PLANE_EPSILON``);
     - the bounding box of the corners' projections, grown by ``pad`` pixels on every side, lies in the image: every
@@ -113,7 +113,7 @@ def seen_free_voxels(box: VoxelBox, cameras: Sequence[PinholeCamera], free_image
 
     A corner (i + a, j + b, k + c) is at lo + (i + a, j + b, k + c) * voxel, its optical coordinates are
     R[r, 0] * x + R[r, 1] * y + R[r, 2] * z + t[r] with (R, t) = ``T_camera_world``, and it projects to
-    u = fx * x / z + cx, v = fy * y / z + cy (SPEC section 1). Blocks of ``config.FREESPACE_BLOCK`` voxels a side
+    u = fx * x / z + cx, v = fy * y / z + cy (design §1). Blocks of ``config.FREESPACE_BLOCK`` voxels a side
     are tested whole first: a camera that sees a whole block free sees each of its voxels free (their corners
     project inside the block's projection and lie no deeper than its deepest corner), so this changes how fast,
     not what (up to rounding in the last bits of a projection).
@@ -224,7 +224,7 @@ def squared_distance_transform(sites) -> np.ndarray:
 
 
 class FreeSpaceMemory:
-    """Remembered free space (SPEC section 8a): for each voxel of a box, the earliest time a person could be in it.
+    """Remembered free space (design §8a): for each voxel of a box, the earliest time a person could be in it.
 
     ``arrival[x]`` is a lower bound of the earliest time (seconds, the frames' clock) at which a person moving at
     most ``v_max`` could be anywhere in voxel x, given everything the cameras have seen; voxel x is certified free at

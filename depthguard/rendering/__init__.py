@@ -1,7 +1,7 @@
 """Rendering of triangle meshes into pinhole cameras with OpenGL (headless EGL): exact depth through each pixel
 centre, labels, a Lambertian intensity image, and the depth of the farthest surface (where a body ends).
 
-Typical use (the robot's collision meshes for self-filtering, SPEC section 7)::
+Typical use (the robot's collision meshes for self-filtering, design §7)::
 
     from depthguard.rendering import MeshInstance, Renderer, primitive_mesh
     renderer = Renderer()                                   # one EGL context, reused

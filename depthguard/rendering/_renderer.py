@@ -2,7 +2,7 @@
 
 How a pixel is made exact
 -------------------------
-depthguard's pixel (u, v) has its centre at image coordinates (u, v) (SPEC section 1); OpenGL samples window pixel
+depthguard's pixel (u, v) has its centre at image coordinates (u, v) (design §1); OpenGL samples window pixel
 (i, j) at its centre (i + 1/2, j + 1/2). The vertex shader maps an optical-frame point (x, y, z) to
 
     x_ndc = (2 fx / W) x/z + (2 cx + 1) / W - 1,      y_ndc = (2 fy / H) y/z + (2 cy + 1) / H - 1,

@@ -400,7 +400,7 @@ class RobotModel:
         round both (padding included), ``with_surface_points`` covers it, and the ground truth's meshes hold it.
         Call again for more pieces. Raises :class:`RobotError` naming ``link`` for a link without kinematics, and
         :class:`InputError` for a solid that is not one of those, or not finite."""
-        from depthguard.rendering._meshes import primitive_mesh
+        from depthguard.rendering import primitive_mesh
         from depthguard.scenes import Box, Capsule, Sphere
 
         if not isinstance(link, str) or link not in self._kinematics.frame_ids:
@@ -430,7 +430,7 @@ class RobotModel:
     def with_surface_points(self, tolerance: float = config.SSM_ROBOT_UNCERTAINTY) -> "RobotModel":
         """The same robot with control points whose spheres cover every moving link's whole padded capsule, each no
         more than ``tolerance`` metres (> 0) beyond it, and the end-effector's control point kept (last, the
-        end-effector): SPEC section 9, "distances from the robot's surface".
+        end-effector): design §9, "distances from the robot's surface".
 
         Along each moving link's capsule axis (length L, radius r, padding included), k >= 2 points evenly spaced
         (k = 1 for a ball), spacing h = L / (k - 1) <= 2 sqrt((r + t)^2 - r^2), each the centre of a sphere of

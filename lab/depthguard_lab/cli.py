@@ -142,9 +142,9 @@ def _real_room(args) -> int:
 
 
 def _scenario_a(args) -> int:
-    from depthguard_lab.experiments import scenario_a
+    from depthguard_lab.experiments import _scenario_a_plots as report
 
-    return scenario_a.main(out=args.out, repeats=args.repeats)
+    return report.main(out=args.out, repeats=args.repeats)
 
 
 def _duration(value, rate: float):

@@ -1,13 +1,13 @@
-"""The Quick start's main job (issue 9): a robot doing its task next to a person, in closed loop, three ways.
+"""The Quick start's main job: a robot doing its task next to a person, in closed loop, three ways.
 
 Scene ``scenario_b_reach.yaml``: a KUKA iiwa traces the 2016 paper's vertical hexagon at 0.4 m/s while a person walks
 up, reaches into its end-effector and walks away; four simulated 640x480 depth cameras (Kinect noise, edge dropouts) at 30 Hz,
-issue 8's reference layout (``scenario_b_four.yaml``: the scene's two front cameras and two in the back corners;
+the four-camera reference layout (``scenario_b_four.yaml``: the scene's two front cameras and two in the back corners;
 ``cameras=2`` keeps the front two), are fused through the depth grid with the free-space memory; control runs at 500 Hz
 (:func:`depthguard_lab.simulation._closed_loop.run_closed_loop`). The same episode is run per mode:
 
 - ``none``: the task alone (the baseline: it shows the collision that would happen);
-- ``avoid``: the papers' avoidance (SPEC section 9: repulsive velocity at the end-effector, risk-shaped joint
+- ``avoid``: the papers' avoidance (design §9: repulsive velocity at the end-effector, risk-shaped joint
   velocity bounds elsewhere, the task kept through redundancy);
 - ``ssm``: speed and separation monitoring (ISO/TS 15066): the task slowed so that the reported distance stays above
   the protective separation distance. It runs in the camera layout SSM needs (:data:`SSM_LAYOUT`,
@@ -59,8 +59,8 @@ import numpy as np
 from depthguard.errors import InputError
 
 SCENE = "scenario_b_reach.yaml"
-#: The camera layouts by number of cameras: the scene's own two, or issue 8's four (its reference layout; neither
-#: reached issue 8's usefulness goal, and the issue asks for four then).
+#: The camera layouts by number of cameras: the scene's own two, or four (the reference layout: two more in the back
+#: corners).
 LAYOUTS = {2: None, 4: "scenario_b_four.yaml"}
 #: The layout of mode ``ssm``: one that sees its protective separation distance round the arm.
 SSM_LAYOUT = "scenario_b_ssm.yaml"
@@ -69,7 +69,7 @@ SSM_LAYOUT = "scenario_b_ssm.yaml"
 REPULSIVE_EPSILON = 1e-3
 #: A step whose task scale or speed factor is below this counts as slowed.
 SLOWED_BELOW = 0.99
-#: The task has resumed when the end-effector is within this of where the task wants it (metres; issue 9: 1 cm).
+#: The task has resumed when the end-effector is within this of where the task wants it (metres: 1 cm).
 RESUMED_WITHIN = 0.01
 #: The obstacles have left when every control point is truly farther than this from every obstacle (metres; the
 #: avoidance's rho, beyond which nothing acts) for the rest of the run.

@@ -1,9 +1,9 @@
-"""Issue 4's workcell experiment: one depth camera against two fused through the depth grid, in reference scenario
+"""The workcell experiment of the depth grid: one depth camera against two fused through the depth grid, in reference scenario
 B's shadow and hidden-hand cases (the 2016 paper's Figs. 8, 9, 12 and 13, with numbers).
 
 Each layout (scene file) is simulated and, every frame, the control points' distances are computed three ways:
-the principal camera alone, the second camera alone (the single-camera method, SPEC sections 3-7, robot filtered
-out) and both fused through the principal camera's depth grid (SPEC section 8). Each is compared with the exact
+the principal camera alone, the second camera alone (the single-camera method, design §3-7, robot filtered
+out) and both fused through the principal camera's depth grid (design §8). Each is compared with the exact
 ground truth of :mod:`depthguard_lab.experiments.workcell` (the person, the box, the table and shelf, the floor, walls
 and pedestal).
 
@@ -44,15 +44,15 @@ CASES = ("shadow", "hidden_hand")
 #: Seconds simulated before and after each case by default.
 MARGIN = 0.5
 #: The names of the fused results among the methods (the others are camera names): without and with the free-space
-#: memory (SPEC section 8a).
+#: memory (design §8a).
 FUSED = "fused"
 FUSED_MEMORY = "fused+memory"
 FUSED_METHODS = (FUSED, FUSED_MEMORY)
 #: The packaged layouts, in the package's simulation folder, and those run by default: the published two-camera
-#: layout and the four-camera reference layout (issue 8).
+#: layout and the four-camera reference layout.
 SCENES = ("scenario_b.yaml", "scenario_b_across.yaml", "scenario_b_four.yaml")
 DEFAULT_SCENES = ("scenario_b.yaml", "scenario_b_four.yaml")
-#: "Useful" (issue 8): the share of (frame, control point) pairs truly farther than rho + USEFUL_MARGIN that are
+#: "Useful": the share of (frame, control point) pairs truly farther than rho + USEFUL_MARGIN that are
 #: reported below rho.
 USEFUL_MARGIN = 0.05
 
@@ -168,7 +168,7 @@ def counts(episode: Episode, k: int, rows: np.ndarray) -> dict:
       (``robot_blind_spot`` set: a single camera says it cannot see there) and ``unflagged_misses``;
     - ``largest_excess_m``: the largest min(reported, rho) - truth;
     - ``useful_alarm_fraction``: among the pairs truly farther than rho + USEFUL_MARGIN, the share reported below
-      rho (issue 8's measure of usefulness);
+      rho (the measure of usefulness);
     - ``remembered``: pairs whose answer rests on the free-space memory (flag ``remembered``).
     """
     truth, reported, tol = episode.truth[rows], episode.reported[k][rows], episode.tolerance[k][rows]
@@ -311,7 +311,7 @@ def main(out="out/fusion-workcell", duration: float | None = None, scenes=None, 
           "filtered out)\nagainst all of them fused through the principal camera's depth grid, without and with the "
           f"free-space memory;\nrho = {RHO} m, hybrid, invalid='neighbors'. False alarm: reported < rho while the "
           "truth >= rho + tolerance;\nuseful: the share of pairs truly farther than rho + "
-          f"{USEFUL_MARGIN:g} m reported below rho (issue 8: at most 10 % with two cameras,\n5 % with four). "
+          f"{USEFUL_MARGIN:g} m reported below rho (the goal: at most 10 % with two cameras,\n5 % with four). "
           "Miss: min(reported, rho) > truth + tolerance; flagged: with robot_blind_spot.\n")
     episodes, plots = [], []
     for path, workcell in zip(paths, workcells):

@@ -1,11 +1,11 @@
 """Real data: five calibrated views of one static room (the slambook2 RGB-D example) as a rig of depth cameras.
 
-Issue 4, item 7. The folder ``slambook2-room`` (see ``data/real/README.md`` in the shared folder; MIT licence, from the
+The folder ``slambook2-room`` (see ``data/real/README.md`` in the shared folder; MIT licence, from the
 public repository gaoxiang12/slambook2, ``ch5/rgbd``) holds five 640x480 depth images of one static room and the
 camera-to-world pose of each. Views 3, 4 and 5 agree best; they stand here for three cameras recording at the same
 time, view 3 the depth grid's principal camera. Views 4 and 5 stand 0.71 and 0.94 m in front of it, looking the same
 way, so they see little of what view 3 cannot. The poses are approximate: that is the rig's calibration error, which
-the fusion margin must cover (SPEC section 8: a secondary camera clears a cell only if it saw beyond the cell by its
+the fusion margin must cover (design §8: a secondary camera clears a cell only if it saw beyond the cell by its
 noise margin plus the fusion margin).
 
 (a) Calibration error. For each ordered pair of views (i, j), every valid pixel of i is back-projected, moved into

@@ -1,4 +1,4 @@
-"""Reference scenario A: the 2015 paper's validation experiment (its section 4, Figs. 6-11; SPEC section 12 "A").
+"""Reference scenario A: the 2015 paper's validation experiment (its section 4, Figs. 6-11; design §12 "A").
 
 One depth camera looks at a table top and a thin vertical wall standing on it. A virtual control point P moves
 along y = 0.4, z = 0.2, x in [-0.5, 0.5] m with rho = 0.3 m. The wall's face X = 0 (the paper's "Y-Z surface")
@@ -20,10 +20,7 @@ run adds Gaussian depth noise of the default noise model and uint16 millimetre q
 
 from __future__ import annotations
 
-import json
 import math
-import os
-import platform
 import time
 from dataclasses import dataclass
 
@@ -32,7 +29,6 @@ import numpy as np
 
 import depthguard as dg
 from depthguard import baselines
-from depthguard.files import write_whole
 from depthguard.depthspace import check_points
 from depthguard.scenes import Box, render_depth, scene_distance
 from depthguard.transforms import look_at
@@ -182,7 +178,7 @@ def query(frame: Frame, method: str, points_world: np.ndarray, rho: float = RHO)
     """Distances (n,) metres and directions (n, 3) world frame (from the obstacle towards the point) of one method.
 
     ``method``: ``"point cloud"`` (the paper's Cartesian baseline, :func:`baselines.cartesian_region_distances`),
-    ``"min"``, ``"mean"``, ``"hybrid"`` (depth space, SPEC), or ``"paper min"`` / ``"paper hybrid"`` (depth space
+    ``"min"``, ``"mean"``, ``"hybrid"`` (depth space, design), or ``"paper min"`` / ``"paper hybrid"`` (depth space
     with the 2015 paper's formulas, for comparison).
     """
     if method == "point cloud":
@@ -342,90 +338,3 @@ def facts(run: Run, x: np.ndarray, truth: np.ndarray) -> dict:
         "max_excess_at_x": worst,
         "hybrid_equals_min": bool(np.array_equal(run.distance["hybrid"], run.distance["min"])),
     }
-
-
-def main(out: str = "out/scenario-a", repeats: int = 20) -> int:
-    """Run scenario A: write the plots and ``summary.json`` into ``out`` (created if needed), print a summary.
-
-    ``repeats``: timing repetitions per control-point position (the per-position median is kept). Returns 0.
-    """
-    from depthguard_lab.experiments import _scenario_a_plots as plots
-
-    started = time.perf_counter()
-    os.makedirs(out, exist_ok=True)
-    scene = make_scene()
-    points = control_points()
-    x = points[:, 0]
-    truth, truth_direction = true_nearest(scene, points)
-
-    camera = make_camera()
-    depth = render(scene, camera)
-    faces = wall_faces_seen(scene, camera, depth)
-    exact = run_methods("noise-free", make_frame(camera, depth), points, METHODS + ("paper min",))
-    exact_facts = facts(exact, x, truth)
-
-    noisy_camera = make_camera(dg.NoiseModel())
-    noisy = run_methods("noisy", make_frame(noisy_camera, noisy_depth(depth, noisy_camera.noise)), points)
-    noisy_facts = facts(noisy, x, truth)
-
-    medians = time_methods(exact.frame, METHODS, points, repeats)
-    table = timing_table(medians)
-
-    files = plots.write_all(out, scene, points, truth, truth_direction, exact, noisy, medians, depth,
-                            switch_x=exact_facts["min_direction_switch_x"])
-    summary = {
-        "scenario": "A (Flacco et al. 2015, section 4)",
-        "rho": RHO,
-        "line": {"y": LINE_Y, "z": LINE_Z, "x": list(X_RANGE), "positions": len(points)},
-        "camera": {"eye": list(CAMERA_EYE), "target": list(CAMERA_TARGET), "width": camera.width,
-                   "height": camera.height, "fx": camera.fx, "fy": camera.fy, "cx": camera.cx, "cy": camera.cy,
-                   "depth_range": list(camera.depth_range)},
-        "wall_face_pixels": faces,
-        "noise_free": exact_facts,
-        "noisy": {"noise": "Gaussian sigma(d) of the default NoiseModel, uint16 mm, margin 3 sigma", **noisy_facts},
-        "timing_seconds": table,
-        "timing": {"repeats_per_position": repeats,
-                   "statistic": "median per position, then worst/median/best over positions",
-                   "query": "one control point, prepared frame", "numba_threads": 1,
-                   "machine": platform.processor() or platform.machine(), "cpus": os.cpu_count()},
-        "paper_timing_seconds": PAPER_TIMES,
-        "files": sorted(os.path.basename(f) for f in files),
-    }
-    write_whole(os.path.join(out, "summary.json"), json.dumps(summary, indent=2))
-
-    _print_summary(out, faces, exact_facts, noisy_facts, table, repeats, len(points), time.perf_counter() - started)
-    return 0
-
-
-def _print_summary(out, faces, exact, noisy, table, repeats, n, elapsed) -> None:
-    def at(x):
-        return "nowhere" if x is None else f"x = {x:.4f} m"
-
-    excess = exact["max_excess_over_truth"]
-    cloud = exact["hidden_face_point_cloud_distance"]
-    seen = exact["hidden_face_min_distance"]
-    noisy_cloud = noisy["hidden_face_point_cloud_distance"]
-    print("Scenario A (Flacco et al. 2015, section 4): one 640x480 depth camera, a table top at z = 0.04 m and a "
-          "thin wall.\n"
-          f"The camera sees the wall's face X = 0 ({faces['X=0']} pixels), not its face Y = 0.37 "
-          f"({faces['Y=0.37']} pixels).\n"
-          f"Control point P: y = {LINE_Y}, z = {LINE_Z}, x from {X_RANGE[0]} to {X_RANGE[1]} m ({n} positions), "
-          f"rho = {RHO} m.\n")
-    print("Noise-free image:")
-    print(f"  min's nearest obstacle turns from the wall to the table at {at(exact['min_direction_switch_x'])} "
-          f"(true: {TRUE_SWITCH_X:.4f} m)")
-    print(f"  behind the wall (x < {-TRUE_SWITCH_X:.3f}): truth 0.030 m; depth-space min "
-          f"{seen[0]:.3f}-{seen[1]:.3f} m; point cloud {cloud[0]:.3f}-{cloud[1]:.3f} m (blind)")
-    print(f"  depth-space distance - truth, largest: min {excess['min'] * 1e3:+.2f} mm, hybrid "
-          f"{excess['hybrid'] * 1e3:+.2f} mm: never above the truth")
-    print(f"  the paper's formulas instead: {excess['paper min'] * 1e3:+.1f} mm at x = "
-          f"{exact['max_excess_at_x']['paper min']:.3f} (their depth filter skips the wall, > rho in front of P)")
-    print("Noisy image (Gaussian sigma(d), uint16 mm, 3-sigma margin):")
-    print(f"  min switch at {at(noisy['min_direction_switch_x'])}; min - truth at most "
-          f"{noisy['max_excess_over_truth']['min'] * 1e3:+.2f} mm; point cloud behind the wall "
-          f"{noisy_cloud[0]:.3f}-{noisy_cloud[1]:.3f} m")
-    print(f"\nTime per query of one control point on a prepared frame, 1 numba thread (median of {repeats} repeats "
-          f"per position,\nthen worst / median / best over the {n} positions; the paper's on an i7-2600):")
-    for line in format_timing_table(table):
-        print(line)
-    print(f"\nPlots (overview, Figs. 7-11, noisy run) and summary.json in {os.path.abspath(out)}/ ({elapsed:.1f} s)")

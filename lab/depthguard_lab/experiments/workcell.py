@@ -4,7 +4,7 @@ main job before the closed loop, ``depthguard demo``).
 A KUKA iiwa traces a vertical hexagon at 0.4 m/s while a person walks in, reaches for the end-effector, carries a
 box past the robot, stands between the principal camera and the robot (the 2016 paper's shadow case) and holds a
 hand behind the robot as the principal camera sees it (its hidden-hand case). Every frame, each camera's
-single-camera distances (SPEC sections 3-7, robot filtered out) are compared with the exact ground truth, which
+single-camera distances (design §3-7, robot filtered out) are compared with the exact ground truth, which
 covers everything the robot could hit: the person, the box, the table and shelf, and the floor, walls and pedestal.
 
 What it shows: single-camera distances are never above the truth plus the pixel tolerance unless flagged

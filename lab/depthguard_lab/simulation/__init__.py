@@ -1,5 +1,5 @@
 """Simulated robot workcells: depth and intensity cameras watching a robot and scripted people, with exact ground
-truth (SPEC section 12, scenario B; issue 3).
+truth (design §12, scenario B).
 
 Typical use::
 

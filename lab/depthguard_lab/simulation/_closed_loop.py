@@ -1,4 +1,4 @@
-"""The avoidance loop in simulated time (issue 9; SPEC section 9): cameras at the workcell's rate, control at 500 Hz.
+"""The avoidance loop in simulated time (design §9): cameras at the workcell's rate, control at 500 Hz.
 
 Per control step k (t = k dt):
 
@@ -222,7 +222,7 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
                      tolerance=settings.avoidance.tolerance + zone)
     limits = JointLimits.from_robot(robot, acceleration=settings.acceleration)
     # The points the avoidance and SSM measure from: spheres that cover every moving link's padded capsule, none more
-    # than Z_r beyond it, and the end-effector's control point (SPEC section 9: distances from the robot's surface).
+    # than Z_r beyond it, and the end-effector's control point (design §9: distances from the robot's surface).
     points_robot = robot.with_surface_points(settings.surface_tolerance) if settings.cover_surface else robot
     controller = AvoidanceController(points_robot, params, limits)
     options = dict(settings.monitor)

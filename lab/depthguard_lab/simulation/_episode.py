@@ -250,7 +250,7 @@ def write_episode(workcell: Workcell, out_dir, seed: int | None = None, progress
     Files:
         rig.yaml: the depth cameras (:func:`depthguard.save_rig`; loads back with :func:`depthguard.load_rig`).
         frames.csv: ``camera, frame, time``: one row per depth image written (every depth camera, every frame, in
-            frame order), capture time in seconds with 6 decimals (SPEC section 12a; read back with
+            frame order), capture time in seconds with 6 decimals (design §12a; read back with
             :func:`depthguard.recordings.open_recording`).
         intensity_rig.yaml: the intensity cameras, if the scene has any.
         depth/<camera>/<index:06d>.png: 16-bit PNG (ROS 16UC1), units of depth_scale (millimetres), 0 = none.

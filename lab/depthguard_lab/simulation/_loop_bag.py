@@ -1,4 +1,4 @@
-"""A closed-loop run as a ROS 2 bag (MCAP) that a user can open in Foxglove or rerun (issue 9, item 6).
+"""A closed-loop run as a ROS 2 bag (MCAP) that a user can open in Foxglove or rerun .
 
 Topics (ROS 2 message types, stamps = simulated time; frame ``world`` is the workcell's world frame, REP 103):
 

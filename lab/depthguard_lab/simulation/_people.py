@@ -108,7 +108,7 @@ PARTS = (
 #: Names of the parts, in the order of :meth:`Person.parts_at` (of a person with the default limbs).
 PART_NAMES = tuple(part.name for part in PARTS)
 
-#: A person with ``limbs: thin`` (SPEC section 11a's thin-limb judges), whatever their height: forearms 45 mm across,
+#: A person with ``limbs: thin`` (design §11a's thin-limb judges), whatever their height: forearms 45 mm across,
 #: hands 25 mm thick (from the wrist to the knuckles, half the hand's length) and a finger 15 mm across (from the
 #: knuckles to the hand's end, where a reach ends). Radii in metres.
 THIN_LIMBS = dict(forearm_radius=0.0225, hand_radius=0.0125, finger_radius=0.0075)

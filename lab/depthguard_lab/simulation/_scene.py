@@ -15,7 +15,7 @@ Top-level keys::
     floor: -0.5               # world z of the floor people stand on (default 0)
     render_segments: 24       # segments around rendered spheres and capsules (default lab_config.SIM_PRIMITIVE_SEGMENTS)
     depth_scale: 0.001        # metres per uint16 unit of the depth images (default 0.001)
-    principal: principal      # the principal depth camera (rig key, SPEC section 2)
+    principal: principal      # the principal depth camera (rig key, design §2)
     workspace: [[x, y, z], [x, y, z]]   # optional rig key: the box watched (depth grid range, free-space memory)
     cameras: [...]            # depth cameras (at least one)
     intensity_cameras: [...]  # optional intensity (grey-level) cameras
@@ -26,7 +26,7 @@ Top-level keys::
     carried_objects: [...]    # optional
     people: [...]             # optional
 
-A depth camera has the rig-file keys of SPEC section 2 (name, width, height, fx, fy, cx, cy, depth_range, noise
+A depth camera has the rig-file keys of design §2 (name, width, height, fx, fy, cx, cy, depth_range, noise
 {a, b, c, k}, depth_scale) with its pose either as ``T_world_camera`` (4x4, row-major, optical frame -> world) or
 as ``look_at: {eye: [x, y, z], target: [x, y, z], up: [0, 0, 1]}``, plus an optional
 ``sensor: {noise: true, edge_threshold: 0.05, edge_dropout: 0.5, grazing_angle: 1.36, grazing_dropout: 0.9}`` (see
@@ -334,7 +334,7 @@ def load_workcell(path, layout=None) -> Workcell:
 
 
 def default_workcell() -> Workcell:
-    """Reference scenario B (SPEC section 12), from the package's ``scenario_b.yaml``."""
+    """Reference scenario B (design §12), from the package's ``scenario_b.yaml``."""
     resource = resources.files("depthguard_lab.simulation").joinpath(DEFAULT_SCENE)
     with resources.as_file(resource) as path:
         return load_workcell(path)
