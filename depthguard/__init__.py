@@ -11,11 +11,12 @@ Typical use::
 
 from depthguard._live import LiveMonitor
 from depthguard._monitor import DistanceMonitor, PreparedSet
+from depthguard._settings import MonitorSettings
 from depthguard.cameras import NoiseModel, PinholeCamera, Rig, load_camera_info, load_rig, rig_from_dict, save_rig
 from depthguard.depth import DepthImage, OccupancyImage, depth_image, load_depth, prepare_depth, read_depth_file
 from depthguard.depthspace import frustum_distance, paper_frustum_distance, single_camera_distances
 from depthguard.errors import DepthguardError, DepthImageError, InputError, RigError
-from depthguard.results import DistanceResult, Flag
+from depthguard.results import DetectableResult, DistanceResult, Flag
 from depthguard.recordings import Recording, open_recording
 
 __version__ = "0.1.0"
@@ -23,12 +24,14 @@ __version__ = "0.1.0"
 __all__ = [
     "DepthImage",
     "DepthImageError",
+    "DetectableResult",
     "DepthguardError",
     "DistanceMonitor",
     "DistanceResult",
     "Flag",
     "InputError",
     "LiveMonitor",
+    "MonitorSettings",
     "NoiseModel",
     "OccupancyImage",
     "PinholeCamera",

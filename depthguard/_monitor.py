@@ -10,9 +10,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from depthguard import config
+from depthguard._settings import MonitorSettings
 from depthguard.cameras import Rig
 from depthguard.depth import DepthImage, OccupancyImage, checked_frame, depth_image, filled_space, prepare_depth
-from depthguard.depthspace import check_options, check_points, single_camera_distances
+from depthguard.depthspace import check_points, single_camera_distances
 from depthguard.errors import InputError, check_real, short_repr
 from depthguard.results import DetectableResult, DistanceResult, Flag
 
@@ -22,65 +23,23 @@ class DistanceMonitor:
 
     Args:
         rig: the cameras (:func:`depthguard.load_rig`).
-        rho: radius of each control point's surveillance region, metres, in [``config.RHO_MIN``,
-            ``config.RHO_MAX``]; obstacles farther away are ignored.
-        aggregate: ``"min"``, ``"mean"`` or ``"hybrid"`` (design §6).
-        invalid: policy for pixels without a valid measurement: ``"occupied"`` (fail-safe), ``"neighbors"`` or
-            ``"free"`` (design §3).
-        unseen: policy for space no camera observes: ``"occupied"`` (fail-safe) or ``"free"``.
-        method: ``"exact"`` (design) or ``"paper"`` (the 2015 paper's unsafe formulas, for comparison only).
-        max_age: seconds, in (0, ``config.MAX_AGE_LIMIT``]; a frame older than this at query time (``now``) makes
-            its camera blind and the result flagged, and so does a frame without a timestamp. ``"auto"`` (default):
-            ``config.DEFAULT_MAX_AGE`` (0.1 s, three frame periods at 30 Hz) for every frame that carries a
-            timestamp; frames without one cannot age. None: frames do not go stale by age (see :meth:`query` for the
-            other rules of time).
-        hole_pixels: largest hole filled by ``invalid="neighbors"``, pixels, in [0, ``config.MAX_HOLE_PIXELS``].
+        settings: a :class:`MonitorSettings` (how it answers: rho, the policies, time, self-filtering, fusion, the
+            memory, the concessions), or None; keyword ``options`` set its fields (``DistanceMonitor(rig, rho=0.5)``),
+            over ``settings`` when both are given.
         robot: a :class:`depthguard.robots.RobotModel` to filter out of every frame (design §7); then each new
             frame needs the robot's joint positions at its capture time (``query(..., joints=...)``).
-        self_filter: the geometry rendered for self-filtering: ``"hulls"`` (default), ``"capsules"`` or
-            ``"meshes"`` (:mod:`depthguard.self_filter`).
-        self_filter_tolerance: metres, in [0, ``config.SELF_FILTER_TOLERANCE_MAX``], by which a measurement may lie
-            in front of the rendered robot and still be the robot (on top of the noise margin).
+        static: known static solids no person can be inside (the floor, a pedestal, walls, a table built down to the
+            floor): a list or tuple of :class:`depthguard.scenes.Box`, world frame. Their surfaces, measured where
+            they are known to be, stop counting as obstacles; the space they hide still counts
+            (:class:`depthguard.static_solids.StaticSolids`, a concession flagged ``known_solid``: an object within
+            ``self_filter_tolerance`` + twice the noise margin of such a surface is taken for it). None (default):
+            everything the cameras see counts.
         principals: with frames of several cameras, the principal cameras of the depth grid (design §8): a list
             or tuple of camera names (a bare string is refused); default: the rig's principal, else its first
             camera. Each point gets the largest of the principals' fused distances among those whose view holds
             its whole surveillance region (each is a lower bound).
         maps: principal name -> :class:`depthguard.depthgrid.DepthGridMap` of that principal (checked against the
             rig); maps not given are built from the rig when first needed (milliseconds).
-        fusion_margin: metres (finite, >= 0) a secondary camera must have seen beyond a cell to clear it (the rig's
-            calibration error, on top of the noise margin). fusion_pixels: pixels, in [0,
-            ``config.MAX_FUSION_PIXELS``], by which a cell's footprint grows in a secondary camera.
-        memory: remember free space over time (design §8a): space no camera sees now counts free while no person
-            moving at ``v_max`` could have reached it since it was last seen free. It needs frame timestamps and the
-            rig's ``workspace`` (the box remembered, in voxels of ``memory_voxel`` metres); without a workspace,
-            or with a rig of one camera, there is no memory (``self.memory`` is None). Fused answers only; an answer
-            that rests on it is flagged ``remembered``. A body part moving faster than v_max is outside the
-            guarantee.
-        v_max: metres/second, finite, > 0: the fastest a person may move (default 2.0, ISO 13855's hand speed).
-        memory_voxel: metres, > 0: the memory's voxel side.
-        robot_zone: metres, in [0, ``config.ROBOT_ZONE_MAX``]; fused answers with a robot take space within this much
-            of the robot's padded capsules (at the principal frame's capture time) for the robot, in every direction,
-            as the self-filter takes a measurement up to its tolerance in front of the robot for the robot. An object
-            wholly inside it is not seen, and a distance to one that reaches into it may exceed the truth by up to
-            this much: state it with your other tolerances (SSM's Z_d). 0 (default) turns it off.
-        static: known static solids no person can be inside (the floor, a pedestal, walls, a table built down to the
-            floor): a list or tuple of :class:`depthguard.scenes.Box`, world frame. Their surfaces, measured where
-            they are known to be, stop counting as obstacles; the space they hide still counts
-            (:class:`depthguard.static_solids.StaticSolids`). An object within ``self_filter_tolerance`` + the noise
-            margin of such a surface is taken for it. None (default): everything the cameras see counts.
-        detection_capability: d, metres, or None (default): with a value, each set of frames also finds where in the
-            possibly occupied space a ball of diameter d fits (:class:`depthguard.freespace.DetectableSpace`, in
-            voxels of ``detectable_voxel`` over the rig's ``workspace``, which it needs), for speed and separation
-            monitoring: :meth:`PreparedSet.detectable_distances`. The space counted free there is what some usable
-            camera sees entirely free now (any camera, not only through a principal), what the memory remembers,
-            the robot's capsules grown by ``robot_zone`` (at every usable frame's joints; with ``robot_zone=0`` the
-            robot's own body counts as possibly occupied, so give one), and the inside of the ``static`` solids grown
-            by ``self_filter_tolerance`` (as their surfaces take an object that near them for them); outside the
-            workspace counts as possibly occupied, except as far as a static solid covering a whole face of it
-            reaches beyond it (the floor under it). Those distances leave out regions thinner than d, so only a rule
-            that counts ISO 13855's intrusion distance C for the same d may use them (SSM's S_p does);
-            :meth:`query` never does.
-        detectable_voxel: metres, in (0, d / 2]: the voxels' side (default ``config.DETECTABLE_VOXEL``, 1 cm).
 
     Every argument is checked here, once: a wrong type or a value out of range raises
     :class:`~depthguard.errors.InputError` naming it.
@@ -92,39 +51,25 @@ class DistanceMonitor:
     sections 3-7) when one camera has a usable frame, the depth grid (design §8) when several have.
     """
 
-    def __init__(self, rig: Rig, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
-                 invalid: str = config.DEFAULT_INVALID, unseen: str = config.DEFAULT_UNSEEN,
-                 method: str = config.DEFAULT_METHOD, max_age: float | str | None = "auto",
-                 hole_pixels: int = config.DEFAULT_NEIGHBOR_HOLE_PIXELS, robot=None, self_filter: str = "hulls",
-                 self_filter_tolerance: float = config.SELF_FILTER_TOLERANCE, principals=None, maps=None,
-                 fusion_margin: float = config.DEFAULT_FUSION_MARGIN,
-                 fusion_pixels: int = config.DEFAULT_FUSION_PIXELS, memory: bool = config.DEFAULT_MEMORY,
-                 v_max: float = config.FREESPACE_V_MAX, memory_voxel: float = config.FREESPACE_VOXEL,
-                 robot_zone: float = config.DEFAULT_ROBOT_ZONE, static=None, detection_capability: float | None = None,
-                 detectable_voxel: float = config.DETECTABLE_VOXEL):
+    def __init__(self, rig: Rig, settings: "MonitorSettings | None" = None, *, robot=None, static=None,
+                 principals=None, maps=None, **options):
         if not isinstance(rig, Rig):
             raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}", field="rig")
+        if settings is None:
+            settings = MonitorSettings(**options)
+        elif not isinstance(settings, MonitorSettings):
+            raise InputError(f"settings must be a depthguard.MonitorSettings, got {short_repr(settings)}",
+                             field="settings")
+        elif options:
+            settings = replace(settings, **options)
+        self.settings = settings
         self.rig = rig
-        self.rho = check_options(rho, aggregate, unseen, method)
-        self.aggregate = aggregate
-        self.unseen = unseen
-        self.method = method
-        self.invalid = _choice(invalid, "invalid", config.INVALID_POLICIES)
-        # Whether a frame without a timestamp is stale: only under a max_age the caller asked for.
-        self._untimed_stale = not (max_age is None or (isinstance(max_age, str) and max_age == "auto"))
-        if isinstance(max_age, str) and max_age == "auto":
-            max_age = config.DEFAULT_MAX_AGE
-        self.max_age = None if max_age is None else check_real(
-            max_age, "max_age", minimum=0.0, above_minimum=True, maximum=config.MAX_AGE_LIMIT, unit="seconds",
-            field="max_age")
-        self.hole_pixels = _whole(hole_pixels, "hole_pixels", config.MAX_HOLE_PIXELS)
-        self.self_filter = _choice(self_filter, "self_filter", config.SELF_FILTER_GEOMETRIES)
-        self.self_filter_tolerance = check_real(self_filter_tolerance, "self_filter_tolerance", minimum=0.0,
-                                                maximum=config.SELF_FILTER_TOLERANCE_MAX, unit="metres",
-                                                field="self_filter_tolerance")
-        self.fusion_margin = check_real(fusion_margin, "fusion_margin", minimum=0.0, unit="metres",
-                                        field="fusion_margin")
-        self.fusion_pixels = _whole(fusion_pixels, "fusion_pixels", config.MAX_FUSION_PIXELS)
+        self.rho, self.aggregate, self.unseen, self.method = (settings.rho, settings.aggregate, settings.unseen,
+                                                              settings.method)
+        self.invalid, self.hole_pixels = settings.invalid, settings.hole_pixels
+        self.max_age, self._untimed_stale = settings.max_age_seconds, settings.untimed_stale
+        self.self_filter, self.self_filter_tolerance = settings.self_filter, settings.self_filter_tolerance
+        self.fusion_margin, self.fusion_pixels = settings.fusion_margin, settings.fusion_pixels
         self.principals = self._principals(principals)
         self.maps = self._maps(maps)
         self.robot = robot
@@ -149,24 +94,18 @@ class DistanceMonitor:
             from depthguard.static_solids import StaticSolids
 
             self._static = StaticSolids(static, self.self_filter_tolerance)
-        self.robot_zone = check_real(robot_zone, "robot_zone", minimum=0.0, maximum=config.ROBOT_ZONE_MAX,
-                                     unit="metres", field="robot_zone")
+        self.robot_zone = settings.robot_zone
         self.memory = None
-        if not isinstance(memory, bool):
-            raise InputError(f"memory must be True or False, got {short_repr(memory)}", field="memory")
-        v_max = check_real(v_max, "v_max", minimum=0.0, above_minimum=True, maximum=config.COORDINATE_LIMIT,
-                           unit="metres/second", field="v_max")
-        memory_voxel = check_real(memory_voxel, "memory_voxel", minimum=0.0, above_minimum=True,
-                                  maximum=config.COORDINATE_LIMIT, unit="metres", field="memory_voxel")
-        if memory and rig.workspace is not None and len(rig.cameras) > 1:  # only fused answers use it
+        if settings.memory and rig.workspace is not None and len(rig.cameras) > 1:  # only fused answers use it
             from depthguard.freespace import FreeSpaceMemory, VoxelBox
 
-            self.memory = FreeSpaceMemory(VoxelBox(rig.workspace[0], rig.workspace[1], memory_voxel), v_max)
+            self.memory = FreeSpaceMemory(VoxelBox(rig.workspace[0], rig.workspace[1], settings.memory_voxel),
+                                          settings.v_max)
         self.detectable = None
         self.hidden_band = 0.0  # metres (detection_capability only): see _hidden_band
         self._static_voxels = None
-        if detection_capability is not None:
-            self._detectable_space(static, detection_capability, detectable_voxel)
+        if settings.detection_capability is not None:
+            self._detectable_space(static, settings.detection_capability, settings.detectable_voxel)
         self._remembered: set[int] = set()  # ids of the frames the memory has taken in
         self._seen_now = None  # voxels the frames of the last memory update saw free
         self._free_now = None  # (free, box, remembered only) behind the fused frames last built
@@ -177,13 +116,6 @@ class DistanceMonitor:
         from depthguard.freespace import DetectableSpace, VoxelBox, solid_voxels
         from depthguard.freespace import closed_faces
 
-        capability = check_real(capability, "detection_capability", minimum=0.0, above_minimum=True,
-                                maximum=config.COORDINATE_LIMIT, unit="metres", field="detection_capability")
-        if capability > config.SSM_INTRUSION_LIMIT:
-            raise InputError(f"detection_capability {capability:g} m is coarser than ISO 13855's 70 mm: no intrusion "
-                             "distance C is defined for it", field="detection_capability")
-        voxel = check_real(voxel, "detectable_voxel", minimum=0.0, above_minimum=True, maximum=capability / 2,
-                           unit="metres", field="detectable_voxel")
         if self.rig.workspace is None:
             raise InputError("detection_capability needs the rig's workspace (the box whose voxels it looks at)",
                              field="detection_capability")
@@ -964,15 +896,3 @@ class _CameraFrame:
 
             self._free = seen_free(self.image, self.occupancy)
         return self._free
-
-
-def _choice(value, name: str, allowed: tuple) -> str:
-    if not isinstance(value, str) or value not in allowed:
-        raise InputError(f"{name} must be one of {allowed}, got {short_repr(value)}", field=name)
-    return value
-
-
-def _whole(value, name: str, maximum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 <= value <= maximum:
-        raise InputError(f"{name} must be a whole number in [0, {maximum}], got {short_repr(value)}", field=name)
-    return int(value)

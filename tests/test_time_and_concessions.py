@@ -344,3 +344,28 @@ def test_a_declared_tool_counts_as_the_robot():
         robot.with_tool("no_such_link", piece)
     with pytest.raises(InputError):
         robot.with_tool("lbr_iiwa_link_7", "box")
+
+
+def test_the_monitors_settings_are_one_validated_dataclass():
+    """DistanceMonitor's values live in one MonitorSettings: made (and checked) once, given whole or field by field,
+    fields given beside settings override them, and a bad value is refused naming it, either way."""
+    rig, depth = _pair()
+    frames = {name: dg.depth_image(depth[name], camera) for name, camera in rig.cameras.items()}
+    settings = dg.MonitorSettings(rho=0.6, aggregate="min", memory=False)
+    by_fields = dg.DistanceMonitor(rig, rho=0.6, aggregate="min", memory=False)
+    whole = dg.DistanceMonitor(rig, settings)
+    assert whole.settings == by_fields.settings == settings
+    np.testing.assert_array_equal(whole.query(frames, POINTS).distance, by_fields.query(frames, POINTS).distance)
+    assert dg.DistanceMonitor(rig, settings, rho=0.3).settings.rho == 0.3
+    for bad in (dict(rho=-1.0), dict(aggregate="max"), dict(max_age=0.0), dict(hole_pixels=1.5),
+                dict(robot_zone=1.0), dict(detection_capability=0.08), dict(memory="yes")):
+        (field,) = bad
+        with pytest.raises(InputError) as caught:
+            dg.MonitorSettings(**bad)
+        assert caught.value.field == field
+        with pytest.raises(InputError) as caught:
+            dg.DistanceMonitor(rig, **bad)
+        assert caught.value.field == field
+    with pytest.raises(InputError) as caught:
+        dg.DistanceMonitor(rig, settings={"rho": 0.4})
+    assert caught.value.field == "settings"
