@@ -204,7 +204,7 @@ class DistanceMonitor:
                                 margin=self.fusion_margin, pad=self.fusion_pixels, check=False)
         if self._static_voxels is not None:
             free |= self._static_voxels
-        joints = {state._joints.tobytes(): state._joints for state in states if state._joints is not None}
+        joints = {state.joints.tobytes(): state.joints for state in states if state.joints is not None}
         if self.robot is not None and joints and self.robot_zone > 0.0:
             robot = None  # the voxels that are the robot at every frame's joints (marked into free for one)
             for q in joints.values():
@@ -319,7 +319,7 @@ class DistanceMonitor:
                 robot_far, moved = self._static.extend_robot(camera, robot_near, robot_far)
         occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels, robot_near=robot_near,
                                   robot_tolerance=self.self_filter_tolerance, robot_far=robot_far)
-        state = _CameraFrame(self, camera, image, occupancy, joints, robot_near, robot_far)
+        state = _CameraFrame(self._silhouette, camera, image, occupancy, joints, robot_near, robot_far)
         state.solid_band = solid_band
         state.measured = measured
         if self._static is not None and robot_far is not None and moved.any():
@@ -433,7 +433,7 @@ class DistanceMonitor:
         zone = None
         zoned = (plan.kind == "fused" or self.detectable is not None) and self.robot is not None and self.robot_zone
         if zoned:
-            joints = {s._joints.tobytes(): s._joints for s in usable.values() if s._joints is not None}
+            joints = {s.joints.tobytes(): s.joints for s in usable.values() if s.joints is not None}
             capsules = [tuple(c.p0) + tuple(c.p1) + (c.radius,) for q in joints.values()
                         for c in self.robot.capsules_world(q, check=False)]
             if capsules:
@@ -447,7 +447,7 @@ class DistanceMonitor:
                       and s.occupancy.invalid_pixels and s.filled is not None)
         shell = None
         if self.robot is not None:
-            joints = {s._joints.tobytes(): s._joints for s in usable.values() if s._joints is not None}
+            joints = {s.joints.tobytes(): s.joints for s in usable.values() if s.joints is not None}
             capsules = [tuple(c.p0) + tuple(c.p1) + (c.radius,) for q in joints.values()
                         for c in self.robot.capsules_world(q, check=False)]
             if capsules:
@@ -542,9 +542,9 @@ class DistanceMonitor:
         """(capsules, thickness) for FusedFrames' robot zone: the robot's capsules when ``state``'s frame was
         captured ((n, 7) world frame: p0, p1, radius with the padding) and ``robot_zone``; None without a robot or
         with ``robot_zone=0``."""
-        if not self.robot_zone or self.robot is None or state._joints is None:
+        if not self.robot_zone or self.robot is None or state.joints is None:
             return None
-        capsules = self.robot.capsules_world(state._joints, check=False)
+        capsules = self.robot.capsules_world(state.joints, check=False)
         return np.array([c.p0 + c.p1 + (c.radius,) for c in capsules]), self.robot_zone
 
     def _remembered_free(self, usable: dict):
@@ -709,14 +709,20 @@ class PreparedSet:
             holds = np.array([[Flag.REGION_OUTSIDE_VIEW not in f for f in r.flags] for r in results])
             candidates = np.where(holds, np.array([r.distance for r in results]), -np.inf)
             chosen = np.where(holds.any(axis=0), np.argmax(candidates, axis=0), 0)
-        pick = lambda attr: np.array([getattr(results[c], attr)[i] for i, c in enumerate(chosen)])  # noqa: E731
+        rows = np.arange(len(points))
+
+        def pick(attr):  # each point's value from the principal chosen for it: (principals, n, ...) -> (n, ...)
+            return np.stack([getattr(r, attr) for r in results])[chosen, rows]
+
         # FusedFrames flags a blind secondary camera STALE_CAMERA; the plan knows whether it was stale or missing.
-        flags = [(results[c].flags[i] & ~Flag.STALE_CAMERA) | plan.absent for i, c in enumerate(chosen)]
+        bits = np.array([[int(f) for f in r.flags] for r in results], dtype=np.int64).reshape(len(results), -1)
+        bits = (bits[chosen, rows] & ~int(Flag.STALE_CAMERA)) | int(plan.absent)
+        flags = [Flag(int(b)) for b in bits]
         distance = pick("distance")
         # An answer rests on memory when space nearer than it counts free only because it is remembered.
         flags = self._flag_remembered(points, distance, self.rho, flags)
         flags, near = self.concessions.flag(points, distance, self.rho, flags, query=True)
-        return DistanceResult(distance=distance, direction=pick("direction").reshape(-1, 3),
+        return DistanceResult(distance=distance, direction=pick("direction"),
                               count=pick("count"), invalid_count=pick("invalid_count"), flags=tuple(flags),
                               blind_distance=pick("blind_distance"), timestamps=timestamps,
                               cameras=tuple(self.usable), invalid_pixels=invalid_pixels,
@@ -839,13 +845,13 @@ class _CameraFrame:
     and ends along each pixel; what the depth grid needs besides, made when first needed: where each pixel's ray first
     leaves the robot (as a principal) and how far the camera saw (as a secondary)."""
 
-    def __init__(self, monitor: DistanceMonitor, camera, image: DepthImage, occupancy: OccupancyImage, joints,
+    def __init__(self, silhouette, camera, image: DepthImage, occupancy: OccupancyImage, joints,
                  robot_near=None, robot_far=None):
-        self._monitor = monitor
+        self.silhouette = silhouette  # the robot's RobotSilhouette (renders where each ray first leaves it), or None
         self.camera = camera
         self.image = image
         self.occupancy = occupancy
-        self._joints = joints
+        self.joints = joints  # (n,) the robot's joints at its capture time, or None
         self.robot_near = robot_near
         self.robot_far = robot_far
         self._robot_exit = None
@@ -879,10 +885,10 @@ class _CameraFrame:
 
     @property
     def robot_exit(self):
-        if self._monitor._silhouette is None:
+        if self.silhouette is None:
             return None
         if self._robot_exit is None:
-            exit = self._monitor._silhouette.render_first_exit(self.camera, self._joints)
+            exit = self.silhouette.render_first_exit(self.camera, self.joints)
             if self.resting is not None:  # a ray that left the robot only into the solid leaves both there
                 moved, far_before = self.resting
                 exit = np.where(moved & (exit >= far_before), self.robot_far, exit).astype(np.float32)
