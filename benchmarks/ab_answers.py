@@ -63,6 +63,7 @@ for label, options in meta["configurations"].items():
         seconds.append(time.perf_counter() - start)
         distances.append(result.distance.tolist())
     out[label] = {"distances": distances, "seconds": seconds[1:]}  # the first set compiled what it needed
+out["__file__"] = dg.__file__
 json.dump(out, sys.stdout)
 """
 
@@ -95,11 +96,16 @@ def record(folder: Path, sets: int) -> None:
 
 def answers(library: Path, folder: Path) -> dict:
     """Run the worker with the library in ``library`` (a folder holding the package ``depthguard``)."""
-    run = subprocess.run([sys.executable, "-c", WORKER, str(folder)], capture_output=True, text=True,
+    # Run from the library's folder: "-c" puts the working folder first on sys.path, ahead of the editable install's
+    # finder (which would otherwise win over PYTHONPATH and answer with this tree on both sides).
+    run = subprocess.run([sys.executable, "-c", WORKER, str(folder)], capture_output=True, text=True, cwd=library,
                          env={"PYTHONPATH": str(library), "PATH": "/usr/bin:/bin"}, timeout=3000)
     if run.returncode != 0:
         sys.exit(f"the library in {library} failed:\n{run.stderr[-3000:]}")
-    return json.loads(run.stdout)
+    side = json.loads(run.stdout)
+    if Path(side.pop("__file__")).resolve().parent.parent != library.resolve():
+        sys.exit(f"the worker did not import the library in {library}")
+    return side
 
 
 def main(argv=None) -> None:
