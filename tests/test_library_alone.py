@@ -118,3 +118,15 @@ def test_known_solids_need_no_opengl():
     run = subprocess.run([sys.executable, "-c", KNOWN_SOLIDS_WITHOUT_OPENGL], capture_output=True, text=True,
                          timeout=600)
     assert run.returncode == 0 and run.stdout.strip() == "ok", run.stderr[-3000:]
+
+
+def test_a_deployment_install_resolves_no_lab_package(tmp_path):
+    """What ``pip install .`` would install, resolved by pip itself from the package registries (every dependency,
+    transitively): no physics engine, plotting library, progress bars or the lab."""
+    report = tmp_path / "report.json"
+    run = subprocess.run([sys.executable, "-m", "pip", "install", "--dry-run", "--quiet", "--ignore-installed",
+                          "--report", str(report), str(ROOT)], capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    names = {item["metadata"]["name"].lower() for item in json.loads(report.read_text())["install"]}
+    assert "depthguard" in names and {"numpy", "numba", "pin"} <= names, names
+    assert not names & {"pybullet", "matplotlib", "tqdm", "depthguard-lab", "open3d", "torch"}, names
