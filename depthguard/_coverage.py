@@ -59,7 +59,8 @@ import numpy as np
 import depthguard as dg
 from depthguard import config
 from depthguard.files import atomic_write, write_whole
-from depthguard.errors import InputError, check_real
+from depthguard.errors import InputError
+from depthguard.validation import check_real
 
 #: Sample spacing, metres; also the rho of the monitor queried at the samples.
 SPACING = 0.03

@@ -24,8 +24,8 @@ import numpy as np
 
 from depthguard.cameras import PinholeCamera, Rig
 from depthguard.depth import depth_image
-from depthguard.depthspace import check_points
-from depthguard.errors import DepthguardError, InputError, check_real
+from depthguard.validation import check_points, check_real
+from depthguard.errors import DepthguardError, InputError
 from depthguard.results import DistanceResult, Flag
 
 _LOG = logging.getLogger("depthguard")

@@ -13,8 +13,9 @@ from depthguard import config
 from depthguard._settings import MonitorSettings
 from depthguard.cameras import Rig
 from depthguard.depth import DepthImage, OccupancyImage, checked_frame, depth_image, filled_space, prepare_depth
-from depthguard.depthspace import check_points, single_camera_distances
-from depthguard.errors import InputError, check_real, short_repr
+from depthguard.depthspace import single_camera_distances
+from depthguard.validation import check_points, check_real, short_repr
+from depthguard.errors import InputError
 from depthguard.results import DetectableResult, DistanceResult, Flag
 
 
@@ -647,7 +648,7 @@ class PreparedSet:
         if self.detectable is None:
             raise InputError("this monitor has no detection_capability: pass DistanceMonitor(detection_capability="
                              "...) for detectable distances", field="detection_capability")
-        from depthguard.freespace import check_limit
+        from depthguard.validation import check_limit
 
         points = check_points(points_world) if check else points_world
         limit = check_limit(limit)

@@ -26,7 +26,8 @@ import numpy as np
 
 from depthguard import config
 from depthguard._files import load_json, read_text
-from depthguard.errors import InputError, short_repr
+from depthguard.errors import InputError
+from depthguard.validation import short_repr
 
 #: A plain decimal number: what the CSV reader accepts in a coordinate column.
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")

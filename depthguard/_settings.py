@@ -4,11 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from depthguard import config
-from depthguard.depthspace import check_options
-from depthguard.errors import InputError, check_real, short_repr
+from depthguard.validation import check_choice, check_options, check_real, check_whole, short_repr
+from depthguard.errors import InputError
 
 
 @dataclass(frozen=True)
@@ -80,18 +78,18 @@ class MonitorSettings:
 
     def __post_init__(self):
         values = {"rho": check_options(self.rho, self.aggregate, self.unseen, self.method),
-                  "invalid": _choice(self.invalid, "invalid", config.INVALID_POLICIES)}
+                  "invalid": check_choice(self.invalid, "invalid", config.INVALID_POLICIES)}
         if not (self.max_age is None or (isinstance(self.max_age, str) and self.max_age == "auto")):
             values["max_age"] = check_real(self.max_age, "max_age", minimum=0.0, above_minimum=True,
                                            maximum=config.MAX_AGE_LIMIT, unit="seconds", field="max_age")
-        values["hole_pixels"] = _whole(self.hole_pixels, "hole_pixels", config.MAX_HOLE_PIXELS)
-        values["self_filter"] = _choice(self.self_filter, "self_filter", config.SELF_FILTER_GEOMETRIES)
+        values["hole_pixels"] = check_whole(self.hole_pixels, "hole_pixels", config.MAX_HOLE_PIXELS)
+        values["self_filter"] = check_choice(self.self_filter, "self_filter", config.SELF_FILTER_GEOMETRIES)
         values["self_filter_tolerance"] = check_real(
             self.self_filter_tolerance, "self_filter_tolerance", minimum=0.0, maximum=config.SELF_FILTER_TOLERANCE_MAX,
             unit="metres", field="self_filter_tolerance")
         values["fusion_margin"] = check_real(self.fusion_margin, "fusion_margin", minimum=0.0, unit="metres",
                                              field="fusion_margin")
-        values["fusion_pixels"] = _whole(self.fusion_pixels, "fusion_pixels", config.MAX_FUSION_PIXELS)
+        values["fusion_pixels"] = check_whole(self.fusion_pixels, "fusion_pixels", config.MAX_FUSION_PIXELS)
         values["robot_zone"] = check_real(self.robot_zone, "robot_zone", minimum=0.0, maximum=config.ROBOT_ZONE_MAX,
                                           unit="metres", field="robot_zone")
         if not isinstance(self.memory, bool):
@@ -125,15 +123,3 @@ class MonitorSettings:
     def untimed_stale(self) -> bool:
         """Whether a frame without a timestamp is stale: only under a max_age given explicitly."""
         return not (self.max_age is None or isinstance(self.max_age, str))
-
-
-def _choice(value, name: str, allowed: tuple) -> str:
-    if not isinstance(value, str) or value not in allowed:
-        raise InputError(f"{name} must be one of {allowed}, got {short_repr(value)}", field=name)
-    return value
-
-
-def _whole(value, name: str, maximum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 <= value <= maximum:
-        raise InputError(f"{name} must be a whole number in [0, {maximum}], got {short_repr(value)}", field=name)
-    return int(value)

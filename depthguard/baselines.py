@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 from depthguard import config
 from depthguard._jit import kernel
 from depthguard.depth import DepthImage
-from depthguard.depthspace import check_points
+from depthguard.validation import check_points
 from depthguard._frustum_kernels import cube_window
 
 

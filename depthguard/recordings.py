@@ -58,7 +58,8 @@ from depthguard import config
 from depthguard._files import atomic_folder, check_regular_file, load_yaml, read_text
 from depthguard.cameras import PinholeCamera, Rig, load_rig, save_rig
 from depthguard.depth import DepthImage, depth_image, load_depth
-from depthguard.errors import DepthguardError, DepthImageError, InputError, check_path, short_repr
+from depthguard.errors import DepthguardError, DepthImageError, InputError
+from depthguard.validation import check_path, short_repr
 
 __all__ = ["FrameRecord", "FrameSet", "Recording", "open_recording", "write_bag"]
 

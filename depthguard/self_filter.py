@@ -20,7 +20,8 @@ from scipy.spatial import HalfspaceIntersection
 
 from depthguard import config
 from depthguard.cameras import PinholeCamera
-from depthguard.errors import InputError, check_real, short_repr
+from depthguard.errors import InputError
+from depthguard.validation import check_real, short_repr
 from depthguard.rendering import MeshInstance, Renderer, primitive_mesh
 from depthguard.robots import RobotModel
 from depthguard.scenes import Capsule

@@ -8,7 +8,8 @@ import numpy as np
 
 from depthguard import config
 from depthguard.cameras import PinholeCamera
-from depthguard.errors import InputError, check_real, short_repr
+from depthguard.errors import InputError
+from depthguard.validation import check_real, short_repr
 
 
 def ray_boxes(camera: PinholeCamera, boxes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

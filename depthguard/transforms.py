@@ -10,38 +10,6 @@ import math
 
 import numpy as np
 
-from depthguard import config
-from depthguard.errors import RigError
-
-
-def check_transform(matrix, *, camera: str | None = None, field: str = "T_world_camera") -> np.ndarray:
-    """Return ``matrix`` as a validated (4, 4) float64 rigid transform.
-
-    Raises :class:`RigError` naming ``camera`` and ``field`` when the matrix is not 4x4, not finite, its last row is
-    not ``[0, 0, 0, 1]``, or its rotation is not orthonormal with determinant +1 (within
-    ``config.ROTATION_TOLERANCE``).
-    """
-    try:
-        T = np.array(matrix, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise RigError(f"not a 4x4 matrix of numbers ({exc})", camera=camera, field=field) from None
-    if T.shape != (4, 4):
-        raise RigError(f"expected a 4x4 matrix, got shape {T.shape}", camera=camera, field=field)
-    if not np.all(np.isfinite(T)):
-        raise RigError("contains NaN or infinity", camera=camera, field=field)
-    if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=config.ROTATION_TOLERANCE):
-        raise RigError(f"last row must be [0, 0, 0, 1], got {T[3].tolist()}", camera=camera, field=field)
-    R = T[:3, :3]
-    off = np.abs(R.T @ R - np.eye(3)).max()
-    det = np.linalg.det(R)
-    if off > config.ROTATION_TOLERANCE or abs(det - 1.0) > config.ROTATION_TOLERANCE:
-        raise RigError(
-            f"rotation is not orthonormal with determinant +1 (max |R^T R - I| = {off:.3g}, det = {det:.6g})",
-            camera=camera,
-            field=field,
-        )
-    T[3] = (0.0, 0.0, 0.0, 1.0)
-    return T
 
 
 def invert(T_a_b: np.ndarray) -> np.ndarray:

@@ -761,7 +761,7 @@ def test_any_value_in_a_rig_gives_a_rig_or_a_rig_error(where, key, value):
 @settings(max_examples=200, deadline=None)
 @given(hnp.arrays(dtype=hnp.scalar_dtypes(), shape=hnp.array_shapes(min_dims=0, max_dims=3, min_side=0, max_side=4)))
 def test_any_array_of_points_is_checked_or_refused(array):
-    from depthguard.depthspace import check_points
+    from depthguard.validation import check_points
 
     try:
         points = check_points(array)

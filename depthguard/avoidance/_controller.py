@@ -31,7 +31,8 @@ import numpy as np
 from depthguard import config
 from depthguard.avoidance._limits import JointLimits, reachable
 from depthguard.avoidance._ssm import brake_along_path
-from depthguard.errors import InputError, check_real, real_vector, short_repr
+from depthguard.errors import InputError
+from depthguard.validation import check_real, real_vector, short_repr
 from depthguard.results import DistanceResult
 
 

@@ -7,7 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from depthguard import config
-from depthguard.errors import InputError, real_vector
+from depthguard.errors import InputError
+from depthguard.validation import real_vector
 
 
 @dataclass(frozen=True, eq=False)

@@ -68,7 +68,8 @@ from depthguard.config import (  # the SSM defaults (ISO/TS 15066, ISO 13855)
     SSM_STOPPING_TIME,
     SSM_UNIT_TOLERANCE,
 )
-from depthguard.errors import InputError, check_real
+from depthguard.errors import InputError
+from depthguard.validation import check_real
 from depthguard.results import DetectableResult, DistanceResult
 
 _UNITS = {"human_speed": "m/s", "human_speed_near": "m/s", "stopping_time": "seconds"}

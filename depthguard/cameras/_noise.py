@@ -9,7 +9,7 @@ import numpy as np
 
 from depthguard import config
 from depthguard.errors import RigError
-from depthguard.errors import short_repr as _short
+from depthguard.validation import short_repr as _short
 
 
 @dataclass(frozen=True)

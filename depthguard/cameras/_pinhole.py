@@ -9,8 +9,9 @@ import numpy as np
 
 from depthguard import config
 from depthguard.cameras._noise import NoiseModel
-from depthguard.errors import RigError, short_repr
-from depthguard.transforms import check_transform, invert
+from depthguard.errors import RigError
+from depthguard.validation import check_transform, short_repr
+from depthguard.transforms import invert
 
 
 @dataclass(frozen=True, eq=False)

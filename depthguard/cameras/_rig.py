@@ -44,7 +44,8 @@ from depthguard import config
 from depthguard._files import read_yaml, write_whole
 from depthguard.cameras._noise import NoiseModel
 from depthguard.cameras._pinhole import PinholeCamera
-from depthguard.errors import RigError, check_path, short_repr
+from depthguard.errors import RigError
+from depthguard.validation import check_path, short_repr
 
 _INTRINSIC_KEYS = ("width", "height", "fx", "fy", "cx", "cy")
 

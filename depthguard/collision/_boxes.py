@@ -11,7 +11,8 @@ import numpy as np
 from depthguard import config
 from depthguard.collision import _update_kernels
 from depthguard.collision._epipolar import TileGrid
-from depthguard.errors import InputError, real_vector
+from depthguard.errors import InputError
+from depthguard.validation import real_vector
 from depthguard.scenes import Box
 
 #: metres, optical depth: a box with a corner this near the camera's plane (or behind it) may be seen in every tile

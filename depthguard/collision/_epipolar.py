@@ -13,7 +13,8 @@ import numpy as np
 from depthguard import config
 from depthguard.cameras import PinholeCamera
 from depthguard.collision import _kernels
-from depthguard.errors import InputError, short_repr
+from depthguard.errors import InputError
+from depthguard.validation import short_repr
 
 
 class TileGrid:

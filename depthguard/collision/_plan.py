@@ -21,7 +21,8 @@ import numbers
 import numpy as np
 
 from depthguard.collision import _plan_kernels
-from depthguard.errors import InputError, real_vector, short_repr
+from depthguard.errors import InputError
+from depthguard.validation import real_vector, short_repr
 
 #: The most cells a configuration grid (and a free mask) may hold: the wave's work arrays take 8 bytes per cell
 #: (128 MiB at the cap), and its flat indices are 32-bit.

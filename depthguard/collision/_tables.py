@@ -14,6 +14,7 @@ import numpy as np
 
 from depthguard.collision._epipolar import EpipolarBands
 from depthguard.errors import InputError
+from depthguard.validation import check_unseen
 
 #: Tile labels of the obstacle image (Table I) and of the revised obstacle image (Table III).
 BACKGROUND, OBSTACLE, UNKNOWN, ERROR, POSSIBLE = 0, 1, 2, 3, 4
@@ -135,14 +136,6 @@ def verdict(obstacle: Sequence[bool], possible: Sequence[bool], theta: int, unse
         klass = "D"
     collides = ("B", "C", "D") if unseen == "occupied" else ("C", "D")
     return Verdict(collision=klass in collides, klass=klass, obstacle=ro, possible=rp)
-
-
-def check_unseen(unseen) -> str:
-    """The ``unseen`` policy of :func:`verdict`: "occupied" or "free", else InputError."""
-    if unseen not in ("occupied", "free"):
-        raise InputError(f"unseen must be 'occupied' (fail-safe) or 'free' (the paper's class B rule), got "
-                         f"{unseen!r}", field="unseen")
-    return unseen
 
 
 def _theta(theta, c: int) -> int:

@@ -23,7 +23,8 @@ from depthguard import config
 from depthguard.cameras import PinholeCamera
 from depthguard.depth import _kernels
 from depthguard.depth._image import DepthImage
-from depthguard.errors import InputError, check_real, short_repr
+from depthguard.errors import InputError
+from depthguard.validation import check_real, short_repr
 
 
 @dataclass(frozen=True, eq=False)
@@ -196,5 +197,3 @@ def _robot_image(image, camera: PinholeCamera, field: str) -> np.ndarray:
     if array.size and not (array.min() >= 0 and np.isfinite(array.max())):  # min is NaN if any element is
         raise InputError(f"{field} of camera {camera.name!r} must be finite depths >= 0 (0 = no robot)")
     return array
-
-

@@ -14,8 +14,9 @@ from depthguard.depth import DepthImage, OccupancyImage
 from depthguard.depth import block_minimum
 from depthguard.depthgrid import _kernels
 from depthguard.depthgrid._map import DepthGridMap
-from depthguard.depthspace import check_options, check_points, query_arrays
-from depthguard.errors import InputError, check_real, short_repr
+from depthguard.depthspace import query_arrays
+from depthguard.validation import check_options, check_points, check_real, short_repr
+from depthguard.errors import InputError
 from depthguard.results import DistanceResult, Flag
 
 

@@ -52,7 +52,8 @@ from depthguard import config
 from depthguard._files import atomic_write, read_bytes
 from depthguard.cameras import Rig
 from depthguard.depth import npy_header
-from depthguard.errors import DepthguardError, InputError, short_repr
+from depthguard.errors import DepthguardError, InputError
+from depthguard.validation import short_repr
 
 MAP_FORMAT = "depthguard-depth-grid-map/2"
 _OLD_FORMATS = ("depthguard-depth-grid-map/1",)

@@ -10,57 +10,9 @@ from numba import parallel_chunksize
 from depthguard import config
 from depthguard.depth import OccupancyImage
 from depthguard.depthspace import _kernels
-from depthguard.errors import InputError, check_real, short_repr
+from depthguard.errors import InputError
+from depthguard.validation import check_options, check_points
 from depthguard.results import DistanceResult, Flag
-
-
-def check_points(points_world) -> np.ndarray:
-    """Return control points as a C-contiguous (n, 3) float64 array (metres, world frame).
-
-    Accepts a sequence or array of real numbers of shape (n, 3), or (3,) for a single point; an empty list or an
-    array of shape (0,) or (0, 3) gives a (0, 3) array. Raises :class:`InputError` for anything else: a string,
-    a masked array, complex, bool, object or text values, another shape (an (n, 0) array among them), a coordinate
-    that is not finite or beyond ``config.COORDINATE_LIMIT`` metres (naming the point's index).
-    """
-    if isinstance(points_world, (str, bytes)):
-        raise InputError(f"points must be numbers of shape (n, 3) (metres, world frame), got a string "
-                         f"{short_repr(points_world)}", field="points")
-    if isinstance(points_world, np.ma.MaskedArray):
-        raise InputError("points must not be a masked array: a masked coordinate has no value (pass the points you "
-                         "mean, as a plain array)", field="points")
-    try:
-        array = np.asarray(points_world)
-    except (TypeError, ValueError) as exc:  # ragged lists, objects numpy cannot read
-        raise InputError(f"points must be numbers of shape (n, 3) ({' '.join(str(exc).split())[:120]})",
-                         field="points") from None
-    if array.dtype.kind not in "fiu":  # checked before converting: complex, bool, object and text never pass
-        raise InputError(f"points must be real numbers (float or int), got dtype {array.dtype}", field="points")
-    points = np.array(array, dtype=np.float64)
-    if points.ndim == 1 and points.shape[0] in (0, 3):
-        points = points.reshape(-1, 3)
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise InputError(f"points must have shape (n, 3) (metres, world frame), got {points.shape}", field="points")
-    bad = ~np.all(np.isfinite(points), axis=1)
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise InputError(f"point #{i} is not finite: {points[i].tolist()}", field="points")
-    far = np.any(np.abs(points) > config.COORDINATE_LIMIT, axis=1)
-    if far.any():
-        i = int(np.argmax(far))
-        raise InputError(f"point #{i} {points[i].tolist()} is beyond +-{config.COORDINATE_LIMIT:g} m "
-                         "(config.COORDINATE_LIMIT)", field="points")
-    return np.ascontiguousarray(points)
-
-
-def check_options(rho: float, aggregate: str, unseen: str, method: str) -> float:
-    """Raise :class:`InputError` for an unknown policy or a rho that is not a number of metres in
-    [``config.RHO_MIN``, ``config.RHO_MAX``]; return rho as a float."""
-    rho = check_real(rho, "rho", minimum=config.RHO_MIN, maximum=config.RHO_MAX, unit="metres", field="rho")
-    for name, value, allowed in (("aggregate", aggregate, config.AGGREGATES),
-                                 ("unseen", unseen, config.UNSEEN_POLICIES), ("method", method, config.METHODS)):
-        if not isinstance(value, str) or value not in allowed:
-            raise InputError(f"{name} must be one of {allowed}, got {short_repr(value)}", field=name)
-    return rho
 
 
 def query_arrays(camera, points_world: np.ndarray):

@@ -42,7 +42,8 @@ from numba import prange
 
 from depthguard import config
 from depthguard._jit import kernel
-from depthguard.errors import InputError, check_real
+from depthguard.errors import InputError
+from depthguard.validation import check_limit, check_real
 from depthguard.freespace._memory import VoxelBox, _check_box
 
 #: Voxels a side of the blocks whose counts let a distance query skip the empty parts of the box.
@@ -131,13 +132,6 @@ class DetectableSpace:
                      float(self.box.voxel), self.beyond, points, float(limit) + self.radius, out)
             out = np.minimum(np.maximum(out - self.radius, 0.0), limit)
         return out
-
-
-def check_limit(limit) -> float:
-    """``limit`` (metres, >= 0, inf allowed) as a float, or :class:`InputError` naming ``limit``."""
-    if isinstance(limit, float) and limit == math.inf:
-        return limit
-    return check_real(limit, "limit", minimum=0.0, unit="metres", field="limit")
 
 
 def robot_voxels(box: VoxelBox, capsules: np.ndarray, zone: float, out: np.ndarray) -> None:

@@ -17,7 +17,8 @@ import numpy as np
 
 from depthguard import config
 from depthguard.cameras import PinholeCamera
-from depthguard.errors import InputError, check_real, short_repr
+from depthguard.errors import InputError
+from depthguard.validation import check_real, short_repr
 from depthguard.freespace import _kernels
 
 _SQRT3 = math.sqrt(3.0)

@@ -15,11 +15,11 @@ import pinocchio as pin
 import trimesh
 
 from depthguard import config
-from depthguard.errors import InputError, RigError, RobotError, real_vector, short_repr
+from depthguard.errors import InputError, RigError, RobotError
+from depthguard.validation import check_real_positive, check_transform, real_vector, short_repr
 from depthguard.robots._capsules import LinkCapsule, fit_capsule
 from depthguard.robots._urdf import UrdfDescription, collision_mesh, parse_urdf
 from depthguard.scenes import Capsule
-from depthguard.transforms import check_transform
 
 
 def _pybullet_data_path(relative: str) -> Path:
@@ -703,13 +703,6 @@ class RobotModel:
     def __repr__(self) -> str:
         return (f"RobotModel(name={self.name!r}, joints={len(self.joint_names)}, links with geometry="
                 f"{len(self.link_names)}, control points={len(self.control_points)}, padding={self.padding:g})")
-
-
-def check_real_positive(value, name: str) -> float:
-    """``value`` as a float if it is a finite real number > 0, else :class:`InputError` naming ``name``."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not 0.0 < float(value) < math.inf:
-        raise InputError(f"{name} must be a finite number > 0 (metres), got {short_repr(value)}", field=name)
-    return float(value)
 
 
 _CAPSULE_GAPS: dict = {}  # (urdf, padding, base) -> metres, RobotModel.capsule_gap

@@ -51,7 +51,8 @@ import trimesh
 
 from depthguard import config
 from depthguard._files import read_bytes
-from depthguard.errors import RobotError, check_path, short_repr
+from depthguard.errors import RobotError
+from depthguard.validation import check_path, short_repr
 
 #: Joint types with one degree of freedom, which depthguard accepts.
 MOVABLE_TYPES = ("revolute", "continuous", "prismatic")

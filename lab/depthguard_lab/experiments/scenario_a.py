@@ -29,7 +29,7 @@ import numpy as np
 
 import depthguard as dg
 from depthguard import baselines
-from depthguard.depthspace import check_points
+from depthguard.validation import check_points
 from depthguard.scenes import Box, render_depth, scene_distance
 from depthguard.transforms import look_at
 

@@ -41,7 +41,8 @@ import numpy as np
 
 from depthguard import config
 from depthguard.avoidance import AvoidanceController, AvoidanceParams, JointLimits, reachable
-from depthguard.errors import InputError, check_real
+from depthguard.errors import InputError
+from depthguard.validation import check_real
 from depthguard.results import DistanceResult, Flag
 
 MODES = ("none", "avoid", "ssm")

@@ -27,7 +27,8 @@ from scipy.spatial.transform import Rotation
 
 from depthguard.files import atomic_folder
 from depthguard.cameras import save_rig
-from depthguard.errors import InputError, check_path
+from depthguard.errors import InputError
+from depthguard.validation import check_path
 from depthguard.recordings import (
     JOINT_STATES_TOPIC,
     depth_messages,

@@ -96,7 +96,8 @@ from depthguard_lab.simulation._fields import Section, new_name, pose_of
 from depthguard_lab.simulation._people import ActionSpan, Person, box_primitive
 from depthguard_lab.simulation._sensors import SensorModel
 from depthguard_lab.simulation._trajectory import Hexagon, HexagonTrajectory, JointTrajectory, RobotTrajectory
-from depthguard.transforms import check_transform, look_at, yaw_pose
+from depthguard.transforms import look_at, yaw_pose
+from depthguard.validation import check_transform
 
 DEFAULT_SCENE = "scenario_b.yaml"
 
