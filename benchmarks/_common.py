@@ -80,7 +80,7 @@ def report(script: str):
 
     import numba
 
-    from depthguard.files import write_whole
+    from depthguard.io.files import write_whole
 
     tee = _Tee(sys.stdout)
     with contextlib.redirect_stdout(tee):

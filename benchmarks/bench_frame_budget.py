@@ -48,9 +48,9 @@ import depthguard._monitor as monitor_module  # noqa: E402
 import depthguard.depthgrid as depthgrid  # noqa: E402
 import depthguard.freespace as freespace  # noqa: E402
 from depthguard.depthgrid import FusedFrames, grid_range  # noqa: E402
-from depthguard.depthgrid import _kernels as grid_kernels  # noqa: E402
+from depthguard.kernels import depthgrid as grid_kernels  # noqa: E402
 from depthguard.freespace import FreeSpaceMemory  # noqa: E402
-from depthguard.freespace import _kernels as memory_kernels  # noqa: E402
+from depthguard.kernels import freespace as memory_kernels  # noqa: E402
 from depthguard.freespace import _near  # noqa: E402
 from depthguard.rendering import Renderer  # noqa: E402
 from depthguard.robots import RobotModel  # noqa: E402

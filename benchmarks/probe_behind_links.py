@@ -2,7 +2,7 @@
 
 For every principal pixel that shows the robot, the depth grid's candidate space starts at ``blind_from`` (where the
 robot's padded body ends along the pixel, plus the self-filter's slack and the noise margin). This probe classifies
-the 12 cells from there on with the fusion's own kernel (:func:`depthguard.depthgrid._kernels.classify_run`) and
+the 12 cells from there on with the fusion's own kernel (:func:`depthguard.kernels.depthgrid.classify_run`) and
 counts how many cells in a row no secondary camera clears: a run of 0 means the space right behind the link is
 cleared; a short run is a thin shell that only a detection capability (an object size below which unseen space is not
 an obstacle) could remove; a long run is a real hidden pocket (around the base, the pedestal, links hiding each
@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 import depthguard as dg
-from depthguard.depthgrid import _kernels
+from depthguard.kernels import depthgrid as grid_kernels
 from depthguard_lab.experiments import fusion_workcell as fw
 from depthguard_lab.simulation import load_workcell, simulate
 from _common import report
@@ -42,7 +42,7 @@ def run_lengths(path: Path, frame_step: int = 25, pixel_step: int = 7) -> np.nda
         prepared = monitor.prepare_set(dict(frame.depth), joints=frame.joints)
         fused = prepared.fused[0]
         grid = fused.grid
-        state = _kernels.GridState(grid.d_min, grid.delta_d, grid.n_cells, fused._corners, fused._offsets,
+        state = grid_kernels.GridState(grid.d_min, grid.delta_d, grid.n_cells, fused._corners, fused._offsets,
                                    fused._eroded, fused._sizes, fused._z_near, fused._margin, fused._cells,
                                    *fused._memory, fused._free_run, fused._behind_run, *fused._zone)
         vs, us = np.nonzero(np.isfinite(fused._blind_from))
@@ -50,7 +50,7 @@ def run_lengths(path: Path, frame_step: int = 25, pixel_step: int = 7) -> np.nda
             k0 = int((fused._blind_from[v, u] - grid.d_min) / grid.delta_d)
             if k0 < 0 or k0 + CELLS >= grid.n_cells:
                 continue
-            _kernels.classify_run(u, v, k0, k0 + CELLS - 1, state)
+            grid_kernels.classify_run(u, v, k0, k0 + CELLS - 1, state)
             cells = fused._cells[v, u, k0:k0 + CELLS]
             n = 0
             while n < CELLS and cells[n] == 2:

@@ -17,7 +17,7 @@ from depthguard.depth import DepthImage, OccupancyImage, depth_image, load_depth
 from depthguard.depthspace import frustum_distance, paper_frustum_distance, single_camera_distances
 from depthguard.errors import DepthguardError, DepthImageError, InputError, RigError
 from depthguard.results import DetectableResult, DistanceResult, Flag
-from depthguard.recordings import Recording, open_recording
+from depthguard.io.recordings import Recording, open_recording
 
 __version__ = "0.1.0"
 

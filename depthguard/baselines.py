@@ -16,10 +16,10 @@ from numba import prange
 from scipy.spatial import cKDTree
 
 from depthguard import config
-from depthguard._jit import kernel
+from depthguard.kernels.jit import kernel
 from depthguard.depth import DepthImage
 from depthguard.validation import check_points
-from depthguard._frustum_kernels import cube_window
+from depthguard.kernels.frustum import cube_window
 
 
 def valid_metres(depth: DepthImage, camera) -> np.ndarray:

@@ -182,7 +182,7 @@ FUSION_ROW_CHUNKS = 4
 
 # ------------------------------------------------------------------------------------------------------- input files
 
-#: Size caps of the files depthguard reads (depthguard._files), bytes. A larger file is refused unread: a device or
+#: Size caps of the files depthguard reads (depthguard.io.files), bytes. A larger file is refused unread: a device or
 #: a runaway file cannot make a monitor read forever or exhaust memory.
 MAX_TEXT_FILE_BYTES = 1 << 20  # rig, camera_info and scene YAML files: 1 MiB
 MAX_POINTS_FILE_BYTES = 16 << 20  # control-point CSV or JSON: 16 MiB (about half a million points)

@@ -3,7 +3,7 @@ field it came from, and returns the value as depthguard uses it (a float, a floa
 :class:`~depthguard.DepthguardError` subclass naming that field (``InputError`` unless said otherwise). The public
 functions of every package call these where a value enters, once; the kernels behind them trust what they get.
 
-Files are checked where they are read (:mod:`depthguard.files` and each format's reader), since what is valid there
+Files are checked where they are read (:mod:`depthguard.io.files` and each format's reader), since what is valid there
 depends on the format.
 """
 

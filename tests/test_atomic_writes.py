@@ -1,4 +1,4 @@
-"""Every file depthguard writes is whole or absent (``depthguard._files.atomic_write``): a writer stopped part way (a
+"""Every file depthguard writes is whole or absent (``depthguard.io.files.atomic_write``): a writer stopped part way (a
 kill, a full disk, an exception) leaves the older file or none, never a shorter file that loads as valid, and no
 leftover under a name that a reader looks for.
 
@@ -18,12 +18,12 @@ import numpy as np
 import pytest
 
 import depthguard as dg
-from depthguard import _files
+from depthguard.io import files as io_files
 from depthguard.cameras import NoiseModel
 from depthguard.depth import write_depth_pgm, write_depth_png
 from depthguard.depthgrid import build_map, load_map, save_map
 from depthguard.errors import InputError, RigError
-from depthguard.recordings import open_recording, write_bag
+from depthguard.io.recordings import open_recording, write_bag
 from depthguard_lab.simulation import _episode, load_workcell, save_workcell, workcell_from_dict, write_episode
 from depthguard.transforms import look_at
 
@@ -63,7 +63,7 @@ def stop_writes_after(monkeypatch, budget: int) -> None:
         file = open(path, mode, *args, **kwargs)
         return _CutFile(file, budget) if "x" in mode or "w" in mode else file
 
-    monkeypatch.setattr(_files, "open", cut_open, raising=False)
+    monkeypatch.setattr(io_files, "open", cut_open, raising=False)
 
 
 def rig_of(n: int, a: float = 0.001) -> dg.Rig:
@@ -92,36 +92,36 @@ def files_in(folder: Path) -> list[str]:
 def test_atomic_write_keeps_the_older_file_or_none(tmp_path):
     path = tmp_path / "a.txt"
     with pytest.raises(Stopped):
-        with _files.atomic_write(path) as f:
+        with io_files.atomic_write(path) as f:
             f.write("half of it")
             raise Stopped
     assert files_in(tmp_path) == []
-    _files.write_whole(path, "older")
+    io_files.write_whole(path, "older")
     with pytest.raises(Stopped):
-        with _files.atomic_write(path, "wb") as f:
+        with io_files.atomic_write(path, "wb") as f:
             f.write(b"newer, ")
             raise Stopped
     assert path.read_text() == "older" and files_in(tmp_path) == ["a.txt"]
-    _files.write_whole(path, b"newer")
+    io_files.write_whole(path, b"newer")
     assert path.read_bytes() == b"newer" and files_in(tmp_path) == ["a.txt"]
 
 
 def test_atomic_write_errors_name_the_file_asked_for(tmp_path):
     with pytest.raises(FileNotFoundError) as info:
-        _files.write_whole(tmp_path / "no" / "such.yaml", "x")
+        io_files.write_whole(tmp_path / "no" / "such.yaml", "x")
     assert info.value.filename == str(tmp_path / "no" / "such.yaml")
     (tmp_path / "folder").mkdir()
     with pytest.raises(IsADirectoryError) as info:
-        _files.write_whole(tmp_path / "folder", "x")
+        io_files.write_whole(tmp_path / "folder", "x")
     assert info.value.filename == str(tmp_path / "folder") and files_in(tmp_path) == ["folder"]
     with pytest.raises(ValueError):
-        with _files.atomic_write(tmp_path / "a", "a"):
+        with io_files.atomic_write(tmp_path / "a", "a"):
             pass
 
 
 def test_the_temporary_file_is_hidden_and_matches_no_name_a_reader_looks_for(tmp_path):
     path = tmp_path / "000001.png"
-    with _files.atomic_write(path, "wb") as f, _files.atomic_write(path, "wb") as g:
+    with io_files.atomic_write(path, "wb") as f, io_files.atomic_write(path, "wb") as g:
         f.write(b"f")
         g.write(b"g")
         names = sorted(p.name for p in tmp_path.iterdir())
@@ -311,7 +311,7 @@ def test_a_bag_stopped_part_way_leaves_no_folder(tmp_path, monkeypatch):
     wc = tiny_workcell()
     episode = write_episode(wc, tmp_path / "episode", seed=1, progress=False)
     recording = open_recording(episode)
-    import depthguard.recordings as recordings
+    import depthguard.io.recordings as recordings
 
     real_messages = recordings.depth_messages
     calls = []

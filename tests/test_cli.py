@@ -14,7 +14,7 @@ from PIL import Image
 import depthguard as dg
 from cli_support import assert_refused, run_cli
 from depthguard import config
-from depthguard._points_io import load_points
+from depthguard.io.points import load_points
 from depthguard.cli import main
 from depthguard.depth import write_depth_png
 from depthguard.scenes import Box, Sphere, render_depth, scene_distance

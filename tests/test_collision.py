@@ -520,7 +520,7 @@ def test_projected_capsules_cover_every_tile_their_render_covers(iiwa_scene):
 
 def test_a_balls_projected_bounds_are_its_tangents():
     """The slopes a/z of the tangents to a ball equal the extremes over densely sampled points of its surface."""
-    from depthguard.collision._kernels import _ball_slopes
+    from depthguard.kernels.collision import _ball_slopes
 
     for a, z, rho in [(0.3, 1.5, 0.1), (-0.8, 0.9, 0.4), (0.0, 2.0, 0.05), (1.5, 0.7, 0.6)]:
         angles = np.linspace(0.0, 2 * np.pi, 200_001)

@@ -14,7 +14,7 @@ import pytest
 
 import depthguard as dg
 from cli_support import assert_refused, run_cli
-from depthguard import _coverage as cov
+from depthguard import coverage as cov
 from depthguard.robots import RobotModel, segment_distances
 from depthguard.scenes import Box, render_depth
 from depthguard.self_filter import RobotSilhouette

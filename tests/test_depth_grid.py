@@ -313,7 +313,7 @@ def test_nearest_by_run_equals_the_walk_on_random_pixels():
     the answer, both give the same squared distance and depth. Every branch is drawn: the cells just past the run's
     ends, the certain part (a surface's own cell, and the grid's near end), the grid's far end, and a nearest point
     outside the run in a cell known occupied (the answer itself)."""
-    from depthguard.depthgrid import _kernels as K
+    from depthguard.kernels import depthgrid as K
 
     r, grid, principal, frees, robot_far, robot_near = robot_scene_frames(40, 30)
     frames = FusedFrames(grid, r, principal, frees, robot_far=robot_far, robot_near=robot_near)

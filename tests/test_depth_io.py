@@ -538,7 +538,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E
 from PIL import EpsImagePlugin, ImageFile  # noqa: E402
 
 import hostile  # noqa: E402
-from depthguard.depth import _io as depth_io  # noqa: E402
+from depthguard.io import images as depth_io  # noqa: E402
 
 
 @pytest.mark.parametrize("name", ["ps.png", "ps.PNG", "ps.tif", "ps.tiff"])

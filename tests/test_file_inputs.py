@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 import hostile
 from depthguard import config
-from depthguard._points_io import load_points
+from depthguard.io.points import load_points
 from depthguard.errors import InputError, SceneError
 from depthguard_lab.simulation import load_workcell
 

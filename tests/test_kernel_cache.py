@@ -1,4 +1,4 @@
-"""A damaged or unwritable numba kernel cache never stops an answer (``depthguard._jit``): a cache file that cannot
+"""A damaged or unwritable numba kernel cache never stops an answer (``depthguard.kernels.jit``): a cache file that cannot
 be read is compiled afresh, a cache that cannot be written or a missing cache folder leaves the kernels running
 uncached, each with one warning line.
 
@@ -24,7 +24,7 @@ QUERY = ("import json, depthguard as dg; "
          "print(json.dumps([dg.__file__, d.tolist(), p.tolist()]))")
 #: The point is 0.3 m in front of the frustum's near plane (z = 0.5), on its axis.
 ANSWER = [[0.3], [[0.0, 0.0, 0.5]]]
-KERNEL = "depthguard.depthspace._frustum._many"
+KERNEL = "depthguard.kernels.frustum.frustum_nearest_many"
 
 
 def run(code: str, env: dict, cwd) -> tuple[list, list[str]]:
@@ -65,7 +65,7 @@ def test_a_truncated_cache_file_is_compiled_afresh_with_one_warning(cached, tmp_
     answer, lines = run(QUERY, own_cache(folder), tmp_path)
     assert answer[1:] == ANSWER
     assert len(lines) == 1, lines
-    assert KERNEL in lines[0] and "cannot be read" in lines[0] and "depthspace_" in lines[0], lines[0]
+    assert KERNEL in lines[0] and "cannot be read" in lines[0] and "frustum" in lines[0], lines[0]
     # ... and written afresh: the next process loads it, silently.
     answer, lines = run(QUERY, own_cache(folder), tmp_path)
     assert answer[1:] == ANSWER and lines == []

@@ -214,7 +214,7 @@ def test_nan_in_the_map_clears_nothing_it_touches():
 CELL_TESTS = r"""
 import json
 import numpy as np
-from depthguard.depthgrid import _kernels as K
+from depthguard.kernels import depthgrid as K
 
 eroded = np.full((48, 64), 10.0, dtype=np.float32)  # a camera that saw 10 m everywhere
 corners = np.zeros((3, 3, 3))

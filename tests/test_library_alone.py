@@ -2,6 +2,7 @@
 plotting library (matplotlib) or progress bars (tqdm), and it answers a fused query without them."""
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -130,3 +131,37 @@ def test_a_deployment_install_resolves_no_lab_package(tmp_path):
     names = {item["metadata"]["name"].lower() for item in json.loads(report.read_text())["install"]}
     assert "depthguard" in names and {"numpy", "numba", "pin"} <= names, names
     assert not names & {"pybullet", "matplotlib", "tqdm", "depthguard-lab", "open3d", "torch"}, names
+
+
+def test_a_fresh_virtual_environment_with_the_library_alone_answers_a_fused_query(two_cameras, tmp_path):
+    """The deployment install itself: a new virtual environment (no site packages of this one), ``pip install .``
+    from the package registries (pip's cache makes it quick after ./dev.sh), and its own ``depthguard distance`` on
+    two cameras, compiling its kernels afresh: the same answers as this process gives, and none of the lab's packages
+    installed."""
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
+    python = venv / "bin" / "python"
+    # From a copy of the sources: pip builds in the tree, and a stale build/ folder there would go into the wheel.
+    source = tmp_path / "source"
+    shutil.copytree(ROOT, source, ignore=shutil.ignore_patterns(".git", ".venv", "build", "out", "*.egg-info",
+                                                                 "__pycache__", "lab", "tests", "benchmarks"))
+    install = subprocess.run([str(python), "-m", "pip", "install", "--quiet", str(source)], capture_output=True,
+                             text=True, timeout=1200)
+    assert install.returncode == 0, install.stderr[-3000:]
+    listed = subprocess.run([str(python), "-m", "pip", "list", "--format=json"], capture_output=True, text=True,
+                            timeout=300, check=True)
+    names = {item["name"].lower() for item in json.loads(listed.stdout)}
+    assert "depthguard" in names and not names & {"pybullet", "matplotlib", "tqdm", "depthguard-lab"}, names
+    folder = two_cameras
+    argv = ["distance", "--rig", folder / "rig.yaml", "--depth", f"left={folder / 'left.npy'}",
+            "--depth", f"right={folder / 'right.npy'}", "--points", folder / "points.json", "--json"]
+    env = {"PATH": str(venv / "bin"), "HOME": str(tmp_path), "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    run = subprocess.run([str(venv / "bin" / "depthguard"), *map(str, argv)], capture_output=True, text=True,
+                         timeout=1200, cwd=tmp_path, env=env)
+    assert run.returncode == 0, run.stderr[-3000:]
+    answers = json.loads(run.stdout)
+    rig = dg.load_rig(folder / "rig.yaml")
+    frames = {name: dg.load_depth(folder / f"{name}.npy", rig.cameras[name]) for name in rig.cameras}
+    expected = dg.DistanceMonitor(rig).query(frames, np.array(json.loads((folder / "points.json").read_text())))
+    assert [a["distance"] for a in answers] == expected.distance.tolist()
+    assert [a["flags"] for a in answers] == [f.names for f in expected.flags]

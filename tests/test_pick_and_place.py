@@ -13,7 +13,7 @@ from scipy.spatial import ConvexHull
 
 import depthguard as dg
 from depthguard.collision import OBSTACLE, ImageCollisionTest, TileGrid
-from depthguard.collision import _update_kernels
+from depthguard.kernels import collision_update
 from depthguard.collision._boxes import NEAR_PLANE, box_tiles, moved_box
 from depthguard.collision._update import ReferenceUpdate
 from depthguard.errors import InputError
@@ -98,8 +98,8 @@ def test_box_tiles_are_the_projected_hull_and_hold_the_rendered_box():
         args = (corners[None], np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]), cam.fx, cam.fy,
                 cam.cx, cam.cy, NEAR_PLANE, grid.col_edges, grid.row_edges, grid.words)
         compiled, plain = np.zeros((1, grid.words), np.uint64), np.zeros((1, grid.words), np.uint64)
-        _update_kernels.box_tile_bits(*args, compiled)
-        _update_kernels.box_tile_bits.py_func(*args, plain)
+        collision_update.box_tile_bits(*args, compiled)
+        collision_update.box_tile_bits.py_func(*args, plain)
         assert np.array_equal(compiled, plain) and np.array_equal(compiled[0], grid.pack(tiles))
 
 

@@ -9,7 +9,7 @@ from collections import deque
 import numpy as np
 import pytest
 
-from depthguard.collision import _plan_kernels
+from depthguard.kernels import collision_plan
 from depthguard.collision._plan import MAX_GRID_CELLS, ConfigurationGrid, plan_path, wave_propagation
 from depthguard.errors import InputError
 
@@ -167,11 +167,11 @@ def test_the_kernel_body_runs_as_python():
     walled = np.ones(120, dtype=bool)
     walled[[118, 113, 95]] = False  # the goal's three neighbours
     for mask, length in ((free, None), (walled, 0)):
-        compiled = _plan_kernels.shortest_path(mask, shape, strides, 0, 119)
-        plain = _plan_kernels.shortest_path.py_func(mask, shape, strides, 0, 119)
+        compiled = collision_plan.shortest_path(mask, shape, strides, 0, 119)
+        plain = collision_plan.shortest_path.py_func(mask, shape, strides, 0, 119)
         assert np.array_equal(compiled, plain)
         assert len(compiled) == (length if length is not None else 4 + 3 + 5 + 1) or length is None
-    assert len(_plan_kernels.shortest_path(free, shape, strides, 0, 119)) > 0
+    assert len(collision_plan.shortest_path(free, shape, strides, 0, 119)) > 0
 
 
 @pytest.mark.parametrize("free, start, goal, field", [

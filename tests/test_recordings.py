@@ -28,7 +28,7 @@ from cli_support import assert_refused, run_cli
 from depthguard.cli import main
 from depthguard.depth import write_depth_png
 from depthguard.errors import DepthImageError, InputError, RigError
-from depthguard.recordings import open_recording, write_bag
+from depthguard.io.recordings import open_recording, write_bag
 from depthguard.robots import RobotModel
 from depthguard_lab.simulation import default_workcell, write_episode
 

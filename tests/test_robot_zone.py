@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import depthguard as dg
-from depthguard.depthgrid import _kernels as K
+from depthguard.kernels import depthgrid as K
 from depthguard.depthgrid._fusion import _zone_arrays
 from depthguard_lab.experiments.workcell import scene_distance
 from depthguard_lab.simulation import load_workcell, simulate

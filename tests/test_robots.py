@@ -32,7 +32,7 @@ import naive
 from depthguard import config
 from depthguard.errors import DepthguardError, InputError, RobotError
 from depthguard.robots import ControlPoint, LinkCapsule, RobotModel, default_robot_path, fit_capsule
-from depthguard.robots import _capsule_kernels as kernels
+from depthguard.kernels import capsules as kernels
 from depthguard.robots._capsules import _hull_vertices, capsule_volume, enclosing_circle, segment_distances
 from depthguard.robots._urdf import _sphere_mesh
 

@@ -1,6 +1,6 @@
 """``depthguard warmup`` compiles every kernel the product uses (issue 12): afterwards a new process answers from the
 cache and compiles nothing; a kernel that does compile at run time says so; kernel caches know the sources they
-inline (``depthguard._jit``)."""
+inline (``depthguard.kernels.jit``)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import depthguard as dg
-from depthguard import _jit
+from depthguard.kernels import jit
 from depthguard.depth import write_depth_png
 from depthguard.rendering import Renderer
 from depthguard.robots import RobotModel
@@ -127,38 +127,38 @@ def test_a_kernel_compiled_at_run_time_says_so(tmp_path):
     assert done.returncode == 0, done.stderr
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1, lines
-    assert "depthguard.depthspace._frustum._many" in lines[0] and "depthguard warmup" in lines[0]
+    assert "depthguard.kernels.frustum.frustum_nearest_many" in lines[0] and "depthguard warmup" in lines[0]
     assert any(tmp_path.rglob("*.nbi"))  # cached where the user asked
     again = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
     assert again.returncode == 0 and again.stderr == ""
 
 
 def test_every_kernel_module_compiles_through_jit_kernel():
-    """Every module that defines numba kernels is listed in _jit.KERNEL_MODULES and uses _jit.kernel (cached,
+    """Every module that defines numba kernels is listed in jit.KERNEL_MODULES and uses jit.kernel (cached,
     stamped with its dependencies), never numba's njit directly."""
     uses_kernel = set()
     for path in PACKAGE.rglob("*.py"):
         source = path.read_text()
         name = "depthguard." + ".".join(path.relative_to(PACKAGE).with_suffix("").parts)
-        assert not re.search(r"\bnjit\b|numba\.jit|from numba import jit", source) or path.name == "_jit.py", name
+        assert not re.search(r"\bnjit\b|numba\.jit|from numba import jit", source) or path.name == "jit.py", name
         if re.search(r"^@kernel\(", source, re.M):
             uses_kernel.add(name)
-    assert uses_kernel == set(_jit.KERNEL_MODULES)
+    assert uses_kernel == set(jit.KERNEL_MODULES)
 
 
 def test_kernel_caches_are_stamped_with_the_sources_they_inline():
-    from depthguard.depthgrid import _kernels as grid_kernels
-    from depthguard.depthspace import _kernels as space_kernels
+    from depthguard.kernels import depthgrid as grid_kernels
+    from depthguard.kernels import depthspace as space_kernels
 
-    assert _jit.kernel_dependencies("depthguard.depthgrid._kernels") == ("depthguard._frustum_kernels",
-                                                                         "depthguard.depthgrid._kernels")
-    assert _jit.kernel_dependencies("depthguard.depthspace._kernels") == ("depthguard._frustum_kernels",
-                                                                          "depthguard.depthspace._kernels")
-    assert _jit.kernel_dependencies("depthguard.depth._kernels") == ("depthguard._frustum_kernels",
-                                                                     "depthguard.depth._kernels")
+    assert jit.kernel_dependencies("depthguard.kernels.depthgrid") == ("depthguard.kernels.depthgrid",
+                                                                         "depthguard.kernels.frustum")
+    assert jit.kernel_dependencies("depthguard.kernels.depthspace") == ("depthguard.kernels.depthspace",
+                                                                          "depthguard.kernels.frustum")
+    assert jit.kernel_dependencies("depthguard.kernels.depth") == ("depthguard.kernels.depth",
+                                                                     "depthguard.kernels.frustum")
     # The locator in use is depthguard's, and its stamp covers the depth grid's and the single camera's sources.
     locator = grid_kernels.fused_query_points._cache._impl.locator
     assert type(locator).__name__.startswith("Depthguard")
     stamp = locator.get_source_stamp()
-    assert stamp == _jit.sources_stamp(grid_kernels.__file__)
-    assert stamp != _jit.sources_stamp(space_kernels.__file__)
+    assert stamp == jit.sources_stamp(grid_kernels.__file__)
+    assert stamp != jit.sources_stamp(space_kernels.__file__)

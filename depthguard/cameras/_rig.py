@@ -23,7 +23,7 @@ not rectified, zero distortion of a model whose zero is the pinhole) or from P (
 rectification matrix R other than the identity, binning, a region of interest smaller than the image, a skewed
 camera matrix and a projection matrix with a stereo baseline are refused.
 
-Files are read through :mod:`depthguard._files`: regular files only, at most ``config.MAX_TEXT_FILE_BYTES``, YAML
+Files are read through :mod:`depthguard.io.files`: regular files only, at most ``config.MAX_TEXT_FILE_BYTES``, YAML
 without anchors, aliases or duplicate keys.
 """
 
@@ -41,7 +41,7 @@ import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError
 
 from depthguard import config
-from depthguard._files import read_yaml, write_whole
+from depthguard.io.files import read_yaml, write_whole
 from depthguard.cameras._noise import NoiseModel
 from depthguard.cameras._pinhole import PinholeCamera
 from depthguard.errors import RigError

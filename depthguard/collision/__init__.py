@@ -14,7 +14,7 @@
 - Step 9: :class:`ConfigurationGrid`, :func:`wave_propagation`, :func:`plan_path`.
 - Step 8, pick-and-place: :mod:`depthguard.collision._update` (:class:`ReferenceUpdate`).
 
-The command line (``depthguard collide``, ``depthguard plan``) lives in :mod:`depthguard._collision_command`.
+The command line (``depthguard collide``, ``depthguard plan``) lives in :mod:`depthguard.cli.collide` and :mod:`depthguard.cli.plan`.
 """
 
 from depthguard.collision._difference import (

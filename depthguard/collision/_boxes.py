@@ -9,14 +9,14 @@ import itertools
 import numpy as np
 
 from depthguard import config
-from depthguard.collision import _update_kernels
+from depthguard.kernels import collision_update as update_kernels
 from depthguard.collision._epipolar import TileGrid
 from depthguard.errors import InputError
 from depthguard.validation import real_vector
 from depthguard.scenes import Box
 
 #: metres, optical depth: a box with a corner this near the camera's plane (or behind it) may be seen in every tile
-#: (the value the capsule and band kernels of ``_kernels.py`` use).
+#: (the value the capsule and band kernels of ``depthguard.kernels.collision`` use).
 NEAR_PLANE = 1e-3
 
 #: (8, 3) the corners of the unit cube [-1, 1]^3, scaled by a box's half extents.
@@ -69,7 +69,7 @@ def grid_bits(grid: TileGrid, corners: np.ndarray) -> np.ndarray:
     cam = grid.camera
     T = cam.T_camera_world
     out = np.zeros((corners.shape[0], grid.words), dtype=np.uint64)
-    _update_kernels.box_tile_bits(np.ascontiguousarray(corners, dtype=np.float64), np.ascontiguousarray(T[:3, :3]),
+    update_kernels.box_tile_bits(np.ascontiguousarray(corners, dtype=np.float64), np.ascontiguousarray(T[:3, :3]),
                                   np.ascontiguousarray(T[:3, 3]), float(cam.fx), float(cam.fy), float(cam.cx),
                                   float(cam.cy), NEAR_PLANE, grid.col_edges, grid.row_edges, grid.words, out)
     return out

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import ndimage
 
-from depthguard.collision import _kernels
+from depthguard.kernels import collision as collision_kernels
 from depthguard.collision._epipolar import TileGrid
 from depthguard.errors import InputError
 
@@ -76,7 +76,7 @@ def tile_features(image, grid: TileGrid) -> np.ndarray:
     last = grid.first_row[tile_row + 1] - 1
     y = np.where(last > first, (np.arange(cam.height) - first) / np.maximum(last - first, 1), 0.5)
     moments = np.empty((grid.rows, grid.cols, 2))
-    _kernels.tile_moments(np.ascontiguousarray(image), grid.first_row, grid.first_col, y, moments)
+    collision_kernels.tile_moments(np.ascontiguousarray(image), grid.first_row, grid.first_col, y, moments)
     total, moment = moments[..., 0], moments[..., 1]
     with np.errstate(invalid="ignore", divide="ignore"):
         balance = np.where(total > 0.0, moment / np.where(total > 0.0, total, 1.0), 0.5)
@@ -123,7 +123,7 @@ def depth_difference_image(image, reference, grid: TileGrid, thresholds=(0.05, 0
     scale = cam.depth_scale if now.dtype == np.uint16 else 1.0
     changed = np.empty((grid.rows, grid.cols))
     k0, k1, k2 = cam.noise.coefficients()
-    _kernels.depth_changes(np.ascontiguousarray(now), scale, np.ascontiguousarray(ref), thresholds[0], k0, k1, k2,
+    collision_kernels.depth_changes(np.ascontiguousarray(now), scale, np.ascontiguousarray(ref), thresholds[0], k0, k1, k2,
                            grid.first_row, grid.first_col, changed)
     counts = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
     return _closed(changed / counts > thresholds[1])

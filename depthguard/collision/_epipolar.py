@@ -12,7 +12,7 @@ import numpy as np
 
 from depthguard import config
 from depthguard.cameras import PinholeCamera
-from depthguard.collision import _kernels
+from depthguard.kernels import collision as collision_kernels
 from depthguard.errors import InputError
 from depthguard.validation import short_repr
 
@@ -141,7 +141,7 @@ class EpipolarBands:
                 cam_b = grid_b.camera
                 T = np.linalg.inv(cam_b.T_world_camera) @ grid_a.camera.T_world_camera  # a's optical -> b's
                 out = np.empty((grid_a.n_tiles, grid_b.words), dtype=np.uint64)
-                _kernels.tile_bands(rays, depths, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
+                collision_kernels.tile_bands(rays, depths, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
                                     cam_b.fx, cam_b.fy, cam_b.cx, cam_b.cy, grid_b.col_edges, grid_b.row_edges,
                                     grid_b.words, out)
                 self.bits[(a, b)] = out

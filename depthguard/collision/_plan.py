@@ -20,7 +20,7 @@ import numbers
 
 import numpy as np
 
-from depthguard.collision import _plan_kernels
+from depthguard.kernels import collision_plan as plan_kernels
 from depthguard.errors import InputError
 from depthguard.validation import real_vector, short_repr
 
@@ -186,7 +186,7 @@ def wave_propagation(free, start, goal, *, check: bool = True) -> list[tuple[int
     flat = np.ascontiguousarray(free).reshape(-1)
     if not flat.flags.writeable:  # numba types a read-only array apart: one compiled signature for every caller
         flat = flat.copy()
-    path = _plan_kernels.shortest_path(flat, shape, strides, int(np.dot(start, strides)), int(np.dot(goal, strides)))
+    path = plan_kernels.shortest_path(flat, shape, strides, int(np.dot(start, strides)), int(np.dot(goal, strides)))
     if len(path) == 0:
         return None
     return list(zip(*(axis.tolist() for axis in np.unravel_index(path, free.shape))))

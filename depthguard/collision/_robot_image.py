@@ -19,7 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from depthguard import config
-from depthguard.collision import _kernels
+from depthguard.kernels import collision as collision_kernels
 from depthguard.collision._epipolar import TileGrid
 from depthguard.errors import InputError
 
@@ -76,7 +76,7 @@ class RobotProjector:
     def _bits(self, ends: np.ndarray, radii: np.ndarray) -> np.ndarray:
         words = max(grid.words for grid in self.grids)
         out = np.zeros((len(self.grids), ends.shape[0], words), dtype=np.uint64)
-        project = _kernels.capsule_tile_bits_parallel if len(ends) >= 64 else _kernels.capsule_tile_bits
+        project = collision_kernels.capsule_tile_bits_parallel if len(ends) >= 64 else collision_kernels.capsule_tile_bits
         for c, (grid, (R, t, fx, fy, cx, cy)) in enumerate(zip(self.grids, self._poses)):
             project(ends, radii, R, t, fx, fy, cx, cy, grid.col_edges, grid.row_edges, grid.words,
                     out[c, :, : grid.words])

@@ -1,8 +1,8 @@
 """Depth images: files, frames tied to cameras and times, and what each pixel says is possibly occupied."""
 
 from depthguard.depth._image import DepthImage, checked_frame, depth_image, load_depth
-from depthguard.depth._io import npy_header, read_depth_file, read_intensity_png, write_depth_pgm, write_depth_png
-from depthguard.depth._kernels import block_minimum
+from depthguard.io.images import npy_header, read_depth_file, read_intensity_png, write_depth_pgm, write_depth_png
+from depthguard.kernels.depth import block_minimum
 from depthguard.depth._prepare import OccupancyImage, filled_space, prepare_depth
 
 __all__ = [

@@ -9,7 +9,7 @@ import numpy as np
 
 from depthguard import config
 from depthguard.cameras import PinholeCamera
-from depthguard.depth._io import read_depth_file
+from depthguard.io.images import read_depth_file
 from depthguard.errors import DepthImageError, InputError
 from depthguard.validation import check_path, short_repr
 

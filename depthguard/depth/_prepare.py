@@ -21,7 +21,7 @@ import numpy as np
 
 from depthguard import config
 from depthguard.cameras import PinholeCamera
-from depthguard.depth import _kernels
+from depthguard.kernels import depth as depth_kernels
 from depthguard.depth._image import DepthImage
 from depthguard.errors import InputError
 from depthguard.validation import check_real, short_repr
@@ -121,7 +121,7 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
     blind = np.empty((h, w), dtype=np.float32)
     invalid_mask = np.empty((h, w), dtype=np.uint8)
     invalid_start = np.inf if invalid == "free" else z_min
-    _kernels.start_depths(depth.data, float(depth.depth_scale), z_min, z_max, m0, m1, m2, invalid_start, z_start,
+    depth_kernels.start_depths(depth.data, float(depth.depth_scale), z_min, z_max, m0, m1, m2, invalid_start, z_start,
                           invalid_mask, z_end, blind)
     n_invalid = int(np.count_nonzero(invalid_mask))
     if robot_near is not None:
@@ -129,12 +129,12 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
         robot_tolerance = check_real(robot_tolerance, "robot_tolerance", minimum=0.0,
                                      maximum=config.SELF_FILTER_TOLERANCE_MAX, unit="metres", field="robot_tolerance")
         far = near if robot_far is None else _robot_image(robot_far, camera, "robot_far")
-        _kernels.robot_filter(z_start, invalid_mask, np.float32(invalid_start), near, far, robot_far is not None,
+        depth_kernels.robot_filter(z_start, invalid_mask, np.float32(invalid_start), near, far, robot_far is not None,
                               float(robot_tolerance), m0, m1, m2, z_end, blind)
     filled = None
     if invalid == "neighbors" and n_invalid:
         before = z_start.copy()
-        _kernels.fill_small_holes(depth.data, float(depth.depth_scale), invalid_mask, int(hole_pixels), m0, m1, m2,
+        depth_kernels.fill_small_holes(depth.data, float(depth.depth_scale), invalid_mask, int(hole_pixels), m0, m1, m2,
                                   z_start, z_end, blind, np.empty((h, w), dtype=np.uint8),
                                   np.empty(h * w, dtype=np.int64))
         changed = (z_start != before) & (invalid_mask != 0)
@@ -145,7 +145,7 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
             # A hole's fill stands for the measurement the pixel lost, and is self-filtered as one: a fill from a
             # surface beside the robot (the pedestal round its base) that lies behind the robot's front along a
             # pixel the robot covers shows the robot there, not a surface inside it.
-            _kernels.robot_filter_fills(z_start, invalid_mask, np.float32(invalid_start), near, far,
+            depth_kernels.robot_filter_fills(z_start, invalid_mask, np.float32(invalid_start), near, far,
                                         robot_far is not None, float(robot_tolerance), m0, m1, m2, z_end, blind)
             if filled is not None:  # a fill taken for the robot counts its pixel free up to the robot
                 filled = np.where((filled > 0) & ~np.isfinite(z_start), blind, filled).astype(np.float32)
@@ -153,10 +153,10 @@ def prepare_depth(depth: DepthImage, camera: PinholeCamera, invalid: str = confi
     block = config.BLOCK_SIZE
     shape = ((h + block - 1) // block, (w + block - 1) // block)
     block_min = np.empty(shape, dtype=np.float32)
-    _kernels.block_minimum(z_start, block, block_min)
+    depth_kernels.block_minimum(z_start, block, block_min)
     blind_block_min = np.full(shape, np.inf, dtype=np.float32)
     if robot_pixels:
-        _kernels.block_minimum(blind, block, blind_block_min)
+        depth_kernels.block_minimum(blind, block, blind_block_min)
     for array in (z_start, z_end, blind, invalid_mask, block_min, blind_block_min) + \
             (() if filled is None else (filled,)):
         array.setflags(write=False)
@@ -181,7 +181,7 @@ def filled_space(occupancy: OccupancyImage) -> OccupancyImage | None:
     h, w = camera.shape
     shape = ((h + block - 1) // block, (w + block - 1) // block)
     block_min = np.empty(shape, dtype=np.float32)
-    _kernels.block_minimum(z_start, block, block_min)
+    depth_kernels.block_minimum(z_start, block, block_min)
     none = np.full((h, w), np.inf, dtype=np.float32)
     return OccupancyImage(camera=camera, z_start=z_start, z_end=z_end, blind=none,
                           invalid=np.zeros((h, w), dtype=np.uint8), block_min=block_min,

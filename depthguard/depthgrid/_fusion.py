@@ -12,7 +12,7 @@ from depthguard import config
 from depthguard.cameras import PinholeCamera, Rig
 from depthguard.depth import DepthImage, OccupancyImage
 from depthguard.depth import block_minimum
-from depthguard.depthgrid import _kernels
+from depthguard.kernels import depthgrid as grid_kernels
 from depthguard.depthgrid._map import DepthGridMap
 from depthguard.depthspace import query_arrays
 from depthguard.validation import check_options, check_points, check_real, short_repr
@@ -26,7 +26,7 @@ def free_image(depth: DepthImage, camera: PinholeCamera) -> np.ndarray:
     free = np.empty(camera.shape, dtype=np.float32)
     z_min, z_max = camera.depth_range
     m0, m1, m2 = camera.noise.coefficients()
-    _kernels.free_depths(depth.data, float(depth.depth_scale), z_min, z_max, m0, m1, m2, free)
+    grid_kernels.free_depths(depth.data, float(depth.depth_scale), z_min, z_max, m0, m1, m2, free)
     return free
 
 
@@ -39,7 +39,7 @@ def seen_free(depth: DepthImage, occupancy: OccupancyImage) -> np.ndarray:
     free = np.empty(camera.shape, dtype=np.float32)
     z_min, z_max = camera.depth_range
     invalid_start = np.float32(z_min) if occupancy.invalid_policy != "free" else np.float32(np.inf)
-    _kernels.seen_free_depths(depth.data, float(depth.depth_scale), z_min, z_max, *camera.noise.coefficients(),
+    grid_kernels.seen_free_depths(depth.data, float(depth.depth_scale), z_min, z_max, *camera.noise.coefficients(),
                               occupancy.z_start, occupancy.invalid, invalid_start, occupancy.blind, free)
     return free
 
@@ -98,7 +98,7 @@ class FusedFrames:
         robot_zone: optional (capsules, thickness): capsules (n, 7) float64, world frame, metres, the robot's padded
             capsules when the principal frame was captured (p0 (3), p1 (3), radius with the padding;
             :meth:`RobotModel.capsules_world`), and thickness, metres. A cell within ``thickness`` of one of them is
-            the robot's (the robot zone, :func:`depthguard.depthgrid._kernels.zoned_cells`): an object wholly inside
+            the robot's (the robot zone, :func:`depthguard.kernels.depthgrid.zoned_cells`): an object wholly inside
             it is not seen, and one that reaches into it may be reported up to ``thickness`` too far.
     """
 
@@ -162,7 +162,7 @@ class FusedFrames:
         self._margin = float(margin)
         # Each pixel's smallest free depth within pad pixels: a cell's grown footprint is then its own pixels.
         self._eroded = np.empty_like(free)
-        _kernels.erode_free(free, self._sizes, int(pad), self._eroded)
+        grid_kernels.erode_free(free, self._sizes, int(pad), self._eroded)
         self._certain = np.empty(camera.shape, dtype=np.uint8)
         self._z_end = np.empty(camera.shape, dtype=np.float32)
         self._blind_from = np.empty(camera.shape, dtype=np.float32)
@@ -171,7 +171,7 @@ class FusedFrames:
         far = none if robot_far is None else np.ascontiguousarray(robot_far, dtype=np.float32)
         near = none if robot_near is None else np.ascontiguousarray(robot_near, dtype=np.float32)
         exit_ = none if robot_exit is None else np.ascontiguousarray(robot_exit, dtype=np.float32)
-        _kernels.principal_arrays(principal.z_start, principal.z_end, principal.invalid,
+        grid_kernels.principal_arrays(principal.z_start, principal.z_end, principal.invalid,
                                   np.float32(camera.depth_range[0]), principal.blind, near, far, exit_,
                                   float(robot_tolerance), *camera.noise.coefficients(), self._certain, self._z_end,
                                   self._blind_from, self._unchecked_from)
@@ -184,8 +184,8 @@ class FusedFrames:
         self._cells = np.zeros(camera.shape + (grid.n_cells,), dtype=np.uint8)
         # Per pixel, one run of cells known free in its gray area and one behind the robot, to skip without reading
         # them: (first << 32) | last.
-        self._free_run = np.full(camera.shape, _kernels.NO_FREE_RUN, dtype=np.int64)
-        self._behind_run = np.full(camera.shape, _kernels.NO_FREE_RUN, dtype=np.int64)
+        self._free_run = np.full(camera.shape, grid_kernels.NO_FREE_RUN, dtype=np.int64)
+        self._behind_run = np.full(camera.shape, grid_kernels.NO_FREE_RUN, dtype=np.int64)
         self._memory = _NO_MEMORY if remembered is None else _memory_tuple(remembered, camera)
         self._zone = _zone_arrays(robot_zone, camera)
 
@@ -211,18 +211,18 @@ class FusedFrames:
         unchecked = np.full(len(points_world), np.inf)
         if len(points_world):
             z_min, z_max = camera.depth_range
-            view = _kernels.PrincipalView(principal.z_start, self._z_end, self._certain, self._blind_from,
+            view = grid_kernels.PrincipalView(principal.z_start, self._z_end, self._certain, self._blind_from,
                                           self._unchecked_from, self._unchecked_block_min, config.BLOCK_SIZE,
                                           camera.fx, camera.fy, camera.cx, camera.cy, z_min, z_max)
-            options = _kernels.QueryOptions(config.AGGREGATES.index(aggregate), unseen == "occupied",
+            options = grid_kernels.QueryOptions(config.AGGREGATES.index(aggregate), unseen == "occupied",
                                             config.NEAR_PLANE_EPSILON, config.INSIDE_TOLERANCE,
                                             config.MIN_DIRECTION_NORM, config.FUSION_ROW_CHUNKS)
-            state = _kernels.GridState(grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets,
+            state = grid_kernels.GridState(grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets,
                                        self._eroded, self._sizes, self._z_near, self._margin, self._cells,
                                        *self._memory, self._free_run, self._behind_run, *self._zone)
-            out = _kernels.FusedOutput(distance, direction_camera, count, invalid_count, flags, unchecked)
+            out = grid_kernels.FusedOutput(distance, direction_camera, count, invalid_count, flags, unchecked)
             with parallel_chunksize(1):
-                _kernels.fused_query_points(points_camera, float(rho), view, options, state, out)
+                grid_kernels.fused_query_points(points_camera, float(rho), view, options, state, out)
         stale = Flag.STALE_CAMERA if self._stale else Flag(0)
         # The region's depths [Z - rho, Z + rho], within the camera's range, that the grid does not span.
         z = points_camera[:, 2]
@@ -243,8 +243,8 @@ class FusedFrames:
         )
 
 
-_NO_MEMORY = (np.zeros((0, 0, 0), dtype=np.uint8), np.zeros(_kernels.MEM_GEOMETRY_SIZE))
-NO_ZONE = (np.zeros((0, 7)), np.zeros(_kernels.ZONE_PARAMS))
+_NO_MEMORY = (np.zeros((0, 0, 0), dtype=np.uint8), np.zeros(grid_kernels.MEM_GEOMETRY_SIZE))
+NO_ZONE = (np.zeros((0, 7)), np.zeros(grid_kernels.ZONE_PARAMS))
 
 
 def _zone_arrays(robot_zone, camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
@@ -268,9 +268,9 @@ def _zone_arrays(robot_zone, camera: PinholeCamera) -> tuple[np.ndarray, np.ndar
     zone[:, 0:3] = capsules[:, 0:3] @ R.T + t
     zone[:, 3:6] = capsules[:, 3:6] @ R.T + t
     zone[:, 6] = capsules[:, 6]
-    params = np.empty(_kernels.ZONE_PARAMS)
-    params[_kernels.ZONE_THICKNESS] = thickness
-    params[_kernels.ZONE_INTRINSICS:] = (camera.fx, camera.fy, camera.cx, camera.cy)
+    params = np.empty(grid_kernels.ZONE_PARAMS)
+    params[grid_kernels.ZONE_THICKNESS] = thickness
+    params[grid_kernels.ZONE_INTRINSICS:] = (camera.fx, camera.fy, camera.cx, camera.cy)
     return np.ascontiguousarray(zone), params
 
 
@@ -285,10 +285,10 @@ def _memory_tuple(remembered, camera: PinholeCamera) -> tuple[np.ndarray, np.nda
     if not isinstance(box, VoxelBox) or not isinstance(free, np.ndarray) or free.dtype != np.bool_ or \
             free.shape != box.shape:
         raise InputError("remembered must be (a bool array of the box's shape, the VoxelBox)", field="remembered")
-    geometry = np.empty(_kernels.MEM_GEOMETRY_SIZE)
-    geometry[_kernels.MEM_LO:_kernels.MEM_LO + 3] = box.lo
-    geometry[_kernels.MEM_INV_VOXEL] = 1.0 / box.voxel
-    geometry[_kernels.MEM_R:_kernels.MEM_R + 9] = camera.T_world_camera[:3, :3].ravel()
-    geometry[_kernels.MEM_T:_kernels.MEM_T + 3] = camera.T_world_camera[:3, 3]
-    geometry[_kernels.MEM_INTRINSICS:] = (1.0 / camera.fx, 1.0 / camera.fy, camera.cx, camera.cy)
+    geometry = np.empty(grid_kernels.MEM_GEOMETRY_SIZE)
+    geometry[grid_kernels.MEM_LO:grid_kernels.MEM_LO + 3] = box.lo
+    geometry[grid_kernels.MEM_INV_VOXEL] = 1.0 / box.voxel
+    geometry[grid_kernels.MEM_R:grid_kernels.MEM_R + 9] = camera.T_world_camera[:3, :3].ravel()
+    geometry[grid_kernels.MEM_T:grid_kernels.MEM_T + 3] = camera.T_world_camera[:3, 3]
+    geometry[grid_kernels.MEM_INTRINSICS:] = (1.0 / camera.fx, 1.0 / camera.fy, camera.cx, camera.cy)
     return np.ascontiguousarray(free, dtype=np.uint8), geometry

@@ -19,7 +19,7 @@ The map is derived data, and never trusted silently (docs/bad-input.md):
   image size, each secondary's image size, and ``sha256``: the SHA-256 of the header's other fields (as canonical
   JSON: ``json.dumps(fields, sort_keys=True, separators=(",", ":"))`` of their typed values) followed by the bytes of
   ``corners`` and ``offsets`` (C order). A flipped bit anywhere in what the map says changes it.
-- :func:`load_map` reads the file through ``depthguard._files`` (a regular file of at most
+- :func:`load_map` reads the file through ``depthguard.io.files`` (a regular file of at most
   ``config.MAX_MAP_FILE_BYTES`` bytes), checks the archive's members and their ``.npy`` headers (names, dtype,
   shapes as the header says) before reading any array, then the checksum, the parameters' ranges (d_min > 0,
   delta_d >= MIN_DELTA_D, 1 <= n_cells <= ``config.DEPTH_GRID_MAX_CELLS``, d_max <= ``config.COORDINATE_LIMIT``,
@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from depthguard import config
-from depthguard._files import atomic_write, read_bytes
+from depthguard.io.files import atomic_write, read_bytes
 from depthguard.cameras import Rig
 from depthguard.depth import npy_header
 from depthguard.errors import DepthguardError, InputError

@@ -9,7 +9,7 @@ from numba import parallel_chunksize
 
 from depthguard import config
 from depthguard.depth import OccupancyImage
-from depthguard.depthspace import _kernels
+from depthguard.kernels import depthspace as depthspace_kernels
 from depthguard.errors import InputError
 from depthguard.validation import check_options, check_points
 from depthguard.results import DistanceResult, Flag
@@ -62,10 +62,10 @@ def single_camera_distances(occupancy: OccupancyImage, points_world, rho: float 
                 config.INSIDE_TOLERANCE, config.MIN_DIRECTION_NORM, distance, direction_camera, count, invalid_count,
                 flags, blind_distance)
         if n == 1:
-            _kernels.query_points_serial(*args)
+            depthspace_kernels.query_points_serial(*args)
         else:
             with parallel_chunksize(1):  # points differ a lot in cost: hand them to threads one at a time
-                _kernels.query_points(*args)
+                depthspace_kernels.query_points(*args)
     direction = direction_camera @ camera.T_world_camera[:3, :3].T
     return DistanceResult(
         distance=distance,

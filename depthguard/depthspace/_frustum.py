@@ -3,25 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import prange
 
-from depthguard._jit import kernel
-from depthguard._frustum_kernels import frustum_nearest, frustum_nearest_paper
-
-
-@kernel(parallel=True)
-def _many(points, bounds, nearest_out, distance_out, paper):
-    for i in prange(points.shape[0]):
-        X, Y, Z = points[i, 0], points[i, 1], points[i, 2]
-        a0, a1, b0, b1, z_lo, z_hi = bounds[i, 0], bounds[i, 1], bounds[i, 2], bounds[i, 3], bounds[i, 4], bounds[i, 5]
-        if paper:
-            d2, z = frustum_nearest_paper(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi)
-        else:
-            d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi)
-        distance_out[i] = np.sqrt(d2)
-        nearest_out[i, 0] = min(max(X, a0 * z), a1 * z)
-        nearest_out[i, 1] = min(max(Y, b0 * z), b1 * z)
-        nearest_out[i, 2] = z
+from depthguard.kernels.frustum import frustum_nearest_many
 
 
 def _run(points_camera, tangents, z_range, paper):
@@ -35,7 +18,7 @@ def _run(points_camera, tangents, z_range, paper):
     bounds = np.ascontiguousarray(np.concatenate([tangents, z_range], axis=1))
     nearest = np.empty((len(points), 3))
     distance = np.empty(len(points))
-    _many(points, bounds, nearest, distance, paper)
+    frustum_nearest_many(points, bounds, nearest, distance, paper)
     return distance, nearest
 
 

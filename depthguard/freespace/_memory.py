@@ -19,7 +19,7 @@ from depthguard import config
 from depthguard.cameras import PinholeCamera
 from depthguard.errors import InputError
 from depthguard.validation import check_real, short_repr
-from depthguard.freespace import _kernels
+from depthguard.kernels import freespace as freespace_kernels
 
 _SQRT3 = math.sqrt(3.0)
 
@@ -166,10 +166,10 @@ def seen_free_voxels(box: VoxelBox, cameras: Sequence[PinholeCamera], free_image
         z_near[c] = max(camera.depth_range[0], config.NEAR_PLANE_EPSILON)
         sizes[c] = (camera.width, camera.height)
         stacked[c, :camera.height, :camera.width] = free
-    _kernels.row_min_tables(stacked, sizes, tables)
+    freespace_kernels.row_min_tables(stacked, sizes, tables)
     floor_log2 = np.zeros(width + 1, dtype=np.int64)  # floor(log2(m)) for m >= 1: frexp's exponent, exactly
     floor_log2[1:] = np.frexp(np.arange(1.0, width + 1.0))[1] - 1
-    _kernels.seen_free_voxels(box.lo, box.voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, float(margin),
+    freespace_kernels.seen_free_voxels(box.lo, box.voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, float(margin),
                               float(pad), config.FREESPACE_BLOCK, out)
     return out
 
@@ -215,9 +215,9 @@ def squared_distance_transform(sites) -> np.ndarray:
         raise InputError(f"sites must be a 3-D bool array of at most {config.FREESPACE_MAX_VOXELS} voxels, got {got}",
                          field="sites")
     d2 = np.empty(sites.shape, dtype=np.int32)
-    _kernels.last_axis_of_mask(np.require(sites, np.bool_, ["C", "W"]), d2)
-    _kernels.middle_axis(d2)
-    _kernels.first_axis(d2)
+    freespace_kernels.last_axis_of_mask(np.require(sites, np.bool_, ["C", "W"]), d2)
+    freespace_kernels.middle_axis(d2)
+    freespace_kernels.first_axis(d2)
     return d2
 
 
@@ -302,11 +302,11 @@ class FreeSpaceMemory:
         seen = np.require(seen, np.bool_, ["C", "W"])  # as in seen_free_voxels: one type for numba
         if use_robot:
             robot = np.require(robot, np.bool_, ["C", "W"])
-        _kernels.last_axis_of_memory(self._arrival, seen, robot if use_robot else self._no_robot, use_robot, t,
+        freespace_kernels.last_axis_of_memory(self._arrival, seen, robot if use_robot else self._no_robot, use_robot, t,
                                      self._d2)
-        _kernels.middle_axis(self._d2)
-        _kernels.first_axis(self._d2)
-        _kernels.advance_arrival(self._d2, t, self.box.voxel, self.box.voxel * _SQRT3, self.v_max,
+        freespace_kernels.middle_axis(self._d2)
+        freespace_kernels.first_axis(self._d2)
+        freespace_kernels.advance_arrival(self._d2, t, self.box.voxel, self.box.voxel * _SQRT3, self.v_max,
                                  config.FREESPACE_ROUNDING, self._arrival)
         self._time = t
 

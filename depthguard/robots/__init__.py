@@ -9,7 +9,7 @@ Typical use::
     J = robot.control_point_jacobians(q)               # (9, 3, 7) metres per radian, world frame
 """
 
-from depthguard.robots._capsules import LinkCapsule, fit_capsule, segment_distances
+from depthguard.robots._capsules import LinkCapsule, enclosing_circle, fit_capsule, segment_distances
 from depthguard.robots._model import ControlPoint, RobotModel, default_robot_path, panda_robot_path, xarm6_robot_path
 
 __all__ = [
@@ -17,6 +17,7 @@ __all__ = [
     "LinkCapsule",
     "RobotModel",
     "default_robot_path",
+    "enclosing_circle",
     "fit_capsule",
     "panda_robot_path",
     "xarm6_robot_path",

@@ -9,7 +9,7 @@ The fit, for a unit axis direction a:
    t_lo = min_v (t_v + s_v) and t_hi = max_v (t_v - s_v) (a single point, a sphere, when t_lo > t_hi);
 3. R is chosen to minimise the volume pi R^2 L + 4/3 pi R^3 (a scan of the radii, then a finer one around the best).
 
-Steps 1-3 are the numba kernel ``_capsule_kernels.fit_along`` (about 0.1 ms for a few hundred vertices).
+Steps 1-3 are the numba kernel ``depthguard.kernels.capsules.fit_along`` (about 0.1 ms for a few hundred vertices).
 
 The direction: the three principal axes (PCA) of the vertices and ``config.CAPSULE_AXIS_CANDIDATES`` directions
 spread over the half sphere are tried, and the best is refined by Nelder-Mead. On the iiwa and Panda links this gives
@@ -31,7 +31,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from depthguard import config
 from depthguard.errors import RobotError
-from depthguard.robots import _capsule_kernels as kernels
+from depthguard.kernels import capsules as kernels
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ What a URDF may read (a URDF is input from outside, like a rig file):
   symbolic link out of the folder) is a :class:`RobotError` naming the link and the path; to use meshes kept
   elsewhere, pass their folder in ``package_dirs``.
 - The URDF and each mesh are regular files (not a device, pipe or folder) of at most ``config.MAX_URDF_BYTES`` and
-  ``config.MAX_MESH_FILE_BYTES`` bytes, read once through :mod:`depthguard._files`; a mesh is decoded from those
+  ``config.MAX_MESH_FILE_BYTES`` bytes, read once through :mod:`depthguard.io.files`; a mesh is decoded from those
   bytes by trimesh, which opens no other file (an OBJ's material library is not read: collision needs none).
 - The XML may not have a document type declaration (``<!DOCTYPE ...>``): no DTD, no entity declarations, so no
   entity expansion (internal or external) and no file or network access while parsing. The same bytes go to
@@ -50,7 +50,7 @@ import numpy as np
 import trimesh
 
 from depthguard import config
-from depthguard._files import read_bytes
+from depthguard.io.files import read_bytes
 from depthguard.errors import RobotError
 from depthguard.validation import check_path, short_repr
 

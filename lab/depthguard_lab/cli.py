@@ -116,7 +116,7 @@ def _simulate(args) -> int:
     out = write_episode(workcell, args.out, seed=args.seed, progress=True, frames=frames)
     print(f"wrote {out}: rig.yaml, frames.csv, depth/, intensity/, joint_states.csv, ground_truth.csv, scene.yaml")
     if args.bag:
-        from depthguard.recordings import open_recording, write_bag
+        from depthguard.io.recordings import open_recording, write_bag
 
         bag = write_bag(open_recording(out), out / "bag")
         print(f"wrote {bag}: ROS 2 bag (MCAP) with the same frames and joint states, and rig.yaml")

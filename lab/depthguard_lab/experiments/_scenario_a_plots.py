@@ -17,7 +17,7 @@ from matplotlib.ticker import FuncFormatter  # noqa: E402
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: E402
 
 import depthguard as dg  # noqa: E402
-from depthguard.files import atomic_write, write_whole  # noqa: E402
+from depthguard.io.files import atomic_write, write_whole  # noqa: E402
 from depthguard_lab.experiments import scenario_a as sa  # noqa: E402
 
 COLORS = {"point cloud": "tab:orange", "min": "tab:blue", "mean": "tab:green", "hybrid": "tab:purple",

@@ -191,7 +191,7 @@ def plot(log, mode_summary: dict, path: Path, control_points, rho: float) -> Non
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from depthguard.files import atomic_write
+    from depthguard.io.files import atomic_write
 
     fig, axes = plt.subplots(3, 1, figsize=(9, 10), gridspec_kw={"height_ratios": [1.2, 1, 0.8]})
     ax = axes[0]
@@ -243,7 +243,7 @@ def main(out="out/demo", duration: float | None = None, modes=None, progress: bo
     """Run the scene once per mode, print a table, write the plots and summary.json into ``out`` (and, with
     ``bag``, the ``avoid`` run as a recording in ``out/bag_avoid``, replacing an earlier one). ``ssm_cell``: mode
     ``ssm`` in :data:`SSM_LAYOUT` (else in the others' layout)."""
-    from depthguard.files import write_whole
+    from depthguard.io.files import write_whole
     from depthguard_lab.simulation._closed_loop import MODES, LoopSettings, run_closed_loop
 
     modes = list(MODES) if not modes else list(dict.fromkeys(modes))

@@ -34,7 +34,7 @@ import numpy as np
 from tqdm import tqdm
 
 import depthguard as dg
-from depthguard.files import atomic_write, write_whole
+from depthguard.io.files import atomic_write, write_whole
 from depthguard.errors import InputError
 from depthguard_lab.experiments import workcell as single
 

@@ -43,7 +43,7 @@ import numpy as np
 from scipy import ndimage
 
 import depthguard as dg
-from depthguard.files import atomic_write, write_whole
+from depthguard.io.files import atomic_write, write_whole
 from depthguard.depthgrid import DepthGridMap, build_map
 from depthguard.transforms import quaternion_to_matrix
 

@@ -26,7 +26,7 @@ import numpy as np
 from tqdm import tqdm
 
 import depthguard as dg
-from depthguard.files import atomic_write, write_whole
+from depthguard.io.files import atomic_write, write_whole
 from depthguard.scenes import scene_distance
 
 RHO = 0.4

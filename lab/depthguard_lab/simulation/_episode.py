@@ -18,7 +18,7 @@ from PIL import Image
 
 from depthguard import config
 from depthguard_lab import config as lab_config
-from depthguard.files import atomic_write, write_whole
+from depthguard.io.files import atomic_write, write_whole
 from depthguard.cameras import save_rig
 from depthguard.depth import depth_image
 from depthguard.errors import InputError
@@ -251,7 +251,7 @@ def write_episode(workcell: Workcell, out_dir, seed: int | None = None, progress
         rig.yaml: the depth cameras (:func:`depthguard.save_rig`; loads back with :func:`depthguard.load_rig`).
         frames.csv: ``camera, frame, time``: one row per depth image written (every depth camera, every frame, in
             frame order), capture time in seconds with 6 decimals (design §12a; read back with
-            :func:`depthguard.recordings.open_recording`).
+            :func:`depthguard.io.recordings.open_recording`).
         intensity_rig.yaml: the intensity cameras, if the scene has any.
         depth/<camera>/<index:06d>.png: 16-bit PNG (ROS 16UC1), units of depth_scale (millimetres), 0 = none.
         intensity/<camera>/<index:06d>.png: 8-bit grey PNG, every camera.
@@ -263,9 +263,9 @@ def write_episode(workcell: Workcell, out_dir, seed: int | None = None, progress
         timeline.csv: ``person, index, action, start, hold_start, end`` (seconds) of every scripted action.
         scene.yaml: the scene (a copy of its data; a relative URDF path is made absolute).
 
-    Every file is written whole (:func:`depthguard.files.atomic_write`), and frames.csv last, once every frame is
+    Every file is written whole (:func:`depthguard.io.files.atomic_write`), and frames.csv last, once every frame is
     written: a folder without frames.csv is an episode that did not finish
-    (:func:`~depthguard.recordings.open_recording` refuses it), never a shorter one that reads as complete.
+    (:func:`~depthguard.io.recordings.open_recording` refuses it), never a shorter one that reads as complete.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

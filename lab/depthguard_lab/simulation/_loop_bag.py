@@ -4,7 +4,7 @@ Topics (ROS 2 message types, stamps = simulated time; frame ``world`` is the wor
 
 - ``/tf_static`` (tf2_msgs/TFMessage): world -> ``<camera>_optical_frame`` for every camera of the rig;
 - ``/<camera>/depth/image_raw`` (sensor_msgs/Image, ``16UC1``) and ``/<camera>/depth/camera_info``
-  (sensor_msgs/CameraInfo): every captured frame, as :func:`depthguard.recordings.write_bag` writes them;
+  (sensor_msgs/CameraInfo): every captured frame, as :func:`depthguard.io.recordings.write_bag` writes them;
 - ``/joint_states`` (sensor_msgs/JointState): the robot's joints at every control step;
 - ``/depthguard/distances`` (std_msgs/Float64MultiArray): the monitor's distance of each control point at every
   control step, metres (``inf``: nothing within rho), in the order the layout's label lists them;
@@ -25,11 +25,11 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from depthguard.files import atomic_folder
+from depthguard.io.files import atomic_folder
 from depthguard.cameras import save_rig
 from depthguard.errors import InputError
 from depthguard.validation import check_path
-from depthguard.recordings import (
+from depthguard.io.recordings import (
     JOINT_STATES_TOPIC,
     depth_messages,
     joint_state_message,

@@ -1,6 +1,6 @@
 """Scene files: a YAML description of a simulated workcell, read into a :class:`Workcell`.
 
-The file is read through ``depthguard.files``: a regular file of at most ``config.MAX_TEXT_FILE_BYTES`` bytes, parsed
+The file is read through ``depthguard.io.files``: a regular file of at most ``config.MAX_TEXT_FILE_BYTES`` bytes, parsed
 by a safe YAML loader (no tags that run code: ``!!python/...`` is refused; no anchors or aliases, no duplicate keys,
 nesting at most ``config.MAX_NESTING`` deep). Every key is
 checked: a missing, unknown or malformed key raises :class:`~depthguard.errors.SceneError` whose ``field`` is the
@@ -86,7 +86,7 @@ import yaml
 
 from depthguard import config
 from depthguard_lab import config as lab_config
-from depthguard.files import read_yaml, write_whole
+from depthguard.io.files import read_yaml, write_whole
 from depthguard.cameras import PinholeCamera, Rig, rig_from_dict
 from depthguard.errors import InputError, RigError, RobotError, SceneError
 from depthguard.robots import RobotModel

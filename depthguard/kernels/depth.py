@@ -1,10 +1,10 @@
-"""Numba kernels of the per-frame preparation. They trust their inputs; ``_prepare.py`` validates them."""
+"""Numba kernels of the per-frame preparation. They trust their inputs; ``depthguard/depth/_prepare.py`` validates them."""
 
 import numpy as np
 from numba import prange
 
-from depthguard._frustum_kernels import noise_margin
-from depthguard._jit import kernel
+from depthguard.kernels.frustum import noise_margin
+from depthguard.kernels.jit import kernel
 
 
 @kernel(parallel=True)

@@ -49,7 +49,6 @@ Left out: sensor dropouts, other objects and walls (their shadows), people, and 
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -58,7 +57,7 @@ import numpy as np
 
 import depthguard as dg
 from depthguard import config
-from depthguard.files import atomic_write, write_whole
+from depthguard.io.files import atomic_write
 from depthguard.errors import InputError
 from depthguard.validation import check_real
 
@@ -235,7 +234,7 @@ def _same_file(path, default) -> bool:
 def trajectory_poses(robot, path, max_poses: int = MAX_POSES) -> list[tuple[str, np.ndarray]]:
     """(label, joints) of at most ``max_poses`` rows, evenly spread, of a ``time,<joint names...>`` CSV file (a
     recording's joint_states.csv). Its columns must be the robot's joints (any order)."""
-    from depthguard.recordings import read_joint_states_csv
+    from depthguard.io.recordings import read_joint_states_csv
 
     names, times, positions = read_joint_states_csv(Path(path))
     missing = [n for n in robot.joint_names if n not in names]
@@ -462,47 +461,5 @@ def plot(result: Coverage, path, poses: int = PLOTTED_POSES) -> Path:
 
 # ------------------------------------------------------------------------------------------------------ the CLI
 
-def load_robot(name: str):
-    """``--robot``: 'iiwa', 'panda' or a URDF file."""
-    from depthguard.robots import RobotModel
-
-    model = {"iiwa": RobotModel.default, "panda": RobotModel.panda}.get(name)
-    return model() if model is not None else RobotModel.from_urdf(name)
 
 
-def main(rig, robot="iiwa", trajectory=None, rho: float = config.DEFAULT_RHO, out="out/coverage") -> int:
-    """``depthguard coverage``: load the rig (a file) and the robot (``"iiwa"``, ``"panda"`` or a URDF file), take
-    the poses (``trajectory``: a joint_states.csv file, else :func:`default_poses`), print the table, write
-    coverage.json and coverage.png into ``out``. Bad input raises before any work."""
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out}: exists and is not a folder")
-    rig_path = rig
-    rig = dg.load_rig(rig_path)
-    model = load_robot(robot)
-    poses = trajectory_poses(model, trajectory) if trajectory is not None else default_poses(model)
-    print(f"Coverage of {rig_path} ({', '.join(rig.cameras)}) around {model.name}, rho = {rho:g} m: frames of the "
-          "robot alone above a floor, no memory.")
-    print(f"Samples every {SPACING * 100:g} cm, from {CLEARANCE * 100:g} cm outside the padded link capsules to rho, "
-          "on noise-free frames. Not clearable: the monitor's")
-    print("min(distance, blind_distance) < the spacing; occupied: its distance is (no camera sees through there); "
-          "unchecked: only its blind")
-    print(f"distance is (behind the robot). cp < rho: of the control points more than rho + {USEFUL_MARGIN:g} m from "
-          "the floor, those whose fused")
-    print("distance (hybrid) is below rho, on noise-free (exact) frames and with the rig's noise model (noisy).\n")
-    print("  " + TABLE_HEADER)
-    result = coverage(rig, model, poses, rho=rho, progress=True)
-    numbers = {"rig": str(rig_path), **result.summary()}
-    print("  " + table_row("all poses", numbers))
-    out.mkdir(parents=True, exist_ok=True)
-    try:
-        import matplotlib  # noqa: F401 - the plots extra
-    except ImportError:
-        picture = None
-    else:
-        picture = plot(result, out / "coverage.png")
-    numbers["picture"] = None if picture is None else str(picture)
-    write_whole(out / "coverage.json", json.dumps(numbers, indent=2))
-    drawn = f"and {picture}" if picture is not None else "(no picture: matplotlib is not installed, depthguard[plots])"
-    print(f"{len(result.poses)} poses in {result.seconds:.1f} s; wrote {out / 'coverage.json'} {drawn}")
-    return 0

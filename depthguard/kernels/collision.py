@@ -1,10 +1,10 @@
 """Numba kernels of the image-based collision test (design §10): the epipolar bands between two cameras' tile
-grids. They trust their inputs; ``_epipolar.py`` checks them."""
+grids. They trust their inputs; ``depthguard/collision/_epipolar.py`` checks them."""
 
 import numpy as np
 from numba import prange
 
-from depthguard._jit import kernel
+from depthguard.kernels.jit import kernel
 
 
 @kernel(inline=True)

@@ -1,4 +1,4 @@
-"""Numba kernels of the capsule fit (see ``_capsules.py`` for the method). They trust their inputs: contiguous
+"""Numba kernels of the capsule fit (see ``depthguard/robots/_capsules.py`` for the method). They trust their inputs: contiguous
 float64 arrays, a unit axis, at least one point. The tests hold them against slow NumPy twins and run their bodies
 as plain Python (``.py_func``)."""
 
@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from depthguard._jit import kernel
+from depthguard.kernels.jit import kernel
 
 
 @kernel(inline=True, error_model="python")

@@ -1,6 +1,6 @@
 """Reading control points from files: CSV with an ``x,y,z`` header, or JSON holding a list of [x, y, z].
 
-A points file is input from outside (docs/bad-input.md). It is read through :mod:`depthguard._files`: a regular file of at most
+A points file is input from outside (docs/bad-input.md). It is read through :mod:`depthguard.io.files`: a regular file of at most
 ``config.MAX_POINTS_FILE_BYTES`` bytes, UTF-8 text (a leading byte-order mark is dropped). Every coordinate must be a
 finite number of metres with ``|x|, |y|, |z| <= config.COORDINATE_LIMIT``. Any problem is an
 :class:`~depthguard.errors.InputError` naming the file and the line (CSV) or entry (JSON).
@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from depthguard import config
-from depthguard._files import load_json, read_text
+from depthguard.io.files import load_json, read_text
 from depthguard.errors import InputError
 from depthguard.validation import short_repr
 

@@ -1,4 +1,4 @@
-"""Numba kernels of the depth-grid fusion (design §8). They trust their inputs; ``_fusion.py`` checks them.
+"""Numba kernels of the depth-grid fusion (design §8). They trust their inputs; ``depthguard/depthgrid/_fusion.py`` checks them.
 
 Along each principal pixel's frustum, what the principal camera says is possibly occupied splits into:
 
@@ -20,7 +20,7 @@ from collections import namedtuple
 import numpy as np
 from numba import prange
 
-from depthguard._frustum_kernels import (
+from depthguard.kernels.frustum import (
     AGG_MIN,
     FLAG_ROBOT_BLIND_SPOT,
     finish_min_at_pixel,
@@ -35,7 +35,7 @@ from depthguard._frustum_kernels import (
     surveillance_region,
     usable_rho,
 )
-from depthguard._jit import kernel
+from depthguard.kernels.jit import kernel
 
 #: What the fused kernels need of the depth grid and its per-frame state, passed as one record (numba compiles a
 #: namedtuple of arrays and scalars like separate arguments). d_min, delta_d (metres), n_cells: the grid's cells
@@ -921,7 +921,7 @@ def fused_finish(X, Y, Z, aggregate, region, acc, view, inside_tol, min_directio
 def fused_query_points(points_camera, rho, view, options, grid, out):
     """Distances from the (n, 3) control points (metres, principal optical frame) to what the principal camera says
     is possibly occupied and the secondary cameras do not clear, aggregated as ``aggregate``; the fused counterpart
-    of :func:`depthguard.depthspace._kernels.query_points`. ``view``: :class:`PrincipalView`; ``options``:
+    of :func:`depthguard.kernels.depthspace.query_points`. ``view``: :class:`PrincipalView`; ``options``:
     :class:`QueryOptions`; ``grid``: :class:`GridState`. Writes into ``out`` (:class:`FusedOutput`) distance (n,),
     the unit direction (n, 3) (from the obstacle towards P, principal optical frame), count, invalid_count and flags,
     and into unchecked (n,) the distance to the space between links fusion did not check (inf beyond rho);

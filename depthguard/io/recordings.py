@@ -33,7 +33,7 @@ A :class:`Recording` gives the rig, the joints (interpolated linearly to any cap
 a time outside it is an error naming the time, never an extrapolation), and its **frame sets** in capture-time
 order: the frames of every camera that share one frame number, answered once the last of them has arrived.
 
-Input from outside is checked where it is read. Files go through :mod:`depthguard._files` (regular files only,
+Input from outside is checked where it is read. Files go through :mod:`depthguard.io.files` (regular files only,
 bounded); depth PNGs through the depth image reader. A missing file, a row naming a camera the rig lacks, a frame
 file missing, a capture time that is not finite or that goes back for one camera, a joint state time that does not
 increase, a bag without the topics it needs, a camera_info that contradicts the rig: each raises an
@@ -55,7 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from depthguard import config
-from depthguard._files import atomic_folder, check_regular_file, load_yaml, read_text
+from depthguard.io.files import atomic_folder, check_regular_file, load_yaml, read_text
 from depthguard.cameras import PinholeCamera, Rig, load_rig, save_rig
 from depthguard.depth import DepthImage, depth_image, load_depth
 from depthguard.errors import DepthguardError, DepthImageError, InputError
@@ -711,7 +711,7 @@ def write_bag(recording: Recording, path, storage: str = "mcap") -> Path:
     shortest decimal of each time, rounded: a time written with 6 decimals reads back as the same float).
 
     ``storage``: ``"mcap"`` or ``"sqlite3"``. Raises :class:`InputError` if ``path`` exists or a time is negative or
-    beyond a ROS time (2**31 s). The folder appears whole or not at all (:func:`depthguard._files.atomic_folder`).
+    beyond a ROS time (2**31 s). The folder appears whole or not at all (:func:`depthguard.io.files.atomic_folder`).
     """
     from rosbags.rosbag2 import Writer
     from rosbags.rosbag2.enums import StoragePlugin

@@ -1,9 +1,9 @@
 """Numba kernel of the wave-propagation planner (Henrich & Gecks, section 5): a breadth-first wave over a discretised
-configuration space, flattened in C order. It trusts its inputs; ``_plan.py`` checks them."""
+configuration space, flattened in C order. It trusts its inputs; ``depthguard/collision/_plan.py`` checks them."""
 
 import numpy as np
 
-from depthguard._jit import kernel
+from depthguard.kernels.jit import kernel
 
 
 @kernel()

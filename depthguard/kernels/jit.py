@@ -11,7 +11,7 @@ and later processes load it from ``__pycache__/*.nbi|*.nbc`` beside its source.
 - Compiling at run time. A kernel missing from the cache (the first run after an install or an upgrade) compiles
   on its first call, which takes from a second to half a minute. Each such compile logs one warning line on the
   ``depthguard`` logger (standard error unless configured) that names the kernel. ``depthguard warmup``
-  (:mod:`depthguard._warmup`) compiles every kernel ahead of time; ``./dev.sh setup`` runs it.
+  (:mod:`depthguard.warmup`) compiles every kernel ahead of time; ``./dev.sh setup`` runs it.
 - A damaged cache. A cache file that cannot be read (truncated by a full disk, garbled) is a cache miss: the kernel
   compiles, the file is written afresh, and the compile's warning line names the cache and why it was not used. A
   cache that cannot be written leaves the kernel compiled for this process, with one warning.
@@ -34,22 +34,20 @@ from numba.core.dispatcher import Dispatcher
 
 #: The modules that define numba kernels, each decorated with :func:`kernel`.
 KERNEL_MODULES = (
-    "depthguard._frustum_kernels",
     "depthguard.baselines",
-    "depthguard.collision._kernels",
-    "depthguard.collision._plan_kernels",
-    "depthguard.collision._update_kernels",
-    "depthguard.depth._kernels",
-    "depthguard.depthgrid._kernels",
-    "depthguard.depthspace._frustum",
-    "depthguard.depthspace._kernels",
-    "depthguard.freespace._detectable",
-    "depthguard.freespace._kernels",
-    "depthguard.freespace._near",
-    "depthguard.robots._capsule_kernels",
+    "depthguard.kernels.capsules",
+    "depthguard.kernels.collision",
+    "depthguard.kernels.collision_plan",
+    "depthguard.kernels.collision_update",
+    "depthguard.kernels.depth",
+    "depthguard.kernels.depthgrid",
+    "depthguard.kernels.depthspace",
+    "depthguard.kernels.detectable",
+    "depthguard.kernels.freespace",
+    "depthguard.kernels.frustum",
 )
 
-_PACKAGE = Path(__file__).resolve().parent
+_PACKAGE = Path(__file__).resolve().parent.parent  # the depthguard package
 _LOG = logging.getLogger("depthguard")
 
 

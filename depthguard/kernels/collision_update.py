@@ -1,17 +1,17 @@
 """Numba kernel of the reference image update (design §10, step 8; Henrich & Gecks section 4.1): the tiles of one
-camera that boxes (work pieces) may be seen in. It trusts its inputs; ``_update.py`` checks them."""
+camera that boxes (work pieces) may be seen in. It trusts its inputs; ``depthguard/collision/_update.py`` checks them."""
 
 import numpy as np
 
-from depthguard._jit import kernel
-from depthguard.collision._kernels import mark_projected_points
+from depthguard.kernels.jit import kernel
+from depthguard.kernels.collision import mark_projected_points
 
 
 @kernel()
 def box_tile_bits(corners, R, t, fx, fy, cx, cy, near, col_edges, row_edges, words, out):
     """For each of K boxes, the tiles of one camera whose footprint meets the convex hull of the box's 8 projected
     corners, as bits in out (K, words) uint64 (written; tile index r * cols + c; tile (r, c) spans col_edges[c] to
-    col_edges[c + 1] and row_edges[r] to row_edges[r + 1], pixels, as in ``_kernels.tile_bands``).
+    col_edges[c + 1] and row_edges[r] to row_edges[r + 1], pixels, as in ``collision.tile_bands``).
 
     corners: (K, 8, 3) float64, the boxes' corners, world frame, metres; R, t: world -> the camera's optical frame
     (x right, y down, z forward); fx, fy, cx, cy: its intrinsics, pixels. A box is the convex hull of its corners, so

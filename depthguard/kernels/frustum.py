@@ -10,8 +10,9 @@ The tests hold these kernels against slow NumPy twins (``tests/naive.py``).
 """
 
 import numpy as np
+from numba import prange
 
-from depthguard._jit import kernel
+from depthguard.kernels.jit import kernel
 
 # Aggregation codes (config.AGGREGATES order).
 AGG_MIN = 0
@@ -536,3 +537,21 @@ def finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, un
     if aggregate == AGG_MEAN:
         return sum_d / count, count, n_invalid, flags
     return d_min, count, n_invalid, flags
+
+
+@kernel(parallel=True)
+def frustum_nearest_many(points, bounds, nearest_out, distance_out, paper):
+    """For each i: distance_out[i] (metres) from points[i] ((n, 3) float64, optical frame) to the frustum segment
+    bounds[i] ((n, 6) float64: a0, a1, b0, b1 tangents, z_lo, z_hi metres) and nearest_out[i] (n, 3) its nearest
+    point; ``paper``: the papers' fixed-depth formula instead of the exact one (design §4)."""
+    for i in prange(points.shape[0]):
+        X, Y, Z = points[i, 0], points[i, 1], points[i, 2]
+        a0, a1, b0, b1, z_lo, z_hi = bounds[i, 0], bounds[i, 1], bounds[i, 2], bounds[i, 3], bounds[i, 4], bounds[i, 5]
+        if paper:
+            d2, z = frustum_nearest_paper(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi)
+        else:
+            d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi)
+        distance_out[i] = np.sqrt(d2)
+        nearest_out[i, 0] = min(max(X, a0 * z), a1 * z)
+        nearest_out[i, 1] = min(max(Y, b0 * z), b1 * z)
+        nearest_out[i, 2] = z

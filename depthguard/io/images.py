@@ -5,7 +5,7 @@ Raw values are kept as they are: ``uint16`` in units of the camera's ``depth_sca
 
 A depth image file is input from outside, and reading it is bounded (docs/bad-input.md):
 
-- The file is read through :mod:`depthguard._files`: a regular file of at most ``config.MAX_DEPTH_FILE_BYTES`` bytes
+- The file is read through :mod:`depthguard.io.files`: a regular file of at most ``config.MAX_DEPTH_FILE_BYTES`` bytes
   (a FIFO, a device or a folder is refused before it is opened).
 - The suffix decides the format, never the content: a ``.png`` is decoded only as PNG, a ``.tif``/``.tiff`` only as
   TIFF (Pillow restricted to that one format, so a PostScript file under such a name never reaches Pillow's
@@ -30,7 +30,7 @@ import numpy.lib.format as npy_format
 from PIL import Image, PngImagePlugin, TiffImagePlugin
 
 from depthguard import config
-from depthguard._files import atomic_write, read_bytes
+from depthguard.io.files import atomic_write, read_bytes
 from depthguard.errors import DepthguardError, DepthImageError
 
 #: Suffix -> format. Nothing else is read.

@@ -1,7 +1,7 @@
 """Numba kernels of the single-camera depth-space distance (design §4-6).
 
 Everything here works in one camera's optical frame (x right, y down, z forward; metres) and trusts its inputs:
-``_monitor.py`` validates them. A pixel (u, v) spans the tangents [a0, a1] x [b0, b1] with
+``depthguard/depthspace/_distance.py`` validates them. A pixel (u, v) spans the tangents [a0, a1] x [b0, b1] with
 a0 = (u - 1/2 - cx)/fx, a1 = (u + 1/2 - cx)/fx, b0 = (v - 1/2 - cy)/fy, b1 = (v + 1/2 - cy)/fy.
 
 The tests hold every kernel against a slow NumPy twin (``tests/naive.py``).
@@ -10,7 +10,7 @@ The tests hold every kernel against a slow NumPy twin (``tests/naive.py``).
 import numpy as np
 from numba import prange
 
-from depthguard._frustum_kernels import (
+from depthguard.kernels.frustum import (
     AGG_MIN,
     FLAG_REGION_OUTSIDE_VIEW,
     FLAG_ROBOT_BLIND_SPOT,
@@ -28,7 +28,7 @@ from depthguard._frustum_kernels import (
     usable_rho,
     view_boundary,
 )
-from depthguard._jit import kernel
+from depthguard.kernels.jit import kernel
 
 
 @kernel(inline=True)

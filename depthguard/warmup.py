@@ -1,5 +1,5 @@
 """``depthguard warmup``: compile every numba kernel the product uses, for every argument type it passes them, before
-the first query needs it (see :mod:`depthguard._jit` for the caches).
+the first query needs it (see :mod:`depthguard.kernels.jit` for the caches).
 
 numba compiles a kernel for each combination of argument types it is called with (uint16 and float32 frames are
 two). The one honest way to reach every combination the product uses is to run the product's own paths, so
@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba.core import event
 
-from depthguard import _jit
+from depthguard.kernels import jit
 
 
 @dataclass
@@ -88,7 +88,7 @@ def warm_up(progress=None) -> WarmupReport:
     ``progress``: called with a kernel's name as it starts compiling. Returns the :class:`WarmupReport`.
     """
     start = time.perf_counter()
-    with _jit.quiet_compiles(), CompileRecorder(progress) as recorder:
+    with jit.quiet_compiles(), CompileRecorder(progress) as recorder:
         _run_workloads()
     return WarmupReport(compiles=recorder.compiles, seconds=time.perf_counter() - start)
 
@@ -98,7 +98,7 @@ def _run_workloads() -> None:
     from depthguard import baselines
     from depthguard.depthgrid import FusedFrames, build_map, free_image, seen_free
     from depthguard.freespace import FreeSpaceMemory, VoxelBox, seen_free_voxels, squared_distance_transform
-    from depthguard.robots._capsules import enclosing_circle, fit_capsule
+    from depthguard.robots import enclosing_circle, fit_capsule
 
     rig, frames, robot, points = _small_workcell()
     grid = build_map(rig, "principal")
@@ -175,7 +175,7 @@ def _run_workloads() -> None:
     grids = [TileGrid(camera, 6, 8) for camera in rig.cameras.values()]
     EpipolarBands(grids, [box.lo, box.hi])
     # ... and a capsule projected onto a tile grid (the robot's tile images).
-    from depthguard.collision import _kernels as collision_kernels
+    from depthguard.kernels import collision as collision_kernels
 
     T = grids[0].camera.T_camera_world
     cam = grids[0].camera
@@ -232,27 +232,3 @@ def _small_workcell():
     return rig, frames, robot, points
 
 
-def main() -> int:
-    """``depthguard warmup``: compile what is not cached yet and say what and how long."""
-    started = []
-
-    def progress(kernel):
-        if not started:
-            print("depthguard warmup: compiling the numba kernels that are not cached yet (after an install or an "
-                  "upgrade; once)", flush=True)
-        started.append(kernel)
-        print(f"  compiling {kernel} ...", flush=True)
-
-    report = warm_up(progress)
-    if _jit.uncached_kernels():
-        print(f"depthguard warmup: {_jit.uncached_kernels()} kernels have no writable cache folder: they were compiled "
-              "for this process only (see the warning above)")
-    if not report.compiles:
-        print(f"depthguard warmup: every kernel was already compiled and cached; checked in {report.seconds:.1f} s")
-        return 0
-    top = report.top_level
-    print(f"depthguard warmup: compiled {len(top)} kernel signatures in {report.compile_seconds:.1f} s "
-          f"({report.seconds:.1f} s in all); the slowest:")
-    for c in sorted(top, key=lambda c: -c.seconds)[:10]:
-        print(f"  {c.seconds:6.1f} s  {c.kernel}")
-    return 0

@@ -1,0 +1,109 @@
+"""``depthguard replay``: run a recording through the monitor in capture-time order, one answer per set of frames."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+
+from depthguard import config
+from depthguard.cli.options import METRES, SPEED, load_robot
+
+HELP = ('run a recording (folder or ROS 2 bag, docs/design.md §12a) through the monitor in capture-time '
+        'order, one answer per set of frames')
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("recording", metavar="RECORDING", help="a recording folder (rig.yaml, frames.csv, depth/, "
+                                                                "joint_states.csv), a rosbag2 folder or an .mcap file")
+    parser.add_argument("--out", required=True, metavar="RESULTS.csv",
+                        help="results: time,frame,control_point,x,y,z,distance,blind_distance,flags")
+    parser.add_argument("--robot", default="iiwa", metavar="URDF",
+                        help="the recorded robot, filtered out of the images: a URDF file, or 'iiwa' / 'panda' for the "
+                             "models shipped with pybullet_data (default: iiwa); its joints must be the recording's")
+    parser.add_argument("--points", metavar="POINTS",
+                        help="fixed control points (CSV x,y,z or JSON, world frame, metres), named p0, p1, ... "
+                             "(default: the robot's control points, moving with the recorded joints)")
+    parser.add_argument("--rho", type=METRES, default=config.DEFAULT_RHO,
+                        help=f"surveillance radius, metres, in [{config.RHO_MIN:g}, {config.RHO_MAX:g}]")
+    parser.add_argument("--aggregate", choices=config.AGGREGATES, default=config.DEFAULT_AGGREGATE)
+    parser.add_argument("--invalid", choices=config.INVALID_POLICIES, default=config.DEFAULT_INVALID,
+                        help="pixels without a measurement: occupied (fail-safe), neighbors, free")
+    parser.add_argument("--rig", metavar="RIG.yaml",
+                        help="the rig (default: rig.yaml in the recording, the bag folder or beside the .mcap file)")
+    memory = parser.add_mutually_exclusive_group()
+    memory.add_argument("--v-max", type=SPEED, default=config.FREESPACE_V_MAX,
+                        help="the free-space memory's fastest person, metres/second (default "
+                             f"{config.FREESPACE_V_MAX:g}, ISO 13855's hand speed; docs/design.md §8a); the memory "
+                             "needs a workspace in the rig")
+    memory.add_argument("--no-memory", action="store_true",
+                        help="do not remember free space: only what the cameras see now clears space")
+    parser.add_argument("--json", action="store_true", help="also print a JSON summary to standard output")
+
+
+def run(args) -> int:
+    import csv
+    from pathlib import Path
+
+    import numpy as np
+
+    from depthguard import DistanceMonitor
+    from depthguard.errors import InputError
+    from depthguard.io.files import atomic_write
+    from depthguard.io.recordings import open_recording
+
+    out = Path(args.out)
+    if out.exists() and not out.is_file():  # a folder, a FIFO, a device: never written to
+        raise InputError(f"--out {args.out}: exists and is not a regular file")
+    recording = open_recording(args.recording, rig=args.rig)
+    robot = load_robot(args.robot)
+    names = recording.joint_names
+    if set(names) != set(robot.joint_names) or len(names) != len(robot.joint_names):
+        missing = [n for n in robot.joint_names if n not in names]
+        unknown = [n for n in names if n not in robot.joint_names]
+        raise InputError(f"the recording's joints are not the robot's ({robot.name}): "
+                         + "; ".join(part for part in (f"missing {', '.join(missing)}" if missing else "",
+                                                       f"not the robot's {', '.join(unknown)}" if unknown else "")
+                                     if part), source=str(recording.path), field="joints")
+    order = [names.index(n) for n in robot.joint_names]  # recording's joint order -> the robot's
+    if args.points is not None:
+        from depthguard.io.points import load_points
+
+        fixed = load_points(args.points)
+        if len(fixed) == 0:
+            raise InputError(f"--points {args.points}: holds no points")
+        point_names = [f"p{i}" for i in range(len(fixed))]
+    else:
+        fixed = None
+        point_names = list(robot.control_point_names)
+    monitor = DistanceMonitor(recording.rig, rho=args.rho, aggregate=args.aggregate, invalid=args.invalid,
+                              robot=robot, memory=not args.no_memory, v_max=args.v_max)
+    distances, flagged, answered = [], 0, 0
+    with atomic_write(out, newline="") as f:  # --out appears once every set is answered
+        writer = csv.writer(f)
+        writer.writerow(["time", "frame", "control_point", "x", "y", "z", "distance", "blind_distance", "flags"])
+        print(f"replaying {len(recording)} frame sets ...", file=sys.stderr, flush=True)
+        for frame_set in recording.frame_sets():
+            points = fixed if fixed is not None else \
+                robot.control_point_positions(recording.joints_at(frame_set.time)[order])
+            camera_joints = {camera: q[order] for camera, q in frame_set.joints.items()}
+            result = monitor.query(frame_set.images, points, camera_joints=camera_joints, now=frame_set.time)
+            for i, name in enumerate(point_names):
+                flags = result.flags[i].names
+                writer.writerow([repr(float(frame_set.time)), frame_set.frame, name,
+                                 *(repr(float(c)) for c in points[i]), repr(float(result.distance[i])),
+                                 repr(float(result.blind_distance[i])), ";".join(flags)])
+                flagged += bool(flags)
+            distances.append(np.asarray(result.distance, dtype=np.float64))
+            answered += 1
+    if args.json:
+        values = np.concatenate(distances) if distances else np.zeros(0)
+        finite = lambda x: None if not math.isfinite(x) else float(x)  # noqa: E731 - inf: nothing within rho
+        print(json.dumps({"recording": str(recording.path), "out": str(out), "frames": answered,
+                          "points": len(point_names), "answers": int(values.size), "flagged": flagged,
+                          "distance_min": finite(values.min()) if values.size else None,
+                          "distance_median": finite(float(np.median(values))) if values.size else None}))
+    else:
+        print(f"replayed {answered} frame sets of {', '.join(recording.rig.cameras)} with {len(point_names)} points "
+              f"each ({flagged} answers flagged) into {out}")
+    return 0
