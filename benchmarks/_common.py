@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 import depthguard as dg
-from depthguard.scenes import Box, render_depth, scene_distance, standing_person
+from depthguard.scenes import Box, render_depth, scene_distance
+from depthguard_lab.simulation import standing_person
 from depthguard.transforms import look_at
 
 

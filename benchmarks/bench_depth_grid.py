@@ -25,7 +25,8 @@ import depthguard as dg
 from depthguard.depthgrid import build_map
 from depthguard.rendering import Renderer
 from depthguard.robots import RobotModel
-from depthguard.scenes import Box, render_depth, standing_person
+from depthguard.scenes import Box, render_depth
+from depthguard_lab.simulation import standing_person
 from depthguard.self_filter import RobotSilhouette
 from depthguard.transforms import look_at
 from _common import report

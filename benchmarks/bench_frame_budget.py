@@ -54,7 +54,8 @@ from depthguard.kernels import freespace as memory_kernels  # noqa: E402
 from depthguard.freespace import _near  # noqa: E402
 from depthguard.rendering import Renderer  # noqa: E402
 from depthguard.robots import RobotModel  # noqa: E402
-from depthguard.scenes import Box, render_depth, standing_person  # noqa: E402
+from depthguard.scenes import Box, render_depth
+from depthguard_lab.simulation import standing_person  # noqa: E402
 from depthguard.self_filter import RobotSilhouette  # noqa: E402
 from bench_depth_grid import EYES, cameras  # noqa: E402
 from _common import report

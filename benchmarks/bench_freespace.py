@@ -33,7 +33,8 @@ from scipy import ndimage
 import depthguard as dg
 from depthguard.depthgrid import free_image
 from depthguard.freespace import FreeSpaceMemory, VoxelBox, seen_free_voxels, squared_distance_transform
-from depthguard.scenes import Box, render_depth, standing_person
+from depthguard.scenes import Box, render_depth
+from depthguard_lab.simulation import standing_person
 from depthguard.transforms import look_at
 from _common import report
 

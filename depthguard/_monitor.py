@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Mapping
@@ -286,6 +287,8 @@ class DistanceMonitor:
         return self._camera_frame(name, frame, joints).occupancy
 
     def _camera_frame(self, name: str, frame, joints) -> "_CameraFrame":
+        """Stages check, self-filter and prepare for one frame of camera ``name`` (kept while the same
+        :class:`DepthImage` comes back)."""
         camera = self.rig.camera(name)
         cached = self._prepared.get(name)
         if cached is not None and cached[0] is frame:
@@ -294,37 +297,27 @@ class DistanceMonitor:
                 # was filtered with: its capture time, not this call's, is when the robot was where they say.
                 self.robot.joint_vector(joints)
             return cached[1]
-        if isinstance(frame, DepthImage):
-            # A DepthImage is a plain dataclass: whoever built it may have bypassed depth_image. Its data is checked
-            # again and copied, so that nothing the caller does to its array can change the prepared frame.
-            image = checked_frame(frame, camera)
-        else:
-            image = depth_image(frame, camera)
-        solid_band = 0.0
-        measured = image
-        if self._static is not None:
+        # check (depthguard.depth): a DepthImage is a plain dataclass, whoever built it may have bypassed
+        # depth_image; its data is checked again and copied, so that nothing the caller does to its array can change
+        # the prepared frame.
+        image = checked_frame(frame, camera) if isinstance(frame, DepthImage) else depth_image(frame, camera)
+        measured, solid_band = image, 0.0
+        if self._static is not None:  # known solids (depthguard.static_solids) stand in for what they hide
             image, solid_band = self._static.substitute_band(image, camera)
-        robot_near = robot_far = None
-        if self._silhouette is not None:
+        mask = None
+        if self._silhouette is not None:  # self-filter (depthguard.self_filter)
             if joints is None:
                 raise InputError(f"camera {name!r}: this monitor filters the robot out of its frames: pass the robot's "
                                  "joint positions at the frame's capture time (query(..., joints=...))")
-            joints = self.robot.joint_vector(joints)
-            robot_near = self._silhouette.render(camera, joints)
-            # Where the robot ends along each pixel: what a camera saw past the padded robot then stays a surface
-            # rather than blind space (whether one camera answers or several), a secondary camera clears the space
-            # there, and the depth grid starts the space behind the robot there (case iv).
-            robot_far = self._silhouette.render_far(camera, joints)
-            if self._static is not None:
-                far_before = robot_far
-                robot_far, moved = self._static.extend_robot(camera, robot_near, robot_far)
-        occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels, robot_near=robot_near,
-                                  robot_tolerance=self.self_filter_tolerance, robot_far=robot_far)
-        state = _CameraFrame(self._silhouette, camera, image, occupancy, joints, robot_near, robot_far)
-        state.solid_band = solid_band
-        state.measured = measured
-        if self._static is not None and robot_far is not None and moved.any():
-            state.resting = (moved, far_before)
+            from depthguard.self_filter import robot_mask
+
+            mask = robot_mask(self._silhouette, camera, self.robot.joint_vector(joints), self._static)
+        # prepare (depthguard.depth)
+        occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels,
+                                  robot_near=None if mask is None else mask.near,
+                                  robot_tolerance=self.self_filter_tolerance,
+                                  robot_far=None if mask is None else mask.far)
+        state = _CameraFrame(camera, image, occupancy, mask, measured=measured, solid_band=solid_band)
         if isinstance(frame, DepthImage):
             self._prepared[name] = (frame, state)
         return state
@@ -392,33 +385,22 @@ class DistanceMonitor:
             raise InputError("this monitor has max_age set: pass now= (seconds, the frames' clock) to query()",
                              field="now")
         tick = time.perf_counter()
+        # The pipeline (docs/design.md, "Layers and the pipeline"): check, self-filter and prepare each frame ...
         states: dict[str, _CameraFrame] = {}
         for name, frame in frames.items():
             if not isinstance(name, str):
                 raise InputError(f"frames must be keyed by camera name, got {short_repr(name)}", field="frames")
             states[name] = self._camera_frame(name, frame,
                                               joints if camera_joints is None else camera_joints.get(name))
-        if now is None:  # the default max_age: the newest frame stands for now
-            times = [s.occupancy.timestamp for s in states.values() if s.occupancy.timestamp is not None
-                     and math.isfinite(s.occupancy.timestamp)]
-            clock = max(times) if times else None
-        else:
-            clock = now
-        usable: dict[str, _CameraFrame] = {}
-        stale: dict[str, float | None] = {}
-        for name, state in states.items():
-            timestamp = state.occupancy.timestamp
-            if self.is_stale(timestamp, clock):
-                stale[name] = timestamp
-            else:
-                usable[name] = state
-        if self.memory is not None:
+        clock, usable, stale = self._split_by_age(states, now)
+        if self.memory is not None:  # ... remember (depthguard.freespace) ...
             self._remember(usable)
         plan = self.plan(usable, stale)
-        fused = self._fused_frames_of(plan, usable) if plan.kind == "fused" else ()
+        fused = self._fused_frames_of(plan, usable) if plan.kind == "fused" else ()  # ... fuse (depthguard.depthgrid)
         times = [state.occupancy.timestamp for state in usable.values() if state.occupancy.timestamp is not None]
         detectable = self._find_detectable(usable)
         concessions = self._concessions(plan, usable)
+        # ... and answer: PreparedSet.query (depthguard.depthspace or the fusion, then the concessions' flags).
         return PreparedSet(plan=plan, usable=dict(usable), fused=fused, free_now=self._free_now if fused else None,
                            rho=self.rho, aggregate=self.aggregate, unseen=self.unseen, method=self.method,
                            time=min(times) if times else None, detectable=detectable, now=clock,
@@ -428,17 +410,36 @@ class DistanceMonitor:
                                                                             self.hidden_band),
                            prepare_seconds=time.perf_counter() - tick)
 
+    def _split_by_age(self, states: dict, now: float | None) -> tuple:
+        """(the clock, usable frames by camera, stale frames' timestamps by camera): the check of time (design §8).
+        Under the default ``max_age="auto"`` without ``now``, the newest timestamp among the frames is the clock."""
+        if now is None:
+            times = [s.occupancy.timestamp for s in states.values() if s.occupancy.timestamp is not None
+                     and math.isfinite(s.occupancy.timestamp)]
+            clock = max(times) if times else None
+        else:
+            clock = now
+        usable: dict[str, _CameraFrame] = {}
+        stale: dict[str, float | None] = {}
+        for name, state in states.items():
+            if self.is_stale(state.occupancy.timestamp, clock):
+                stale[name] = state.occupancy.timestamp
+            else:
+                usable[name] = state
+        return clock, usable, stale
+
     def _concessions(self, plan: "QueryPlan", usable: dict) -> "Concessions":
         """Where the concessions of this set of frames counted space free that no camera saw free (design section
         11a): the robot zone (fused answers and the detectable space), the known solids' bands, the filled holes."""
-        zone = None
-        zoned = (plan.kind == "fused" or self.detectable is not None) and self.robot is not None and self.robot_zone
-        if zoned:
+        capsules = None  # the robot's capsules at every usable frame's joints: (n, 7) world frame
+        if self.robot is not None:
             joints = {s.joints.tobytes(): s.joints for s in usable.values() if s.joints is not None}
-            capsules = [tuple(c.p0) + tuple(c.p1) + (c.radius,) for q in joints.values()
-                        for c in self.robot.capsules_world(q, check=False)]
-            if capsules:
-                zone = (np.array(capsules, dtype=np.float64), self.robot_zone)
+            rows = [tuple(c.p0) + tuple(c.p1) + (c.radius,) for q in joints.values()
+                    for c in self.robot.capsules_world(q, check=False)]
+            if rows:
+                capsules = np.array(rows, dtype=np.float64)
+        zoned = (plan.kind == "fused" or self.detectable is not None) and self.robot_zone
+        zone = (capsules, self.robot_zone) if zoned and capsules is not None else None
         solids = None
         if self._static is not None:  # query() only: the detectable space uses the frames as measured
             band = max([s.solid_band for s in usable.values()], default=0.0)
@@ -446,13 +447,7 @@ class DistanceMonitor:
                 solids = (self._static.boxes, band)
         fills = tuple(s.filled for s in usable.values() if s.occupancy.invalid_policy == "neighbors"
                       and s.occupancy.invalid_pixels and s.filled is not None)
-        shell = None
-        if self.robot is not None:
-            joints = {s.joints.tobytes(): s.joints for s in usable.values() if s.joints is not None}
-            capsules = [tuple(c.p0) + tuple(c.p1) + (c.radius,) for q in joints.values()
-                        for c in self.robot.capsules_world(q, check=False)]
-            if capsules:
-                shell = (np.array(capsules, dtype=np.float64), self._shell)
+        shell = (capsules, self._shell) if capsules is not None else None
         return Concessions(zone, solids, fills, zone_in_query=plan.kind == "fused", shell=shell)
 
     def _remember(self, usable: dict) -> None:
@@ -464,21 +459,14 @@ class DistanceMonitor:
                and state.occupancy.timestamp is not None and state.occupancy.timestamp >= last]
         if not new:
             return
-        from depthguard.freespace import seen_free_voxels
+        from depthguard.freespace import remember_frames, surface_voxels
 
-        from depthguard.freespace import surface_voxels
-
-        t = min(state.occupancy.timestamp for state in new)
-        seen = seen_free_voxels(self.memory.box, [state.camera for state in new], [state.free for state in new],
-                                margin=self.fusion_margin, pad=self.fusion_pixels, check=False)
-        # A surface measured now where the memory remembers free space moved faster than v_max: not cleared there.
-        surfaces = np.zeros(self.memory.box.shape, dtype=bool)
-        for state in new:
-            surface_voxels(self.memory.box, state.camera, state.image, state.occupancy, surfaces)
-        self.memory.forget(surfaces)
-        seen &= ~surfaces
-        self.memory.update(t, seen, check=False)
-        self._seen_now = seen
+        box = self.memory.box
+        self._seen_now = remember_frames(
+            self.memory, min(state.occupancy.timestamp for state in new), [state.camera for state in new],
+            [state.free for state in new],
+            [functools.partial(surface_voxels, box, state.camera, state.image, state.occupancy) for state in new],
+            margin=self.fusion_margin, pad=self.fusion_pixels)
         self._remembered = {id(state) for state in usable.values()}
 
     def plan(self, usable, stale) -> "QueryPlan":
@@ -842,26 +830,40 @@ def _farthest_depth(camera, workspace) -> float:
 
 
 class _CameraFrame:
-    """One camera's latest frame as the monitor prepared it: its occupancy and, with a robot, where the robot starts
-    and ends along each pixel; what the depth grid needs besides, made when first needed: where each pixel's ray first
-    leaves the robot (as a principal) and how far the camera saw (as a secondary)."""
+    """One camera's latest frame as the monitor's stages left it: the frame checked (``image``; ``measured``, before
+    known solids replaced any measurement, and ``solid_band``, metres, how far from a known solid the replaced ones
+    reach), where the robot is along each pixel (``mask``, a :class:`~depthguard.self_filter.RobotMask`, or None),
+    and the prepared frame (``occupancy``); what the fusion and the memory need besides is made when first asked
+    for."""
 
-    def __init__(self, silhouette, camera, image: DepthImage, occupancy: OccupancyImage, joints,
-                 robot_near=None, robot_far=None):
-        self.silhouette = silhouette  # the robot's RobotSilhouette (renders where each ray first leaves it), or None
+    def __init__(self, camera, image: DepthImage, occupancy: OccupancyImage, mask=None, *, measured=None,
+                 solid_band: float = 0.0):
         self.camera = camera
         self.image = image
         self.occupancy = occupancy
-        self.joints = joints  # (n,) the robot's joints at its capture time, or None
-        self.robot_near = robot_near
-        self.robot_far = robot_far
-        self._robot_exit = None
+        self.mask = mask
+        self.measured = image if measured is None else measured
+        self.solid_band = solid_band
         self._free = None
         self._filled = None
         self._measured_free = None
-        self.measured = image  # the frame as measured, before a known solid replaced any pixel
-        self.resting = None  # (pixels, robot_far before): where the robot's far end was moved through a known solid
-        self.solid_band = 0.0  # metres: how far from a known solid the replaced measurements reach (0: none)
+
+    @property
+    def joints(self):
+        """(n,) the robot's joints at the frame's capture time, or None without a robot."""
+        return None if self.mask is None else self.mask.joints
+
+    @property
+    def robot_near(self):
+        return None if self.mask is None else self.mask.near
+
+    @property
+    def robot_far(self):
+        return None if self.mask is None else self.mask.far
+
+    @property
+    def robot_exit(self):
+        return None if self.mask is None else self.mask.exit
 
     @property
     def measured_free(self) -> np.ndarray:
@@ -885,19 +887,8 @@ class _CameraFrame:
         return self._filled[0]
 
     @property
-    def robot_exit(self):
-        if self.silhouette is None:
-            return None
-        if self._robot_exit is None:
-            exit = self.silhouette.render_first_exit(self.camera, self.joints)
-            if self.resting is not None:  # a ray that left the robot only into the solid leaves both there
-                moved, far_before = self.resting
-                exit = np.where(moved & (exit >= far_before), self.robot_far, exit).astype(np.float32)
-            self._robot_exit = exit
-        return self._robot_exit
-
-    @property
     def free(self) -> np.ndarray:
+        """(h, w) float32 metres: how far the camera saw free along each pixel (``depthguard.depthgrid.seen_free``)."""
         if self._free is None:
             from depthguard.depthgrid import seen_free
 

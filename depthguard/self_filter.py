@@ -134,3 +134,52 @@ class RobotSilhouette:
     def triangles(self) -> int:
         """Triangles drawn per camera."""
         return sum(self.renderer._mesh(mesh_id).n_faces for _, mesh_id in self._meshes)
+
+
+class RobotMask:
+    """Where the robot is along each pixel of one camera at one instant: the self-filter stage's answer (design §7).
+
+    ``near``, ``far``: (h, w) float32 metres, where each pixel's ray enters the robot's padded geometry and where it
+    leaves it for the last time (0 where the robot is not). With known solids, ``far`` runs on through a solid the
+    robot rests in (``StaticSolids.extend_robot``) and ``resting`` holds (pixels moved (h, w) bool, far before).
+    :attr:`exit`, where each ray first leaves the robot, is rendered when the depth grid first asks for it."""
+
+    def __init__(self, silhouette: RobotSilhouette, camera: PinholeCamera, joints: np.ndarray, near: np.ndarray,
+                 far: np.ndarray, resting: tuple | None = None):
+        self.silhouette = silhouette
+        self.camera = camera
+        self.joints = joints
+        self.near = near
+        self.far = far
+        self.resting = resting
+        self._exit = None
+
+    @property
+    def exit(self) -> np.ndarray:
+        """(h, w) float32 metres: where each pixel's ray first leaves the robot (:meth:`RobotSilhouette.
+        render_first_exit`); a ray that left the robot only into a known solid leaves both at ``far``."""
+        if self._exit is None:
+            exit = self.silhouette.render_first_exit(self.camera, self.joints)
+            if self.resting is not None:
+                moved, far_before = self.resting
+                exit = np.where(moved & (exit >= far_before), self.far, exit).astype(np.float32)
+            self._exit = exit
+        return self._exit
+
+
+def robot_mask(silhouette: RobotSilhouette, camera: PinholeCamera, joints: np.ndarray, static=None) -> RobotMask:
+    """The self-filter stage for one frame: render the robot at ``joints`` (its joint vector when the frame was
+    captured) into ``camera``; ``static``: the known solids (:class:`depthguard.static_solids.StaticSolids`, or None)
+    the robot's far end may run on through."""
+    near = silhouette.render(camera, joints)
+    # Where the robot ends along each pixel: what a camera saw past the padded robot then stays a surface rather
+    # than blind space (whether one camera answers or several), a secondary camera clears the space there, and the
+    # depth grid starts the space behind the robot there (case iv).
+    far = silhouette.render_far(camera, joints)
+    resting = None
+    if static is not None:
+        far_before = far
+        far, moved = static.extend_robot(camera, near, far)
+        if moved.any():
+            resting = (moved, far_before)
+    return RobotMask(silhouette, camera, joints, near, far, resting)

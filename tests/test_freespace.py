@@ -16,7 +16,8 @@ import depthguard as dg
 from depthguard import config
 from depthguard.depthgrid import free_image
 from depthguard.freespace import FreeSpaceMemory, VoxelBox, seen_free_voxels, squared_distance_transform
-from depthguard.scenes import Box, render_depth, standing_person
+from depthguard.scenes import Box, render_depth
+from depthguard_lab.simulation import standing_person
 from depthguard.transforms import look_at
 
 SQRT3 = math.sqrt(3.0)

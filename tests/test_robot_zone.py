@@ -40,6 +40,15 @@ def _segment_distance(points, a, b):
     return np.linalg.norm(points - (a + t[..., None] * ab), axis=-1)
 
 
+def zone_grid(d_min, delta_d, n_cells, zone, params):
+    """A GridState that holds only the robot zone (zoned_cells reads nothing else)."""
+    empty3 = np.zeros((0, 1, 1, 3))
+    return K.GridState(d_min, delta_d, n_cells, empty3, np.zeros((0, 3)), np.zeros((0, 1, 1), np.float32),
+                       np.zeros((0, 2), np.int64), np.zeros(0), 0.0, np.zeros((1, 1, 1), np.uint8),
+                       np.zeros((0, 0, 0), np.uint8), np.zeros(0), np.zeros((1, 1), np.int64),
+                       np.zeros((1, 1), np.int64), zone, params)
+
+
 def test_zoned_cells_against_corners():
     rng = np.random.default_rng(7)
     camera = dg.PinholeCamera("p", 160, 120, 131.25, 131.25, 79.5, 59.5, np.eye(4))
@@ -58,7 +67,7 @@ def test_zoned_cells_against_corners():
             u = int(np.clip(u_c + rng.integers(-12, 13), 0, camera.width - 1))
             v = int(np.clip(v_c + rng.integers(-12, 13), 0, camera.height - 1))
             k_a = int(np.clip((centre[2] - 0.3 - d_min) / delta_d, 0, n_cells - 64))
-            bits = int(K.zoned_cells(u, v, k_a, k_a + 63, d_min, delta_d, zone, params))
+            bits = int(K.zoned_cells(u, v, k_a, k_a + 63, zone_grid(d_min, delta_d, n_cells, zone, params)))
             for i in range(64):
                 z0 = d_min + (k_a + i) * delta_d
                 corners = np.array([[(uu - camera.cx) / camera.fx * z, (vv - camera.cy) / camera.fy * z, z]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 
 from depthguard import config
-from depthguard.cli.options import METRES, robot_and_joints
+from depthguard.cli.options import add_monitor_options, robot_and_joints
 
 HELP = 'distances from control points to what the cameras see'
 
@@ -16,11 +16,7 @@ def add_arguments(parser) -> None:
                         help="depth image of camera NAME (16-bit PNG/PGM in depth_scale units, .npy, float TIFF)")
     parser.add_argument("--points", required=True, help="control points: CSV with header x,y,z or JSON list of "
                                                         "[x, y, z] (world frame, metres)")
-    parser.add_argument("--rho", type=METRES, default=config.DEFAULT_RHO,
-                        help=f"surveillance radius, metres, in [{config.RHO_MIN:g}, {config.RHO_MAX:g}]")
-    parser.add_argument("--aggregate", choices=config.AGGREGATES, default=config.DEFAULT_AGGREGATE)
-    parser.add_argument("--invalid", choices=config.INVALID_POLICIES, default=config.DEFAULT_INVALID,
-                        help="pixels without a measurement: occupied (fail-safe), neighbors, free")
+    add_monitor_options(parser)
     parser.add_argument("--unseen", choices=config.UNSEEN_POLICIES, default=config.DEFAULT_UNSEEN,
                         help="space no camera observes: occupied (fail-safe) or free")
     parser.add_argument("--method", choices=config.METHODS, default=config.DEFAULT_METHOD,

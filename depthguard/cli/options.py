@@ -123,3 +123,12 @@ def robot_and_joints(args):
         raise InputError("--robot needs --joints (the robot's joint positions when the images were taken)")
     robot = load_robot(args.robot)
     return robot, robot.joint_vector(parse_joints(args.joints))
+
+
+def add_monitor_options(parser) -> None:
+    """The monitor's settings a command passes on: ``--rho``, ``--aggregate``, ``--invalid``."""
+    parser.add_argument("--rho", type=METRES, default=config.DEFAULT_RHO,
+                        help=f"surveillance radius, metres, in [{config.RHO_MIN:g}, {config.RHO_MAX:g}]")
+    parser.add_argument("--aggregate", choices=config.AGGREGATES, default=config.DEFAULT_AGGREGATE)
+    parser.add_argument("--invalid", choices=config.INVALID_POLICIES, default=config.DEFAULT_INVALID,
+                        help="pixels without a measurement: occupied (fail-safe), neighbors, free")

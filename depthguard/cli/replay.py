@@ -7,7 +7,7 @@ import math
 import sys
 
 from depthguard import config
-from depthguard.cli.options import METRES, SPEED, load_robot
+from depthguard.cli.options import SPEED, add_monitor_options, load_robot
 
 HELP = ('run a recording (folder or ROS 2 bag, docs/design.md §12a) through the monitor in capture-time '
         'order, one answer per set of frames')
@@ -24,11 +24,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--points", metavar="POINTS",
                         help="fixed control points (CSV x,y,z or JSON, world frame, metres), named p0, p1, ... "
                              "(default: the robot's control points, moving with the recorded joints)")
-    parser.add_argument("--rho", type=METRES, default=config.DEFAULT_RHO,
-                        help=f"surveillance radius, metres, in [{config.RHO_MIN:g}, {config.RHO_MAX:g}]")
-    parser.add_argument("--aggregate", choices=config.AGGREGATES, default=config.DEFAULT_AGGREGATE)
-    parser.add_argument("--invalid", choices=config.INVALID_POLICIES, default=config.DEFAULT_INVALID,
-                        help="pixels without a measurement: occupied (fail-safe), neighbors, free")
+    add_monitor_options(parser)
     parser.add_argument("--rig", metavar="RIG.yaml",
                         help="the rig (default: rig.yaml in the recording, the bag folder or beside the .mcap file)")
     memory = parser.add_mutually_exclusive_group()

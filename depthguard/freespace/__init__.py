@@ -6,7 +6,13 @@ capability fits."""
 from depthguard.freespace._detectable import closed_faces, DetectableSpace, robot_voxels, solid_voxels
 from depthguard.kernels.detectable import or_coarse
 from depthguard.freespace._near import surface_voxels, voxels_within
-from depthguard.freespace._memory import FreeSpaceMemory, VoxelBox, seen_free_voxels, squared_distance_transform
+from depthguard.freespace._memory import (
+    FreeSpaceMemory,
+    VoxelBox,
+    remember_frames,
+    seen_free_voxels,
+    squared_distance_transform,
+)
 
-__all__ = ["DetectableSpace", "FreeSpaceMemory", "VoxelBox", "closed_faces", "or_coarse", "robot_voxels",
+__all__ = ["DetectableSpace", "FreeSpaceMemory", "VoxelBox", "closed_faces", "or_coarse", "remember_frames", "robot_voxels",
            "seen_free_voxels", "solid_voxels", "squared_distance_transform", "surface_voxels", "voxels_within"]

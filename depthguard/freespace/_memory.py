@@ -333,3 +333,21 @@ class FreeSpaceMemory:
             got = f"dtype {mask.dtype}, shape {mask.shape}" if isinstance(mask, np.ndarray) else type(mask).__name__
             raise InputError(f"{name} must be a bool array of the box's shape {self.box.shape}, got {got}", field=name)
         return mask
+
+
+def remember_frames(memory: "FreeSpaceMemory", t: float, cameras: Sequence[PinholeCamera], free_images: Sequence,
+                    surfaces_of: Sequence, margin: float, pad: int) -> np.ndarray:
+    """The remember stage (design §8a): take one set of frames, captured no earlier than ``t`` (seconds), into
+    ``memory``. ``cameras`` and ``free_images`` as :func:`seen_free_voxels`; ``surfaces_of``: for each camera, a
+    function that marks in a (nx, ny, nz) bool array the voxels holding a surface that camera measures now
+    (:func:`depthguard.freespace.surface_voxels`). A surface measured where the memory remembers free space moved
+    faster than v_max: the memory forgets that voxel, and these frames do not clear it. Returns the voxels these
+    frames saw free ((nx, ny, nz) bool)."""
+    seen = seen_free_voxels(memory.box, cameras, free_images, margin=margin, pad=pad, check=False)
+    surfaces = np.zeros(memory.box.shape, dtype=bool)
+    for mark in surfaces_of:
+        mark(surfaces)
+    memory.forget(surfaces)
+    seen &= ~surfaces
+    memory.update(t, seen, check=False)
+    return seen

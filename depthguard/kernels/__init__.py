@@ -34,7 +34,13 @@ Conventions, the same in every module:
   voxels ``voxel`` metres a side.
 - Records: a kernel that needs many arrays of one thing takes them as one namedtuple, documented where it is
   defined (the depth grid's ``GridState``, ``PrincipalView``, ``QueryOptions``, ``FusedOutput``); numba compiles a
-  namedtuple of arrays and scalars as separate arguments, at no cost.
+  namedtuple of arrays and scalars as separate arguments, at no cost. The depth grid is passed one way only: as its
+  ``GridState`` ``grid``, to every kernel that reads it, down to ``cell_index(z, grid)``.
+- One aggregation (design §6): both walks over contributing pixels, the single camera's (``depthspace``) and the
+  depth grid's (``depthgrid``), add each pixel's :func:`frustum.contribution` and finish with
+  :func:`frustum.finish_sum` (``mean``, ``hybrid``) or :func:`frustum.finish_min_at_pixel` (``min``).
+- Arguments: every argument of every kernel is documented with its shape, dtype and unit, in the kernel's docstring
+  or in its module's glossary (``Arguments used throughout:``); ``tests/test_kernel_docs.py`` checks it.
 - Outputs: the kernels of the online path (frames to distances) write into arrays their caller allocated (``out``,
   ``*_out``, the records' arrays) and allocate nothing per pixel or per point; the collision test's and the capsule
   fit's allocate small scratch arrays per call or per thread.

@@ -1,6 +1,9 @@
-"""Numba kernels of the capsule fit (see ``depthguard/robots/_capsules.py`` for the method). They trust their inputs: contiguous
-float64 arrays, a unit axis, at least one point. The tests hold them against slow NumPy twins and run their bodies
-as plain Python (``.py_func``)."""
+"""Numba kernels of the capsule fit (see ``depthguard/robots/_capsules.py`` for the method). They trust their
+inputs: contiguous float64 arrays, a unit axis, at least one point. The tests hold them against slow NumPy twins and
+run their bodies as plain Python (``.py_func``).
+
+Lengths are in the unit of the points given, metres for the fit (a link's mesh vertices, in the link's frame); every
+point, axis and result of one call is in the same frame."""
 
 import math
 
@@ -12,7 +15,10 @@ from depthguard.kernels.jit import kernel
 @kernel(inline=True, error_model="python")
 def circumcircle(ax, ay, bx, by, cx, cy):
     """(centre x, centre y, radius) of the circle through three points; for (nearly) collinear points, the circle
-    on the farthest pair."""
+    on the farthest pair.
+
+    ax, ay, bx, by, cx, cy: float64, the three points (ax, ay), (bx, by), (cx, cy) in one plane, in one length unit
+    (metres in the fit: coordinates in the plane normal to the axis); not a camera's intrinsics."""
     d = 2.0 * (ax * (by - cy) + bx * (cy - ay) + cx * (ay - by))
     if abs(d) < 1e-18:
         dab, dac, dbc = math.hypot(ax - bx, ay - by), math.hypot(ax - cx, ay - cy), math.hypot(bx - cx, by - cy)
@@ -29,7 +35,8 @@ def circumcircle(ax, ay, bx, by, cx, cy):
 
 @kernel(error_model="python")
 def enclosing_circle(x, y):
-    """Smallest circle enclosing the points (x[i], y[i]), (n,) float64 each: (centre x, centre y, radius).
+    """Smallest circle enclosing the points (x[i], y[i]), (n,) float64 each (n >= 1, one length unit: metres in the
+    fit): (centre x, centre y, radius), in the same unit.
 
     Welzl's algorithm, iterative; its expected time is linear when the points come in random order (the caller
     shuffles them once). The radius returned is the exact largest distance from the centre to a point.
@@ -58,7 +65,12 @@ def enclosing_circle(x, y):
 @kernel(inline=True, error_model="python")
 def _scan(t, r2, lo, hi, samples):
     """The radius in ``samples`` evenly spaced values of [lo, hi] whose capsule (shortest segment) has the smallest
-    volume: (radius, index)."""
+    volume: (radius, index).
+
+    t: (n,) float64, metres, each point's coordinate along the axis; r2: (n,) float64, square metres, its squared
+    distance from the axis line; lo, hi: float64, metres, the radii to try, lo <= hi, lo at least every
+    point's distance from the axis line; samples: int >= 1 (lo alone when 1); index: int in [0, samples), the chosen
+    value's."""
     best_volume, best_radius, best_index = np.inf, lo, 0
     for k in range(samples):
         radius = lo + (hi - lo) * k / (samples - 1) if samples > 1 else lo
@@ -75,9 +87,12 @@ def _scan(t, r2, lo, hi, samples):
 
 @kernel(error_model="python")
 def fit_along(points, axis, samples):
-    """The smallest capsule this fit finds around (n, 3) ``points`` with its segment parallel to the unit (3,)
-    ``axis``: (p0 (3,), p1 (3,), radius, volume). The radius is the one the volume scan chose; every point lies
-    within it of the segment (up to rounding; the caller recomputes the exact largest distance).
+    """The smallest capsule this fit finds around (n, 3) float64 ``points`` (n >= 1; metres, the link's frame) with
+    its segment parallel to the unit (3,) float64 ``axis`` (same frame): (p0 (3,), p1 (3,), radius, volume), float64,
+    metres, cubic metres, in the points' frame. The radius is the one the volume scan chose; every point lies within
+    it of the segment (up to rounding; the caller recomputes the exact largest distance). ``samples``: int >= 1, the
+    radii each of the two scans tries (``config.CAPSULE_RADIUS_SAMPLES``): one over the whole range, then one around
+    the best.
 
     Written with scalars rather than NumPy's cross, norm and matrix products, which take seconds to compile."""
     n = points.shape[0]

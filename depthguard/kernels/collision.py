@@ -1,5 +1,28 @@
 """Numba kernels of the image-based collision test (design §10): the epipolar bands between two cameras' tile
-grids. They trust their inputs; ``depthguard/collision/_epipolar.py`` checks them."""
+grids. They trust their inputs; ``depthguard/collision/_epipolar.py`` checks them. Also the tiles the robot's capsules
+may cover (``_robot_image.py``) and the per-tile sums of the difference images (``_difference.py``), which check
+theirs.
+
+A set of tiles is a bitset: a row of a (K, words) uint64 array, tile index r * cols + c in bit ``index & 63`` of word
+``index >> 6``.
+
+Arguments used throughout:
+
+- ``R, t``: (3, 3) float64 and (3,) float64 metres: the rigid transform from the frame the geometry is given in (each
+  kernel says which) into the optical frame (x right, y down, z forward) of the camera whose tiles are marked:
+  x_camera = R x + t.
+- ``fx, fy, cx, cy``: float, pixels: that camera's intrinsics.
+- ``col_edges, row_edges``: (cols + 1,) and (rows + 1,) float64, pixels: that camera's tile grid
+  (:class:`depthguard.collision.TileGrid`): tile (r, c) spans image columns col_edges[c] to col_edges[c + 1] and
+  rows row_edges[r] to row_edges[r + 1], its pixels' footprints (each entry a tile's first pixel minus 1/2, the last
+  the image's width or height minus 1/2).
+- ``words``: int, the uint64 words of one bitset, (rows * cols + 63) // 64.
+- ``k``: int, the row of the bitsets ``out`` that a kernel sets bits in.
+- ``ends, radii``: (K, m, 2, 3) float64, metres, world frame: for each of K robot configurations the core segments
+  (both end points) of its m capsules; (m,) float64, metres: the capsules' radii (padding included).
+- ``first_row, first_col``: (rows + 1,) and (cols + 1,) int64, pixels: each tile row's first image row and each tile
+  column's first image column, the last entry the image's height and width.
+"""
 
 import numpy as np
 from numba import prange
@@ -9,13 +32,16 @@ from depthguard.kernels.jit import kernel
 
 @kernel(inline=True)
 def _cross(ox, oy, ax, ay, bx, by):
+    """(a - o) x (b - o) for the points o = (ox, oy), a = (ax, ay), b = (bx, by) (float64, pixels): > 0 when o, a, b
+    turn counter-clockwise (the sense of :func:`convex_hull`), 0 when they are collinear; pixels squared."""
     return (ax - ox) * (by - oy) - (ay - oy) * (bx - ox)
 
 
 @kernel()
 def convex_hull(xs, ys, hull_x, hull_y):
-    """Andrew's monotone chain over the points (xs, ys) (n <= 16): writes the hull's vertices counter-clockwise
-    into hull_x, hull_y (length >= 2 n) and returns their number (collinear points dropped)."""
+    """Andrew's monotone chain over the points (xs, ys) ((n,) float64 each, 1 <= n <= 16; pixels here): writes the
+    hull's vertices counter-clockwise into hull_x, hull_y (float64, length >= 2 n, same unit) and returns their number
+    (collinear points dropped)."""
     n = xs.shape[0]
     order = np.arange(n)
     for i in range(1, n):  # insertion sort by x, then y
@@ -42,7 +68,9 @@ def convex_hull(xs, ys, hull_x, hull_y):
 @kernel(inline=True)
 def _rect_meets_hull(x0, x1, y0, y1, hull_x, hull_y, m):
     """Whether the axis-aligned rectangle [x0, x1] x [y0, y1] meets the convex polygon (hull_x, hull_y)[:m]
-    (counter-clockwise), by separating axes: the rectangle's two and the polygon's edge normals."""
+    (counter-clockwise), by separating axes: the rectangle's two and the polygon's edge normals. x0 <= x1, y0 <= y1:
+    float64, pixels; hull_x, hull_y: float64 arrays, pixels, the polygon's m >= 1 vertices first (as
+    :func:`convex_hull` writes them)."""
     lo_x = np.inf
     hi_x = -np.inf
     lo_y = np.inf
@@ -71,7 +99,8 @@ def _rect_meets_hull(x0, x1, y0, y1, hull_x, hull_y, m):
 
 @kernel(inline=True)
 def _tiles_spanned(edges, lo, hi):
-    """(first, last) tile whose span edges[k] .. edges[k + 1] may meet [lo, hi] (clamped to the grid)."""
+    """(first, last) tile whose span edges[k] .. edges[k + 1] may meet [lo, hi] (clamped to the grid). edges:
+    (n + 1,) float64, pixels, ``col_edges`` or ``row_edges``; lo <= hi: float64, pixels."""
     n = edges.shape[0] - 1
     first = 0
     while first < n - 1 and edges[first + 1] < lo:
@@ -84,9 +113,9 @@ def _tiles_spanned(edges, lo, hi):
 
 @kernel(inline=True)
 def mark_hull_tiles(xs, ys, hull_x, hull_y, col_edges, row_edges, out, k):
-    """Set in out[k] (a uint64 bitset, tile index r * cols + c) every tile whose footprint (col_edges[c] ..
-    col_edges[c + 1] x row_edges[r] .. row_edges[r + 1], pixels) meets the convex hull of the points (xs, ys)
-    (pixels, at most 8); hull_x, hull_y: work arrays of twice their length."""
+    """Set in out[k] (out: (K, words) uint64 bitsets, tile index r * cols + c) every tile whose footprint
+    (col_edges[c] .. col_edges[c + 1] x row_edges[r] .. row_edges[r + 1], pixels) meets the convex hull of the points
+    (xs, ys) ((n,) float64 each, pixels, 1 <= n <= 8); hull_x, hull_y: float64 work arrays of twice their length."""
     cols = col_edges.shape[0] - 1
     rows = row_edges.shape[0] - 1
     m = convex_hull(xs, ys, hull_x, hull_y)
@@ -112,23 +141,26 @@ def mark_hull_tiles(xs, ys, hull_x, hull_y, col_edges, row_edges, out, k):
 
 @kernel(inline=True)
 def mark_every_tile(n_tiles, out, k):
-    """Set in out[k] the bits of tiles 0 .. n_tiles - 1 (something that may be seen anywhere)."""
+    """Set in out[k] ((K, words) uint64 bitsets) the bits of tiles 0 .. n_tiles - 1 (something that may be seen
+    anywhere); n_tiles: int, rows * cols."""
     for tile in range(n_tiles):
         out[k, tile >> 6] |= np.uint64(1) << np.uint64(tile & 63)
 
 
 @kernel(inline=True)
 def _in_frame(R, t, px, py, pz):
-    """(x, y, z) = R (px, py, pz) + t."""
+    """(x, y, z) = R (px, py, pz) + t: the point (px, py, pz) (float64, metres, R, t's source frame) in the camera's
+    optical frame."""
     return (R[0, 0] * px + R[0, 1] * py + R[0, 2] * pz + t[0], R[1, 0] * px + R[1, 1] * py + R[1, 2] * pz + t[1],
             R[2, 0] * px + R[2, 1] * py + R[2, 2] * pz + t[2])
 
 
 @kernel(inline=True)
 def mark_projected_points(points, R, t, fx, fy, cx, cy, near, col_edges, row_edges, out, k, xs, ys, hull_x, hull_y):
-    """Set in out[k] the tiles whose footprint meets the convex hull of ``points`` ((8, 3), metres) as a camera sees
-    them (R, t: the points' frame -> its optical frame; fx, fy, cx, cy: its intrinsics); every tile when a point lies
-    at optical depth <= ``near`` (it may be seen anywhere). xs, ys (8,) and hull_x, hull_y (16,): work arrays."""
+    """Set in out[k] (out: (K, words) uint64 bitsets) the tiles of the grid col_edges, row_edges whose footprint
+    meets the convex hull of ``points`` ((8, 3) float64, metres) as a camera sees them (R, t: the points' frame -> its
+    optical frame; fx, fy, cx, cy: its intrinsics); every tile when a point lies at optical depth <= ``near`` (float,
+    metres; it may be seen anywhere). xs, ys (8,) and hull_x, hull_y (16,): float64 work arrays."""
     for i in range(points.shape[0]):
         x, y, z = _in_frame(R, t, points[i, 0], points[i, 1], points[i, 2])
         if not z > near:
@@ -145,11 +177,12 @@ def tile_bands(rays, depths, R, t, fx, fy, cx, cy, col_edges, row_edges, words, 
     (A's optical depth, metres) can project onto, as bits in out (n_tiles_A, words) uint64 (tile index r * cols + c
     of B's grid; tile (r, c) spans col_edges[c] to col_edges[c + 1] and row_edges[r] to row_edges[r + 1], pixels).
 
-    rays: (n_tiles_A, 4, 3) the tile's corner rays in A's optical frame (z = 1); R, t: A's optical frame -> B's;
-    fx, fy, cx, cy: B's intrinsics. The frustum piece is the convex hull of its 8 corners; its projection is the
-    convex hull of theirs, and a tile of B is set when its pixel rectangle meets that polygon (tiles are sets of
-    pixel footprints: pixel p covers [p - 0.5, p + 0.5]). A piece that reaches behind B's image plane (a corner at
-    B's depth <= 1 mm) sets every tile: it may be seen anywhere."""
+    rays: (n_tiles_A, 4, 3) float64, the tile's corner rays in A's optical frame (z = 1: metres per metre of depth);
+    depths: (n_tiles_A, 2) float64, metres, each tile's near and far optical depth in A; R, t: A's optical frame -> B's;
+    fx, fy, cx, cy: B's intrinsics; col_edges, row_edges, words: B's tile grid. The frustum piece is the convex hull of
+    its 8 corners; its projection is the convex hull of theirs, and a tile of B is set when its pixel rectangle meets
+    that polygon (tiles are sets of pixel footprints: pixel p covers [p - 0.5, p + 0.5]). A piece that reaches behind
+    B's image plane (a corner at B's depth <= 1 mm) sets every tile: it may be seen anywhere."""
     n = rays.shape[0]
     for a in prange(n):
         corners = np.empty((8, 3))
@@ -170,7 +203,8 @@ def tile_bands(rays, depths, R, t, fx, fy, cx, cy, col_edges, row_edges, words, 
 @kernel(inline=True)
 def _ball_slopes(a, z, rho):
     """(lowest, highest) a' / z' over the ball of radius rho around (a, z) in a plane through the camera centre
-    (z > rho): the slopes of the two tangents from the centre, exact."""
+    (z > rho): the slopes of the two tangents from the centre, exact (tangents x/z or y/z, no unit). a: float64,
+    metres, the centre's optical x (or y); z: float64, metres, its optical depth; rho: float64, metres."""
     d = z * z - rho * rho
     root = rho * np.sqrt(a * a + d)
     return (a * z - root) / d, (a * z + root) / d
@@ -178,7 +212,8 @@ def _ball_slopes(a, z, rho):
 
 @kernel(inline=True)
 def _capsule_set_bits(ends, k, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
-    """Set k of :func:`capsule_tile_bits` (the work of one configuration)."""
+    """Set k of :func:`capsule_tile_bits` (the work of one configuration): clears and writes out[k], out (K, words)
+    uint64; ends, radii, R, t (world -> optical), fx, fy, cx, cy, col_edges, row_edges, words as there."""
     m = ends.shape[1]
     cols = col_edges.shape[0] - 1
     rows = row_edges.shape[0] - 1
@@ -223,19 +258,20 @@ def capsule_tile_bits(ends, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, w
     for one or a few sets (a parallel region costs more than the work, and stalls when the other core is busy);
     :func:`capsule_tile_bits_parallel` for many.
 
-    ends: (K, m, 2, 3) the capsules' core segments, world frame, metres; radii: (m,) metres; R, t: world -> the
-    camera's optical frame; fx, fy, cx, cy: its intrinsics. A capsule is the convex hull of its two end balls, so its
-    projection is the convex hull of theirs; each ball's projection lies in the pixel rectangle bounded by its
-    tangent planes through the camera's x and y axes (exact slopes). A tile is set when its footprint meets the
-    convex hull of the two rectangles, a superset of the capsule's projection. A capsule that reaches within 1 mm of
-    the camera's plane (or behind it) sets every tile."""
+    ends: (K, m, 2, 3) float64, the capsules' core segments, world frame, metres; radii: (m,) float64, metres; R, t:
+    world -> the camera's optical frame; fx, fy, cx, cy: its intrinsics. A capsule is the convex hull of its two end
+    balls, so its projection is the convex hull of theirs; each ball's projection lies in the pixel rectangle bounded by
+    its tangent planes through the camera's x and y axes (exact slopes). A tile is set when its footprint meets the
+    convex hull of the two rectangles, a superset of the capsule's projection. A capsule that reaches within 1 mm of the
+    camera's plane (or behind it) sets every tile."""
     for k in range(ends.shape[0]):
         _capsule_set_bits(ends, k, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out)
 
 
 @kernel(parallel=True)
 def capsule_tile_bits_parallel(ends, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
-    """:func:`capsule_tile_bits` with the sets spread over the threads."""
+    """:func:`capsule_tile_bits` with the sets spread over the threads: the same arguments (ends (K, m, 2, 3), radii
+    (m,), R, t world -> optical), and out (K, words) uint64 written the same."""
     for k in prange(ends.shape[0]):
         _capsule_set_bits(ends, k, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out)
 
@@ -243,8 +279,10 @@ def capsule_tile_bits_parallel(ends, radii, R, t, fx, fy, cx, cy, col_edges, row
 @kernel()
 def tile_moments(image, first_row, first_col, row_weight, out):
     """Per tile, the sum of the pixel values and of the values times their row's weight: out (rows, cols, 2) float64
-    (written). image: (height, width) numbers; first_row (rows + 1,), first_col (cols + 1,) each tile's first pixel
-    (and the image's size); row_weight: (height,) float64."""
+    (written). image: (height, width) numbers (uint8, uint16, float32 or float64 grey values, indexed [v, u]);
+    first_row (rows + 1,), first_col (cols + 1,) int64 each tile's first pixel (and the image's size); row_weight:
+    (height,) float64, no unit (the caller's: each pixel row's position within its tile, 0 at the first, 1 at the
+    last, 0.5 in a tile of one row)."""
     rows = first_row.shape[0] - 1
     cols = first_col.shape[0] - 1
     for r in range(rows):
@@ -264,10 +302,12 @@ def tile_moments(image, first_row, first_col, row_weight, out):
 @kernel()
 def depth_changes(now, scale, reference, threshold, k0, k1, k2, first_row, first_col, out):
     """Per tile, the number of pixels whose depth changed: out (rows, cols) float64 (written). now: (height, width)
-    depth in units of ``scale`` metres (uint16 with the camera's depth_scale, or float metres with scale 1; not
-    finite or <= 0: no measurement); reference: (height, width) float64 metres, 0 = no measurement. A pixel changed
-    when exactly one of the two measures, or both do and differ by more than max(threshold, k0 + k1 d + k2 d^2) at
-    the reference's depth d (the camera's noise margin)."""
+    depth in units of ``scale`` metres (uint16 with the camera's depth_scale, or float32 / float64 metres with scale
+    1; not finite or <= 0: no measurement); reference: (height, width) float64 metres, 0 = no measurement. A pixel
+    changed when exactly one of the two measures, or both do and differ by more than
+    max(threshold, k0 + k1 d + k2 d^2) at the reference's depth d (the camera's noise margin). threshold: float,
+    metres; k0, k1, k2: float, the camera's NoiseModel.coefficients() (metres, no unit, per metre). first_row,
+    first_col: the tiles' first pixels."""
     rows = first_row.shape[0] - 1
     cols = first_col.shape[0] - 1
     for r in range(rows):

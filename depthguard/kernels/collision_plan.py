@@ -14,7 +14,7 @@ def shortest_path(free, shape, strides, start, goal):
         free: (N,) bool, C-contiguous: the n-dimensional grid of cells flattened in C order (True = collision-free).
         shape: (n,) int64, the grid's shape (N = prod(shape) < 2**31).
         strides: (n,) int64, the grid's C-order strides in cells (``strides[d] = prod(shape[d + 1:])``).
-        start, goal: flat indices in [0, N).
+        start, goal: int, flat cell indices in [0, N).
 
     Returns (m,) int64: the flat indices of the path from ``start`` to ``goal``, both included (m - 1 steps, each
     moving one joint by one cell); empty when ``start`` or ``goal`` is not free or the goal cannot be reached.

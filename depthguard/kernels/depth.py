@@ -1,4 +1,31 @@
-"""Numba kernels of the per-frame preparation. They trust their inputs; ``depthguard/depth/_prepare.py`` validates them."""
+"""Numba kernels of the per-frame preparation. They trust their inputs; ``depthguard/depth/_prepare.py`` validates
+them.
+
+Each kernel works on one camera's frame: (h, w) arrays indexed [v, u], C order; depths are optical z (the camera's
+optical frame), metres.
+
+Arguments used throughout:
+
+- ``raw``: (h, w) uint16 in units of ``scale`` metres, or float32 metres: the camera's depth image; a value that is
+  not finite or <= 0 is no measurement (and, for :func:`start_depths`, one outside [z_min, z_max]).
+- ``scale``: float, metres per unit of ``raw`` (the frame's depth_scale; 1.0 for float32).
+- ``m0, m1, m2``: float, the camera's noise margin m(d) = max(m0 + m1 d + m2 d^2, 0) metres at depth d metres
+  (m0 in metres, m1 no unit, m2 per metre; ``NoiseModel.coefficients()``).
+- ``z_start``: (h, w) float32, metres: where each pixel's possibly-occupied segment starts (inf: nothing along the
+  pixel), :attr:`OccupancyImage.z_start` (:func:`block_minimum` is also given other such images, e.g. ``blind``).
+- ``z_end``: (h, w) float32, metres: where that segment ends (inf: it does not end).
+- ``blind``: (h, w) float32, metres: where the space hidden behind the robot starts along the pixel (inf: none).
+- ``invalid``: (h, w) uint8: 1 where the pixel has no valid measurement (whatever the policy made of it), else 0.
+- ``policy_start``: float32, metres: the start depth the invalid-pixel policy gives a pixel without a measurement
+  (``invalid_start`` of :func:`start_depths`: the camera's z_min, or inf for ``invalid="free"``).
+- ``robot_near``: (h, w) float32, metres: the nearest surface of the robot's padded geometry rendered into the
+  camera; 0 where the robot is not rendered.
+- ``robot_far``: (h, w) float32, metres: where the rendered robot ends along each pixel (its farthest surface); 0
+  where it is not rendered. Read only with ``has_far``.
+- ``has_far``: bool: whether ``robot_far`` was given (without it, the caller passes ``robot_near`` again).
+- ``tolerance``: float, metres: how far in front of the rendered robot a measurement may lie and still be the robot,
+  on top of the noise margin (``prepare_depth``'s ``robot_tolerance``, by default ``config.SELF_FILTER_TOLERANCE``).
+"""
 
 import numpy as np
 from numba import prange
@@ -11,9 +38,9 @@ from depthguard.kernels.jit import kernel
 def start_depths(raw, scale, z_min, z_max, m0, m1, m2, invalid_start, z_start, invalid, z_end, blind):
     """Per pixel, the depth from which its frustum is possibly occupied.
 
-    raw: (h, w) uint16 units or float32 metres. scale: metres per unit. [z_min, z_max]: valid range, metres.
-    m0 + m1*d + m2*d**2: the noise margin at depth d (metres), clamped at 0. invalid_start: where a pixel without a
-    valid measurement starts (z_min for "occupied", inf for "free").
+    raw: (h, w) uint16 units or float32 metres. scale: metres per unit. [z_min, z_max]: float, the camera's valid
+    range, metres. m0 + m1*d + m2*d**2: the noise margin at depth d (metres), clamped at 0. invalid_start: float,
+    metres, where a pixel without a valid measurement starts (z_min for "occupied" and "neighbors", inf for "free").
     Writes z_start (h, w) float32 metres (inf = nothing) and invalid (h, w) uint8 (1 = no valid measurement), and
     sets z_end and blind (h, w) float32 to inf (no segment end, no robot blind spot).
     """
@@ -38,6 +65,10 @@ def start_depths(raw, scale, z_min, z_max, m0, m1, m2, invalid_start, z_start, i
 @kernel(parallel=True)
 def block_minimum(z_start, block, out):
     """out[i, j] = min of z_start over the block of pixels [i*block, (i+1)*block) x [j*block, (j+1)*block).
+
+    z_start: (h, w) float32, metres (the start depths, or any image of depths: the callers pass ``blind`` and
+    ``unchecked_from`` too); block: int, the blocks' side in pixels (``config.BLOCK_SIZE``); out: (ceil(h / block),
+    ceil(w / block)) float32, metres (written).
 
     One thread per row of blocks: the minimum over its image rows column by column (a loop that vectorises), then
     over each block's columns."""
@@ -100,7 +131,8 @@ def robot_filter_fills(z_start, invalid, policy_start, robot_near, robot_far, ha
 @kernel(inline=True)
 def _filter_robot_pixel(v, u, z_start, invalid, policy_start, robot_near, robot_far, has_far, tolerance, m0, m1, m2,
                         z_end, blind):
-    """:func:`robot_filter` on one pixel where the robot is rendered."""
+    """:func:`robot_filter` on one pixel where the robot is rendered: v, u (int), its row and column. The other
+    arguments as there."""
     h, w = z_start.shape
     d_r = np.float64(robot_near[v, u])
     d_near = d_r
@@ -142,8 +174,9 @@ def fill_small_holes(raw, scale, invalid, hole_pixels, m0, m1, m2, z_start, z_en
     finite), the hole shows the robot: free in front (z_start = inf) and blind from that depth on. Otherwise it
     takes that depth minus its noise margin. Work is proportional to the pixels without a measurement.
 
-    raw: (h, w) uint16 or float32 measurements, ``scale`` metres per unit. invalid: (h, w) uint8. Edits z_start,
-    z_end, blind in place. visited: (h, w) uint8 scratch; stack: (h*w,) int64 scratch.
+    raw: (h, w) uint16 or float32 measurements, ``scale`` metres per unit. invalid: (h, w) uint8. hole_pixels: int,
+    pixels, the largest hole filled whatever its thickness. m0, m1, m2: the noise margin. Edits z_start, z_end, blind
+    in place. visited: (h, w) uint8 scratch; stack: (h*w,) int64 scratch.
     """
     h, w = invalid.shape
     for v0 in range(h):

@@ -1,4 +1,5 @@
-"""Numba kernels of the depth-grid fusion (design §8). They trust their inputs; ``depthguard/depthgrid/_fusion.py`` checks them.
+"""Numba kernels of the depth-grid fusion (design §8). They trust their inputs; ``depthguard/depthgrid/_fusion.py``
+checks them.
 
 Along each principal pixel's frustum, what the principal camera says is possibly occupied splits into:
 
@@ -13,6 +14,43 @@ A candidate cell is occupied only if every secondary camera confirms it. Camera 
 cell's whole footprint (its 8 corners projected into j, grown by ``pad`` pixels) lies inside j's image and every
 pixel q of that footprint saw beyond the cell: free[j][q] >= the cell's largest depth in j plus ``margin``, where
 free[j][q] is j's measured depth minus its noise margin (0 where j measured nothing).
+
+Cell k of principal pixel (u, v) spans the principal's optical depths d_min + k delta_d to d_min + (k + 1) delta_d
+(``grid``'s). A frame's (h, w) arrays are indexed [v, u]; H, W: the principal image's height and width.
+
+Arguments used throughout:
+
+- ``X, Y, Z``: float64, metres: the control point P in the principal camera's optical frame.
+- ``rho``: float64, metres: the radius of the surveillance region around P.
+- ``u, v``: int, pixels: the column and row of a principal pixel.
+- ``a0, a1, b0, b1``: float64, tangents (x/z and y/z, no unit): principal pixel (u, v)'s frustum {x/z in [a0, a1],
+  y/z in [b0, b1]}, a0 = (u - 1/2 - cx)/fx, a1 = (u + 1/2 - cx)/fx, b0 = (v - 1/2 - cy)/fy, b1 = (v + 1/2 - cy)/fy.
+- ``k_a, k_b``: int: the first and last cell of a run along principal pixel (u, v), k_a <= k_b < k_a + 64.
+- ``lo, hi``: float64, metres: the ends of a segment [lo, hi] of principal pixel (u, v)'s frustum (optical depths).
+- ``bound2``: float64, square metres: only what comes nearer than sqrt(bound2) to P counts.
+- ``grid``: :class:`GridState`: the depth grid and its per-frame state (the fields as documented there).
+- ``view``: :class:`PrincipalView`: the principal camera's frame.
+- ``runs``: (H, W) int64: per principal pixel, one run of cells known free, (first << 32) | last (NO_FREE_RUN for
+  none): ``grid``'s free_run (a gray area, or the frustum of a pixel without a measurement) or behind_run (the space
+  behind the robot).
+- ``spans``: (H, 2) int64: per principal image row v, the first and last column to visit (first > last: none), as
+  :func:`depthguard.kernels.frustum.surveillance_region` fills it.
+- ``scale``: float, metres per unit of ``raw`` (the frame's depth_scale; 1.0 for float32).
+- ``z_min, z_max``: float, metres: the camera's valid depth range.
+- ``m0, m1, m2``: float, the camera's noise margin m(d) = max(m0 + m1 d + m2 d^2, 0) metres at depth d metres
+  (m0 in metres, m1 no unit, m2 per metre; ``NoiseModel.coefficients()``).
+- ``z_start, invalid, blind``: (h, w) float32 metres, uint8, float32 metres: the camera's prepared frame
+  (:class:`depthguard.depth.OccupancyImage`): where each pixel's possibly-occupied segment starts (inf: nothing), 1
+  for a pixel without a valid measurement, where the space hidden behind the robot starts (inf: none).
+- ``aggregate``: int: AGG_MIN, AGG_MEAN or AGG_HYBRID (0, 1, 2: the index in ``config.AGGREGATES``).
+- ``unseen_occupied``: bool: unseen space counts as possibly occupied (``unseen="occupied"``, design §3).
+- ``near_eps``: float, metres: a cube corner at or nearer than this optical depth makes the window the whole image
+  (``config.NEAR_PLANE_EPSILON``).
+- ``inside_tol``: float, metres: a distance at or below it means P is inside (``config.INSIDE_TOLERANCE``).
+- ``min_direction``: float, no unit: a sum of unit directions shorter than min_direction times their count gives the
+  zero vector (``config.MIN_DIRECTION_NORM``).
+- ``out_direction``: (3,) float64, written: the unit direction from the obstacle towards P, principal optical frame
+  (zero for none).
 """
 
 from collections import namedtuple
@@ -21,6 +59,7 @@ import numpy as np
 from numba import prange
 
 from depthguard.kernels.frustum import (
+    contribution,
     AGG_MIN,
     FLAG_ROBOT_BLIND_SPOT,
     finish_min_at_pixel,
@@ -28,7 +67,6 @@ from depthguard.kernels.frustum import (
     guess_piece_row,
     nearest_in_blocks,
     clamped_index,
-    frustum_direction,
     frustum_nearest,
     noise_margin,
     rho_squared,
@@ -72,7 +110,8 @@ FusedOutput = namedtuple("FusedOutput", "distance direction count invalid_count 
 @kernel(inline=True)
 def measured_free(raw, scale, z_min, z_max, m0, m1, m2):
     """How far one pixel saw its ray free: its measurement (raw * scale metres) minus the noise margin, at least 0;
-    -1 where it measured nothing (or outside [z_min, z_max])."""
+    -1 where it measured nothing (or outside [z_min, z_max]). raw: the pixel's value, uint16 in units of ``scale``
+    metres or float32 metres (not finite or <= 0: no measurement)."""
     d = np.float64(raw) * scale
     if np.isfinite(d) and d > 0.0 and d >= z_min and d <= z_max:
         return max(d - noise_margin(d, m0, m1, m2), 0.0)
@@ -82,7 +121,8 @@ def measured_free(raw, scale, z_min, z_max, m0, m1, m2):
 @kernel(parallel=True)
 def free_depths(raw, scale, z_min, z_max, m0, m1, m2, free):
     """Per pixel of a secondary frame, the depth up to which the camera saw the ray free: the measured depth minus
-    its noise margin, 0 where it measured nothing (or outside [z_min, z_max]). Writes free (h, w) float32."""
+    its noise margin, 0 where it measured nothing (or outside [z_min, z_max]). raw: (h, w) uint16 in units of
+    ``scale`` metres, or float32 metres. Writes free (h, w) float32, metres."""
     h, w = raw.shape
     for v in prange(h):
         for u in range(w):
@@ -90,11 +130,12 @@ def free_depths(raw, scale, z_min, z_max, m0, m1, m2, free):
 
 
 @kernel(inline=True)
-def surface_cell_end(zs, d_min, delta_d):
-    """Where the grid cell holding a measured surface at depth zs ends (d_min for a surface before the grid)."""
-    if zs < d_min:
-        return d_min
-    return d_min + (np.floor((zs - d_min) / delta_d) + 1.0) * delta_d
+def surface_cell_end(zs, grid):
+    """Where the grid cell holding a measured surface at depth zs ends (d_min for a surface before the grid). zs and
+    the answer: float64, metres, principal optical depth."""
+    if zs < grid.d_min:
+        return grid.d_min
+    return grid.d_min + (np.floor((zs - grid.d_min) / grid.delta_d) + 1.0) * grid.delta_d
 
 
 @kernel(parallel=True)
@@ -102,8 +143,10 @@ def seen_free_depths(raw, scale, z_min, z_max, m0, m1, m2, z_start, invalid, inv
     """Per pixel of a secondary camera's frame, how far it saw the ray free: its measurement minus the noise margin
     (:func:`free_depths`; the robot's own surface included: the ray is free up to it); where it measured nothing,
     the depth its prepared frame starts at when the ``neighbors`` policy filled the small hole (the nearest surface
-    around it, or the rendered robot when that surface is the robot), else 0. raw: (h, w) measurements, ``scale``
-    metres per unit; z_start, invalid, blind: its :class:`OccupancyImage`. Writes free (h, w) float32."""
+    around it, or the rendered robot when that surface is the robot), else 0. raw: (h, w) measurements (uint16 in
+    units of ``scale`` metres, or float32 metres); z_start, invalid, blind: its :class:`OccupancyImage`;
+    invalid_start: float32, metres, the start depth its invalid-pixel policy gives a pixel without a measurement
+    (z_min, or inf for ``invalid="free"``). Writes free (h, w) float32, metres."""
     h, w = raw.shape
     for v in prange(h):
         for u in range(w):
@@ -134,6 +177,13 @@ def principal_arrays(z_start, z_end, invalid, invalid_start, blind, robot_near, 
     - unchecked_from: where, along a pixel whose ray may leave one link and meet another (robot_exit, where it first
       leaves the padded geometry, is nearer than robot_far), the space between them starts; it ends at
       blind_from. Fusion takes it for the robot and does not check it, but flags it. inf for none.
+
+    Inputs: the principal's prepared frame (:class:`OccupancyImage`), z_start, z_end and blind: (h, w) float32,
+    metres, and invalid: (h, w) uint8; invalid_start: float32, metres, the camera's z_min (where the invalid-pixel
+    policy starts a pixel without a measurement); robot_near, robot_far, robot_exit: (h, w) float32, metres, the
+    rendered robot's nearest surface, where it ends, and where a ray first leaves it (0 where the robot is not
+    rendered, all 0 when not given); slack: float, metres, the self-filter's tolerance. Writes certain (h, w) uint8
+    and z_end_fused, blind_from, unchecked_from (h, w) float32, metres.
     """
     h, w = z_start.shape
     for v in prange(h):
@@ -163,7 +213,9 @@ def principal_arrays(z_start, z_end, invalid, invalid_start, blind, robot_near, 
 def erode_free(free, sizes, pad, out):
     """out[j, r, q] = the smallest free[j] over the pixels within pad of (r, q) (a (2 pad + 1)^2 square), 0 where
     that square leaves camera j's image: a cell's footprint then needs only its own pixels read, and the grown
-    footprint's pixels and its staying inside the image come with them. free, out: (J, h, w) float32."""
+    footprint's pixels and its staying inside the image come with them. free, out: (J, h, w) float32, metres (each
+    secondary's free image, padded to the largest); sizes: (J, 2) int64, each camera's (width, height) in pixels;
+    pad: int, pixels."""
     n_cams, h, w = free.shape
     row_min = np.empty((n_cams, h, w), dtype=np.float32)
     for j in range(n_cams):
@@ -193,7 +245,13 @@ def erode_free(free, sizes, pad, out):
 def face_box(corners, offset, u, v, z, z_near):
     """The 4 corners of principal pixel (u, v)'s frustum at depth z, projected into one secondary camera: (ok,
     x_lo, x_hi, y_lo, y_hi, largest depth); not ok when a corner is behind the camera or nearer than it measures,
-    or when the map's geometry gives no finite point (NaN in a map: the cell cannot be cleared)."""
+    or when the map's geometry gives no finite point (NaN in a map: the cell cannot be cleared).
+
+    corners: (H + 1, W + 1, 3) float64 and offset: (3,) float64, that camera's map (``grid``'s corners[j] and
+    offsets[j], :class:`depthguard.depthgrid.DepthGridMap`): the footprint corner at (u - 1/2, v - 1/2) and principal
+    depth z lands at homogeneous image coordinates h = corners[v, u] z + offset (pixel (h_x / h_z, h_y / h_z), depth
+    h_z metres); z: float64, metres; z_near: float, metres, the camera's nearest valid depth. The bounds are in
+    pixels, the depth in metres."""
     x_lo = np.inf
     x_hi = -np.inf
     y_lo = np.inf
@@ -220,7 +278,9 @@ def face_box(corners, offset, u, v, z, z_near):
 @kernel(inline=True)
 def box_seen_through(eroded, width, height, x_lo, x_hi, y_lo, y_hi, need):
     """Whether every pixel whose footprint meets [x_lo, x_hi] x [y_lo, y_hi], grown by the erosion's pad, lies in
-    the image and saw at least ``need`` metres (not when any of them is NaN)."""
+    the image and saw at least ``need`` metres (not when any of them is NaN). eroded: (>= height, >= width) float32,
+    metres, one secondary's eroded free image (``grid``'s eroded[j]); width, height: int, pixels, its image size;
+    x_lo, x_hi, y_lo, y_hi: float64, pixels; need: float64, metres."""
     q_lo = np.ceil(x_lo - 0.5)
     q_hi = np.floor(x_hi + 0.5)
     r_lo = np.ceil(y_lo - 0.5)
@@ -240,7 +300,7 @@ ZONE_THICKNESS, ZONE_INTRINSICS, ZONE_PARAMS = 0, 1, 5
 
 
 @kernel(inline=True)
-def zoned_cells(u, v, k_a, k_b, d_min, delta_d, zone, zone_params):
+def zoned_cells(u, v, k_a, k_b, grid):
     """Bit i set when cell k_a + i of principal pixel (u, v) lies wholly in the robot zone: within the zone's
     thickness of one of the robot's padded capsules (``zone`` rows: p0 (3), p1 (3) in the principal's optical frame,
     metres, and the radius with the padding). It is the self-filter's rule (a measurement up to its tolerance in front
@@ -248,6 +308,7 @@ def zoned_cells(u, v, k_a, k_b, d_min, delta_d, zone, zone_params):
     the same in every direction: the space right beside a link lies within every camera's noise margin of the link it
     sees, and no camera can clear it. The test is conservative: the cell's bounding sphere (centre on the pixel's
     central ray at mid-depth, radius reaching its corners) must fit in one capsule grown by the thickness."""
+    d_min, delta_d, zone, zone_params = grid.d_min, grid.delta_d, grid.zone, grid.zone_params
     if zone.shape[0] == 0:
         return np.uint64(0)
     grow = zone_params[ZONE_THICKNESS]
@@ -301,11 +362,11 @@ def classify_run(u, v, k_a, k_b, grid):
     faces' corners and its largest depth at one of them (depth is linear along each corner ray), so if the camera
     saw beyond that over that box, it saw through every cell, and the per-cell tests would all agree. Behind the
     robot, where a secondary camera sees the room far beyond, that settles a run with one test."""
-    d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run, behind_run, zone, zone_params = grid
+    d_min, delta_d, corners, offsets = grid.d_min, grid.delta_d, grid.corners, grid.offsets
+    eroded, sizes, z_near, margin, cells = grid.eroded, grid.sizes, grid.z_near, grid.margin, grid.cells
     n = k_b - k_a + 1
     everything = _ALL if n == 64 else (np.uint64(1) << np.uint64(n)) - np.uint64(1)
-    cleared = zoned_cells(u, v, k_a, k_b, d_min, delta_d, zone, zone_params)
+    cleared = zoned_cells(u, v, k_a, k_b, grid)
     for j in range(corners.shape[0]):
         if cleared == everything:
             break
@@ -332,7 +393,7 @@ def classify_run(u, v, k_a, k_b, grid):
             ok0, x_lo0, x_hi0, y_lo0, y_hi0, far0 = ok1, x_lo1, x_hi1, y_lo1, y_hi1, far1
     remembered = np.uint64(0)
     if cleared != everything:
-        remembered = remembered_cells(u, v, k_a, k_b, d_min, delta_d, (mem_free, mem_geometry))
+        remembered = remembered_cells(u, v, k_a, k_b, grid)
     for i in range(k_b - k_a + 1):
         bit = np.uint64(1) << np.uint64(i)
         cells[v, u, k_a + i] = 1 if (cleared & bit) != np.uint64(0) else (
@@ -347,7 +408,8 @@ MEM_LO, MEM_INV_VOXEL, MEM_R, MEM_T, MEM_INTRINSICS, MEM_GEOMETRY_SIZE = 0, 3, 4
 @kernel(inline=True)
 def _face_bounds(u, v, z, geo):
     """The world-frame bounding box (x_lo, x_hi, y_lo, y_hi, z_lo, z_hi) of principal pixel (u, v)'s footprint at
-    optical depth z: its 4 corners on the frustum's edge rays."""
+    optical depth z (float64, metres): its 4 corners on the frustum's edge rays. geo: (MEM_GEOMETRY_SIZE,) float64,
+    ``grid``'s mem_geometry (laid out as the MEM_* constants say)."""
     lo0 = np.inf
     lo1 = np.inf
     lo2 = np.inf
@@ -373,7 +435,9 @@ def _face_bounds(u, v, z, geo):
 @kernel(inline=True)
 def _voxels_free(free, geo, lo0, hi0, lo1, hi1, lo2, hi2):
     """Whether every voxel that the world box [lo, hi] (grown by 1e-9 m against rounding) touches is certified free
-    in ``free`` (uint8, 1 = free); not when the box leaves the voxels' box (or holds NaN)."""
+    in ``free`` ((nx, ny, nz) uint8, 1 = free; ``grid``'s mem_free); not when the box leaves the voxels' box (or holds
+    NaN). The box: lo0 <= hi0, lo1 <= hi1, lo2 <= hi2, float64, metres, along world x, y, z. geo: the memory's
+    geometry, as in :func:`_face_bounds`."""
     inv = geo[MEM_INV_VOXEL]
     nx, ny, nz = free.shape
     i0 = np.floor((lo0 - 1e-9 - geo[MEM_LO]) * inv)
@@ -393,12 +457,12 @@ def _voxels_free(free, geo, lo0, hi0, lo1, hi1, lo2, hi2):
 
 
 @kernel()
-def remembered_cells(u, v, k_a, k_b, d_min, delta_d, memory):
+def remembered_cells(u, v, k_a, k_b, grid):
     """Bit i set when cell k_a + i (k_a..k_b, at most 64) of principal pixel (u, v) lies wholly in voxels that the
-    free-space memory certifies free (design §8a). ``memory``: (free, geometry): free (nx, ny, nz) uint8, 1 for a
-    voxel no person can have reached yet, of zero size for no memory; geometry (MEM_GEOMETRY_SIZE,) float64 as
+    free-space memory certifies free (design §8a): the grid's mem_free, (nx, ny, nz) uint8, 1 for a voxel no person
+    can have reached yet, of zero size for no memory, and its mem_geometry (MEM_GEOMETRY_SIZE,) float64 as
     MEM_LO.. describe. A cell lies within the box of its 8 corners (it is convex), whose voxels are checked."""
-    free, geo = memory
+    free, geo, d_min, delta_d = grid.mem_free, grid.mem_geometry, grid.d_min, grid.delta_d
     if free.size == 0:
         return np.uint64(0)
     out = np.uint64(0)
@@ -413,7 +477,8 @@ def remembered_cells(u, v, k_a, k_b, d_min, delta_d, memory):
 
 @kernel(inline=True)
 def _next_not_free(cells, v, u, k, k_end, step):
-    """The first cell from k towards k_end (inclusive, by step +-1) not known to be free, or k_end + step."""
+    """The first cell from k towards k_end (inclusive, by step +-1) not known to be free, or k_end + step. cells:
+    (H, W, n_cells) uint8, ``grid``'s cell classes, read at pixel (u, v); k, k_end, step: int."""
     while k != k_end + step and (cells[v, u, k] & 1) != 0:  # 1: seen free now, 3: remembered free
         k += step
     return k
@@ -421,7 +486,8 @@ def _next_not_free(cells, v, u, k, k_end, step):
 
 @kernel()
 def occupied_in(u, v, k_lo, k_hi, highest, grid):
-    """The highest (or lowest) occupied cell in k_lo..k_hi of principal pixel (u, v), -1 for none.
+    """The highest (with ``highest``, a numpy bool) or lowest occupied cell in k_lo..k_hi (int) of principal pixel
+    (u, v), -1 for none.
 
     cells[v, u, k] caches each cell's class for the frame: 0 unknown, 1 free (seen), 2 occupied, 3 free (remembered:
     no camera sees through it now, but the free-space memory says no person can be there yet). A cell met unknown is
@@ -429,8 +495,7 @@ def occupied_in(u, v, k_lo, k_hi, highest, grid):
     control points may classify the same cell at once; each writes the same byte, a function of this frame's images
     alone, so whichever write lands, the cache holds the right class.
     """
-    d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run, behind_run, zone, zone_params = grid
+    cells = grid.cells
     if k_lo > k_hi:
         return -1
     step = -1 if highest else 1
@@ -455,9 +520,10 @@ NO_FREE_RUN = 1 << 32  # free_run's value for "no run known": the empty range 1.
 
 @kernel(inline=True)
 def remember_free_run(free_run, v, u, k_lo, k_hi):
-    """Record that cells k_lo..k_hi of pixel (u, v) are all free: free_run[v, u] = (first << 32) | last of one run
-    of cells known free, grown by this one where they touch, else replaced by the longer. One 8-byte store, so a
-    thread never reads half of another's run; every run stored is free, whichever store lands."""
+    """Record that cells k_lo..k_hi (int) of pixel (u, v) are all free: free_run[v, u] = (first << 32) | last of one run
+    of cells known free, grown by this one where they touch, else replaced by the longer. free_run: (H, W) int64, the
+    run array to write (``grid``'s free_run or behind_run). One 8-byte store, so a thread never reads half of another's
+    run; every run stored is free, whichever store lands."""
     if k_lo > k_hi:
         return
     run = free_run[v, u]
@@ -472,29 +538,30 @@ def remember_free_run(free_run, v, u, k_lo, k_hi):
 
 
 @kernel(inline=True)
-def known_free(lo, hi, u, v, d_min, delta_d, n_cells, free_run):
-    """Whether every cell of the candidate range [lo, hi] (inside the grid) of pixel (u, v) is known free."""
-    if not (d_min <= lo <= hi <= d_min + n_cells * delta_d):
+def known_free(lo, hi, u, v, grid, runs):
+    """Whether every cell of the candidate range [lo, hi] (inside the grid) of pixel (u, v) is known free: inside
+    the run ``runs`` holds for it."""
+    if not (grid.d_min <= lo <= hi <= grid.d_min + grid.n_cells * grid.delta_d):
         return False
-    run = free_run[v, u]
-    return (run >> 32) <= cell_index(lo, d_min, delta_d, n_cells) and min(
-        cell_index(hi, d_min, delta_d, n_cells), n_cells - 1) <= (run & 0xFFFFFFFF)
+    run = runs[v, u]
+    return (run >> 32) <= cell_index(lo, grid) and min(cell_index(hi, grid), grid.n_cells - 1) <= (run & 0xFFFFFFFF)
 
 
 @kernel(inline=True)
-def cell_index(z, d_min, delta_d, n_cells):
-    """int((z - d_min) / delta_d), the grid cell holding depth z, with the quotient clamped to [-1, n_cells] first:
+def cell_index(z, grid):
+    """int((z - d_min) / delta_d), the grid cell holding depth z (float64, metres), with the quotient clamped to
+    [-1, n_cells] first:
     a depth far beyond the grid (or NaN) gives an end, never an index int() made garbage of."""
-    return clamped_index((z - d_min) / delta_d, -1, n_cells)
+    return clamped_index((z - grid.d_min) / grid.delta_d, -1, grid.n_cells)
 
 
 @kernel(inline=True)
 def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, grid, runs):
     """:func:`nearest_confirmed`'s walk down and up from cell k_star (or from the ends of the known free run holding
     it) to the first occupied cell each way within k_lo..k_hi. Returns (k_left, k_right), -1 for none, or (-2, -2)
-    when k_star's own cell is occupied. Records the free run found between them in ``runs``."""
-    d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run, behind_run, zone, zone_params = grid
+    when k_star's own cell is occupied. Records the free run found between them in ``runs``. k_lo, k_hi, k_star:
+    int, cells; in_run: bool, whether k_star lies in the pixel's known free run run_lo..run_hi (int64, read from
+    ``runs`` before)."""
     # np.bool_, not a literal True or False, for which numba would compile occupied_in twice.
     if not in_run and occupied_in(u, v, k_star, k_star, np.bool_(False), grid) >= 0:
         return -2, -2
@@ -520,13 +587,15 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
     down from z*, or the first walking up.
 
     A range of candidate cells alone (no certain part) is walked whole, and the run of cells found free is kept in
-    ``runs`` (the grid's free_run for a gray area, behind_run for the space behind the robot), so that the next control point whose range that run covers skips the pixel at once: the space behind
-    the robot, which every point on the robot looks at, is mostly such a range. Elsewhere only cells close enough
-    to z* to come nearer than bound2 are looked at. Returns (squared distance, z*), (inf, 0) if nothing occupied
-    comes nearer than bound2.
+    ``runs`` (the grid's free_run for a gray area, behind_run for the space behind the robot), so that the next
+    control point whose range that run covers skips the pixel at once: the space behind the robot, which every point
+    on the robot looks at, is mostly such a range. Elsewhere only cells close enough to z* to come nearer than bound2
+    are looked at. Returns (squared distance, z*), (inf, 0) if nothing occupied comes nearer than bound2.
+
+    P = (X, Y, Z); certain_to: float64, metres; the segment [lo, hi] and the frustum a0..b1 are pixel (u, v)'s. rho
+    is not used.
     """
-    d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run, behind_run, zone, zone_params = grid
+    d_min, delta_d, n_cells = grid.d_min, grid.delta_d, grid.n_cells
     if lo > hi:
         return np.inf, 0.0
     d_max = d_min + n_cells * delta_d
@@ -535,10 +604,10 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
     above = max(d_max, below)
     candidates_only = below <= lo and hi <= above
     if candidates_only:
-        if known_free(lo, hi, u, v, d_min, delta_d, n_cells, runs):
+        if known_free(lo, hi, u, v, grid, runs):
             return np.inf, 0.0
-        k_lo = cell_index(lo, d_min, delta_d, n_cells)
-        k_hi = min(cell_index(hi, d_min, delta_d, n_cells), n_cells - 1)
+        k_lo = cell_index(lo, grid)
+        k_hi = min(cell_index(hi, grid), n_cells - 1)
     run = runs[v, u]
     run_lo = run >> 32
     run_hi = run & 0xFFFFFFFF
@@ -551,11 +620,11 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
         # g(z), the squared distance from P to the frustum's slice at depth z, is convex with g'' >= 2, so
         # g(z) >= d2 + (z - z*)^2 and only cells within reach of z* can come nearer than bound2.
         reach = np.sqrt(bound2 - d2)
-        k_lo = max(cell_index(max(below, lo), d_min, delta_d, n_cells),
-                   cell_index(max(z - reach, d_min), d_min, delta_d, n_cells))
-        k_hi = min(cell_index(min(hi, d_max, z + reach), d_min, delta_d, n_cells), n_cells - 1)
+        k_lo = max(cell_index(max(below, lo), grid),
+                   cell_index(max(z - reach, d_min), grid))
+        k_hi = min(cell_index(min(hi, d_max, z + reach), grid), n_cells - 1)
     k_lo = max(k_lo, 0)
-    k_star = min(max(cell_index(z, d_min, delta_d, n_cells), k_lo), k_hi)
+    k_star = min(max(cell_index(z, grid), k_lo), k_hi)
     # Skip the run of cells already known free around z*, if there is one; else start at z*'s own cell. (No cell
     # in reach, k_lo > k_hi, happens only with numbers the public functions refuse.)
     in_run = run_lo <= k_star <= run_hi
@@ -588,34 +657,37 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
 
 @kernel(inline=True)
 def _slice_distance2(X, Y, Z, a0, a1, b0, b1, z):
-    """g(z): the squared distance from P to the slice of pixel frustum [a0, a1] x [b0, b1] at depth z."""
+    """g(z): the squared distance (square metres) from P = (X, Y, Z) to the slice of pixel frustum [a0, a1] x
+    [b0, b1] at depth z (float64, metres)."""
     dx = max(a0 * z - X, 0.0, X - a1 * z)
     dy = max(b0 * z - Y, 0.0, Y - b1 * z)
     return dx * dx + dy * dy + (Z - z) * (Z - z)
 
 
 @kernel(inline=True)
-def nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, lo, certain_to, hi, bound2, u, v, d_min, delta_d, n_cells, cells,
-                   runs):
+def nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, lo, certain_to, hi, bound2, u, v, grid, runs):
     """:func:`nearest_confirmed` on [lo, hi] (certain part [lo, certain_to]) when the pixel's known free run in
     ``runs`` holds the cell of the segment's nearest point z (d2 = g(z) < bound2): the first occupied part each way
     is then the cell just past each end of the run, or the part occupied as it stands past the cells in reach. g is
     convex with its minimum at z, so each such part's nearest point is its end towards z: one evaluation of g each.
     A z outside the run whose own cell is known occupied is the answer itself. Returns (squared distance, depth,
     True), (inf, 0, True) for nothing nearer than bound2, or (.., False) when the run does not decide it (a cell past
-    its end not yet classified, or z outside it in a cell not known occupied): the caller asks the grid."""
+    its end not yet classified, or z outside it in a cell not known occupied): the caller asks the grid.
+
+    P = (X, Y, Z); pixel (u, v) with frustum a0..b1; d2: float64, square metres; z, certain_to: float64, metres."""
+    d_min, delta_d, n_cells, cells = grid.d_min, grid.delta_d, grid.n_cells, grid.cells
     d_max = d_min + n_cells * delta_d
     below = max(certain_to, min(d_min, hi)) if lo < d_min else certain_to
     above = max(d_max, below)
     if (below > lo and z <= below) or (hi > above and z >= above):
         return d2, z, True
     reach = np.sqrt(bound2 - d2)
-    k_lo = max(cell_index(max(below, lo), d_min, delta_d, n_cells),
-               cell_index(max(z - reach, d_min), d_min, delta_d, n_cells), 0)
-    k_hi = min(cell_index(min(hi, d_max, z + reach), d_min, delta_d, n_cells), n_cells - 1)
+    k_lo = max(cell_index(max(below, lo), grid),
+               cell_index(max(z - reach, d_min), grid), 0)
+    k_hi = min(cell_index(min(hi, d_max, z + reach), grid), n_cells - 1)
     if k_lo > k_hi:
         return d2, z, False
-    k_star = min(max(cell_index(z, d_min, delta_d, n_cells), k_lo), k_hi)
+    k_star = min(max(cell_index(z, grid), k_lo), k_hi)
     run = runs[v, u]
     run_lo = run >> 32
     run_hi = run & 0xFFFFFFFF
@@ -647,15 +719,20 @@ def nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, lo, certain_to, hi, bound2, u
 
 
 @kernel(inline=True)
-def distance_by_runs(X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, ze, certain, bf, z_far, bound2, u, v, d_min,
-                     delta_d, n_cells, cells, free_run, behind_run):
+def distance_by_runs(X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, ze, certain, bf, z_far, bound2, u, v, grid):
     """:func:`pixel_distance` from the pixel's known free runs alone (:func:`nearest_by_run` on each of its
     candidate segments: the surface's gray area, or the frustum of a pixel without a measurement, with free_run; the
     space behind the robot with behind_run), when they decide it. (d2, z): the nearest point of the span fused_rows
     gathered, which is the segment itself for a ``one_piece`` pixel (a surface and its gray area) and for one whose
     only segment is behind the robot. Returns (squared distance, depth, from a pixel without a measurement?,
     decided?); (inf, 0, False, True) for nothing nearer than bound2. A surface at or behind P (case ii) is left to
-    pixel_distance."""
+    pixel_distance.
+
+    P = (X, Y, Z); pixel (u, v) with frustum a0..b1; d2 (square metres), z (metres): float64; one_piece: bool; zs,
+    ze: float64, metres, the principal's possibly-occupied segment; certain: it starts at a measured surface (uint8
+    0 or 1); bf: float64, metres, where the space behind the robot starts (inf: none); z_far: float64, metres,
+    Z + rho."""
+    free_run, behind_run = grid.free_run, grid.behind_run
     best2, best_z, from_invalid = np.inf, 0.0, False
     if zs <= z_far:
         if certain and zs >= Z:
@@ -665,9 +742,9 @@ def distance_by_runs(X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, ze, certain,
             if not one_piece:
                 d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, zs, hi)
             if d2 < bound2:
-                certain_to = surface_cell_end(zs, d_min, delta_d) if certain else zs
+                certain_to = surface_cell_end(zs, grid) if certain else zs
                 best2, best_z, decided = nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, zs, certain_to, hi, bound2, u,
-                                                        v, d_min, delta_d, n_cells, cells, free_run)
+                                                        v, grid, free_run)
                 if not decided:
                     return best2, best_z, False, False
                 from_invalid = not certain and best2 < np.inf
@@ -676,8 +753,8 @@ def distance_by_runs(X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, ze, certain,
             d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, bf, z_far)
         bound_behind = min(best2, bound2)  # as pixel_distance asks it: only to beat the gray area's answer
         if d2 < bound_behind:
-            d2, z, decided = nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, bf, bf, z_far, bound_behind, u, v, d_min,
-                                            delta_d, n_cells, cells, behind_run)
+            d2, z, decided = nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, bf, bf, z_far, bound_behind, u, v, grid,
+                                            behind_run)
             if not decided:
                 return d2, z, False, False
             if d2 < best2:
@@ -693,11 +770,11 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
     whether that came from a candidate of a pixel without a measurement. (inf, 0, False) if nothing nearer than
     ``bound2``.
 
-    zs, ze: the principal's possibly-occupied segment; ``certain``: it starts at a measured surface; blind_from:
-    where the space behind the robot starts (after its body), inf for none.
+    P = (X, Y, Z), frustum a0..b1. zs, ze: float64, metres, the principal's possibly-occupied segment; ``certain``
+    (uint8 0 or 1): it starts at a measured surface; blind_from: float64, metres, where the space behind the robot
+    starts (after its body), inf for none. rho: for z_far = Z + rho.
     """
-    d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run, behind_run, zone, zone_params = grid
+    free_run, behind_run = grid.free_run, grid.behind_run
     z_far = Z + rho
     best2 = np.inf
     best_z = 0.0
@@ -710,7 +787,7 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
                     best2 = np.inf
             else:  # case (iii): the surface's own cell is certain, the gray area behind it is a candidate
                 best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs,
-                                                  surface_cell_end(zs, d_min, delta_d),
+                                                  surface_cell_end(zs, grid),
                                                   min(ze, z_far), bound2, u, v, grid, free_run)
         else:  # no measurement: the whole segment is a candidate
             best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs, zs, min(ze, z_far), bound2, u, v,
@@ -739,9 +816,12 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
     ... <= v_last of its surveillance region (``spans``): what the principal camera says is possibly occupied and
     the secondary cameras do not clear. Writes into acc (N_ACC,) the count of contributing pixels, those from pixels
     without a measurement, whether P is inside, the sums of their distances and unit directions, and the nearest
-    one (squared distance, pixel, depth, from a pixel without a measurement?). ``scratch`` (5, width) float64."""
-    d_min, delta_d, n_cells, corners, offsets, eroded, sizes, z_near, margin, cells, mem_free, mem_geometry, \
-        free_run, behind_run, zone, zone_params = grid
+    one (squared distance, pixel, depth, from a pixel without a measurement?). ``scratch`` (5, width) float64.
+
+    rho: metres; v_first, v_last, v_step: int, rows; ``view``, ``grid``: the principal's frame and the grid; with
+    ``prune_min`` (bool: the aggregate is ``min``) only pixels that can beat the nearest so far are followed and no
+    sums are kept. acc: (N_ACC,) float64, written, laid out as the ACC_* constants say."""
+    d_min, delta_d, n_cells, cells, behind_run = grid.d_min, grid.delta_d, grid.n_cells, grid.cells, grid.behind_run
     z_start, z_end, certain, blind_from = view.z_start, view.z_end, view.certain, view.blind_from
     fx, fy, cx, cy = view.fx, view.fy, view.cx, view.cy
     rho2 = rho_squared(rho)
@@ -775,7 +855,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
             bf = np.float64(blind_from[v, u])
             if min(zs, bf) > z_far:
                 continue
-            if zs > z_far and known_free(bf, z_far, u, v, d_min, delta_d, n_cells, behind_run):
+            if zs > z_far and known_free(bf, z_far, u, v, grid, behind_run):
                 continue  # the space behind the robot, every cell in reach known free
             z_in[m] = min(zs, bf)
             z_hi_in[m] = min(np.float64(z_end[v, u]), z_far) if (certain[v, u] and bf > z_far) else z_far
@@ -808,7 +888,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
             answered = False
             if certain[v, u] and zs <= z_far:  # the surface's certain part: the frustum on (case ii), or its cell
                 ze = np.float64(z_end[v, u])
-                answered = z <= (ze if zs >= Z else min(surface_cell_end(zs, d_min, delta_d), ze))
+                answered = z <= (ze if zs >= Z else min(surface_cell_end(zs, grid), ze))
             if not answered and (one_piece or zs > z_far) and d_min <= z < d_max:
                 answered = cells[v, u, min(int((z - d_min) / delta_d), n_cells - 1)] == 2
             # Earlier queries' runs of free cells decide it, without a walk: the nearest occupied cell is the one
@@ -816,7 +896,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
             if not answered:
                 d2, z, from_invalid, answered = distance_by_runs(
                     X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, np.float64(z_end[v, u]), certain[v, u], bf, z_far,
-                    bound2, u, v, d_min, delta_d, n_cells, cells, free_run, behind_run)
+                    bound2, u, v, grid)
             if not answered:
                 d2, z, from_invalid = pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, np.float64(z_end[v, u]),
                                                      certain[v, u], bf, bound2, grid)
@@ -832,11 +912,8 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
                 continue
             count += 1
             n_invalid += 1 if from_invalid else 0
-            if d2 <= 0.0:
-                inside = True
-                continue
-            d = np.sqrt(d2)
-            ex, ey, ez = frustum_direction(X, Y, Z, a0, a1, b0, b1, z, d)
+            here, d, ex, ey, ez = contribution(X, Y, Z, a0, a1, b0, b1, z, d2)
+            inside = inside or here
             sum_d += d
             sx += ex
             sy += ey
@@ -857,10 +934,11 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
 
 @kernel()
 def fused_region(X, Y, Z, rho, view, unseen_occupied, near_eps, inside_tol, spans, region, out_direction):
-    """The first step of one control point P's fused query: its surveillance region (``spans``, (height, 2) int64,
-    as :func:`surveillance_region` fills it), written into region (8,): flags, P unseen?, unseen_d, nx, ny, nz,
-    v_lo, v_hi (v_hi < v_lo: no rows to visit). Clears out_direction (3,). Returns the distance to the space between
-    links that fusion takes for the robot and does not check (inf beyond rho)."""
+    """The first step of one control point P = (X, Y, Z)'s fused query: its surveillance region (``spans``, (height,
+    2) int64, as :func:`surveillance_region` fills it) in the principal camera's ``view``, written into region (8,)
+    float64: flags, P unseen?, unseen_d, nx, ny, nz, v_lo, v_hi (v_hi < v_lo: no rows to visit). Clears
+    out_direction (3,). Returns the distance to the space between links that fusion takes for the robot and does not
+    check (inf beyond rho)."""
     height, width = view.z_start.shape
     fx, fy, cx, cy, z_min, z_max = view.fx, view.fy, view.cx, view.cy, view.z_min, view.z_max
     f, unseen_here, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi = surveillance_region(
@@ -889,9 +967,10 @@ def fused_region(X, Y, Z, rho, view, unseen_occupied, near_eps, inside_tol, span
 
 @kernel()
 def fused_finish(X, Y, Z, aggregate, region, acc, view, inside_tol, min_direction, out_direction):
-    """The last step of one control point P's fused query: the sums of its row tasks (acc, (row_chunks, N_ACC)),
-    added in a fixed order, so that the answer does not depend on the threads' timing, and aggregated. region (8,):
-    from :func:`fused_region`. Returns (distance, count, invalid_count, flags) and writes the direction."""
+    """The last step of one control point P = (X, Y, Z)'s fused query: the sums of its row tasks (acc, (row_chunks,
+    N_ACC) float64), added in a fixed order, so that the answer does not depend on the threads' timing, and
+    aggregated as ``aggregate``. region (8,) float64: from :func:`fused_region`. ``view``: for the intrinsics.
+    Returns (distance, count, invalid_count, flags) and writes the direction into out_direction."""
     fx, fy, cx, cy = view.fx, view.fy, view.cx, view.cy
     f = int(region[0])
     if region[1] != 0.0:
@@ -919,13 +998,14 @@ def fused_finish(X, Y, Z, aggregate, region, acc, view, inside_tol, min_directio
 
 @kernel(parallel=True)
 def fused_query_points(points_camera, rho, view, options, grid, out):
-    """Distances from the (n, 3) control points (metres, principal optical frame) to what the principal camera says
-    is possibly occupied and the secondary cameras do not clear, aggregated as ``aggregate``; the fused counterpart
-    of :func:`depthguard.kernels.depthspace.query_points`. ``view``: :class:`PrincipalView`; ``options``:
-    :class:`QueryOptions`; ``grid``: :class:`GridState`. Writes into ``out`` (:class:`FusedOutput`) distance (n,),
-    the unit direction (n, 3) (from the obstacle towards P, principal optical frame), count, invalid_count and flags,
-    and into unchecked (n,) the distance to the space between links fusion did not check (inf beyond rho);
-    ROBOT_BLIND_SPOT flags it when it comes nearer than the distance.
+    """Distances from the (n, 3) float64 control points ``points_camera`` (metres, principal optical frame) to what
+    the principal camera says is possibly occupied and the secondary cameras do not clear, aggregated as
+    ``aggregate``; the fused counterpart of :func:`depthguard.kernels.depthspace.query_points`. ``view``:
+    :class:`PrincipalView`; ``options``: :class:`QueryOptions`; ``grid``: :class:`GridState`. Writes into ``out``
+    (:class:`FusedOutput`) distance (n,) float64 metres, the unit direction (n, 3) float64 (from the obstacle towards
+    P, principal optical frame), count, invalid_count and flags ((n,) int64 each), and into unchecked (n,) float64
+    the distance to the space between links fusion did not check (inf beyond rho); ROBOT_BLIND_SPOT flags it when it
+    comes nearer than the distance.
 
     Each point's region is split into ``row_chunks`` interleaved sets of rows, and the n * row_chunks tasks run in
     parallel: a point near much clutter does not leave the other threads idle. Their sums are then added in a fixed

@@ -5,12 +5,48 @@ Everything here works in one camera's optical frame (x right, y down, z forward;
 a0 = (u - 1/2 - cx)/fx, a1 = (u + 1/2 - cx)/fx, b0 = (v - 1/2 - cy)/fy, b1 = (v + 1/2 - cy)/fy.
 
 The tests hold every kernel against a slow NumPy twin (``tests/naive.py``).
+
+The frame's arrays are those of a :class:`depthguard.depth.OccupancyImage`, (h, w) and indexed [v, u].
+
+Arguments used throughout:
+
+- ``X, Y, Z``: float64, metres: the control point P in the camera's optical frame.
+- ``rho``: float64, metres: the radius of the surveillance region; only what lies nearer than rho to P counts.
+- ``z_start, z_end``: (h, w) float32, metres: pixel (u, v) is possibly occupied along its frustum for
+  z_start[v, u] <= z <= z_end[v, u]; a z_start of inf: nothing along the pixel, a z_end of inf: no end.
+- ``invalid``: (h, w) uint8: 1 where the pixel had no valid measurement, else 0.
+- ``block_min``: (ceil(h / block), ceil(w / block)) float32, metres: the minimum of z_start over each block.
+- ``blind, blind_block_min``: (h, w) float32, metres: where the space hidden behind the robot starts along each
+  pixel (inf: none); and its block minima, shaped as block_min.
+- ``has_blind``: bool: whether the frame shows the robot (``blind`` is read only then).
+- ``block``: int, pixels: the side of the blocks (``config.BLOCK_SIZE``).
+- ``fx, fy, cx, cy``: float, pixels: the camera's intrinsics.
+- ``z_min, z_max``: float, metres: the camera's valid depth range, which with the image bounds the observed volume.
+- ``aggregate``: int: AGG_MIN, AGG_MEAN or AGG_HYBRID (0, 1, 2: the index in ``config.AGGREGATES``).
+- ``unseen_occupied``: bool: unseen space counts as possibly occupied (``unseen="occupied"``, design §3).
+- ``near_eps``: float, metres: a cube corner at or nearer than this optical depth makes the window the whole image
+  (``config.NEAR_PLANE_EPSILON``).
+- ``inside_tol``: float, metres: a distance at or below it means P is inside (``config.INSIDE_TOLERANCE``).
+- ``min_direction``: float, no unit: a sum of unit directions shorter than min_direction times their count is
+  reported as the zero vector (``config.MIN_DIRECTION_NORM``).
+- ``paper``: bool: the 2015 paper's method (:func:`query_point_paper`) instead of the exact one.
+- ``points_camera``: (n, 3) float64, metres: the control points in the camera's optical frame.
+- ``spans``: (h, 2) int64 work space: per image row v, the first and last column to visit (first > last: none), as
+  :func:`depthguard.kernels.frustum.surveillance_region` fills it.
+- ``scratch``: (5, w) float64 work space.
+- ``distance, direction, count, invalid_count, flags, blind_distance``: the results for the n points, written:
+  (n,) float64 metres (inf: nothing nearer than rho); (n, 3) float64, the unit vector from the obstacle towards P in
+  the optical frame (zero for none); (n,) int64 contributors; (n,) int64 contributors from pixels without a
+  measurement; (n,) int64 bits of :class:`depthguard.results.Flag`; (n,) float64 metres, the distance to the space
+  behind the robot (inf beyond rho, or without ``has_blind``).
+- ``out_direction``: (3,) float64, written: one point's unit direction from the obstacle towards P, optical frame.
 """
 
 import numpy as np
 from numba import prange
 
 from depthguard.kernels.frustum import (
+    contribution,
     AGG_MIN,
     FLAG_REGION_OUTSIDE_VIEW,
     FLAG_ROBOT_BLIND_SPOT,
@@ -35,7 +71,8 @@ from depthguard.kernels.jit import kernel
 def _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, v_lo, v_hi, spans, scratch):
     """Every contributing pixel for ``mean`` and ``hybrid``: per row, gather the silhouette span's pixels whose
     start depth is not behind the region, take their exact distances (:func:`guess_piece_row`, walking where the
-    guess fails), and sum the contributors' distances and unit directions. ``scratch`` is a (5, width) float64 array.
+    guess fails), and sum the contributors' distances and unit directions. ``scratch`` is a (5, width) float64 array;
+    v_lo, v_hi (int) the region's first and last row, whose ``spans`` are filled.
 
     Returns (count, invalid count, inside?, sum of d, sum of unit directions x, y, z, best d^2).
     """
@@ -85,11 +122,8 @@ def _all_in_rows(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, v_lo, v_
             count += 1
             n_invalid += invalid[v, u]
             best2 = min(best2, d2)
-            if d2 <= 0.0:
-                inside = True
-                continue
-            d = np.sqrt(d2)
-            ex, ey, ez = frustum_direction(X, Y, Z, a0, a1, b0, b1, z_star, d)
+            here, d, ex, ey, ez = contribution(X, Y, Z, a0, a1, b0, b1, z_star, d2)
+            inside = inside or here
             sum_d += d
             sx += ex
             sy += ey
@@ -110,9 +144,9 @@ def query_point(X, Y, Z, rho, z_start, z_end, invalid, block_min, blind, blind_b
 
     Returns (distance, count, invalid_count, flags); writes the unit direction (from the obstacle towards P, optical
     frame) into out_direction (3,). ``spans`` (height, 2) int64 and ``scratch`` (5, width) float64 are scratch space.
-    With ``has_blind``, writes into out_blind[0] the distance to the space hidden behind the robot (``blind``: where
-    it starts along each pixel, inf for none; ``blind_block_min``: its block minima), inf beyond rho; the caller
-    flags a result that this blind space comes closer than.
+    With ``has_blind``, writes into out_blind[0] (out_blind: (1,) float64, metres) the distance to the space hidden
+    behind the robot (``blind``: where it starts along each pixel, inf for none; ``blind_block_min``: its block
+    minima), inf beyond rho; the caller flags a result that this blind space comes closer than.
     """
     height, width = z_start.shape
     out_blind[0] = np.inf
@@ -234,6 +268,10 @@ def query_point_paper(X, Y, Z, rho, z_start, z_end, invalid, fx, fy, cx, cy, z_m
 def _query_one(i, points_camera, rho, z_start, z_end, invalid, block_min, blind, blind_block_min, has_blind, block, fx,
                fy, cx, cy, z_min, z_max, aggregate, unseen_occupied, paper, near_eps, inside_tol, min_direction, spans,
                scratch, distance, direction, count, invalid_count, flags, blind_distance):
+    """Point i (int64) of points_camera: :func:`query_point`, or :func:`query_point_paper` with ``paper``, written
+    into row i of distance, direction, count, invalid_count, flags and blind_distance; ROBOT_BLIND_SPOT is flagged
+    where the space behind the robot comes nearer than the distance. spans (h, 2) and scratch (5, w): this point's
+    work space."""
     X = points_camera[i, 0]
     Y = points_camera[i, 1]
     Z = points_camera[i, 2]

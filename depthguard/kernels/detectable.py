@@ -2,7 +2,18 @@
 diameter d in voxels, distances to what stays, and marking the voxels the robot and known solids fill.
 
 Voxel arrays are (nx, ny, nz) bool, C order, indexed [i, j, k] along world x, y, z; ``lo``: (3,) float64 metres,
-the box's near corner in the world frame; ``voxel``: the side s, metres.
+the box's near corner in the world frame (a number in :func:`to_interval`); ``voxel``: the side s, metres.
+
+Arguments used throughout:
+
+- ``voxel``: float, metres: the side s of the box's voxels.
+- ``free``: (nx, ny, nz) bool: the voxels certified free entirely (seen free by some camera, inside the robot's zone,
+  inside a known solid).
+- ``fits``: (nx, ny, nz) bool: E_vox, the voxels that may hold the centre of a ball of diameter d lying in possibly
+  occupied space.
+- ``counts``: (bx, by, bz) int32, bx = ceil(nx / block) and so on: how many True voxels of ``fits`` each block holds.
+- ``block``: int, voxels: the side of the blocks that ``counts`` counts (``BLOCK`` of
+  ``depthguard/freespace/_detectable.py``).
 """
 
 import math
@@ -15,8 +26,9 @@ from depthguard.kernels.jit import kernel
 
 @kernel(parallel=True)
 def erode_fits(free, offsets, block, fits, counts):
-    """fits[v] = v is not free and no voxel at one of ``offsets`` ((k, 3) int64) from v is free (beyond the array:
-    not free); counts[block] = how many True voxels of ``fits`` it holds (blocks of ``block`` voxels a side)."""
+    """fits[v] = v is not free and no voxel at one of ``offsets`` ((k, 3) int64, voxels: the offsets o != 0 with
+    |o| s <= r) from v is free (beyond the array: not free); counts[block] = how many True voxels of ``fits`` it holds
+    (blocks of ``block`` voxels a side). Writes fits and counts."""
     nx, ny, nz = free.shape
     bx, by, bz = counts.shape
     for p in prange(bx * by * bz):
@@ -45,7 +57,8 @@ def erode_fits(free, offsets, block, fits, counts):
 @kernel(parallel=True)
 def or_coarse(free, coarse, ratio):
     """free[i, j, k] |= coarse[i // ratio, j // ratio, k // ratio] (a coarser box of voxels ``ratio`` times as big
-    with the same near corner)."""
+    with the same near corner). coarse: (mx, my, mz) bool, the coarser box's voxels certified free
+    (mx * ratio >= nx, and so on); ratio: int >= 1."""
     nx, ny, nz = free.shape
     for i in prange(nx):
         for j in range(ny):
@@ -56,13 +69,18 @@ def or_coarse(free, coarse, ratio):
 
 @kernel(inline=True)
 def to_interval(x, lo, hi):
+    """The distance from x to the interval [lo, hi] along one axis (float64 each, metres, lo <= hi), 0 inside."""
     return max(lo - x, 0.0, x - hi)
 
 
 @kernel(parallel=True)
 def nearest_fit(fits, counts, block, lo, voxel, beyond, points, limit, out):
     """out[p] = min(distance from points[p] to the nearest True voxel's cube, to the outside of the box (beyond[f]
-    metres past face f), limit); 0 for a point outside the box."""
+    metres past face f), limit); 0 for a point outside the box.
+
+    points: (n, 3) float64, metres, world frame; lo: (3,) float64, metres, the box's near corner (world frame); beyond:
+    (6,) float64, metres, for the faces at lo x, hi x, lo y, hi y, lo z, hi z; limit: float, metres (may be inf); out:
+    (n,) float64, metres, written. fits and counts as :func:`erode_fits` wrote them, with its ``block``."""
     nx, ny, nz = fits.shape
     bx, by, bz = counts.shape
     side = block * voxel
@@ -123,7 +141,8 @@ def nearest_fit(fits, counts, block, lo, voxel, beyond, points, limit, out):
 @kernel()
 def mark_capsule_voxels(lo, voxel, capsules, zone, out):
     """out[v] = True for the voxels whose centre lies within radius + zone - voxel sqrt(3) / 2 of a capsule's
-    segment (capsules (n, 7): p0, p1, radius)."""
+    segment (capsules (n, 7) float64, metres, world frame: p0 (3), p1 (3), radius). zone: float, metres; lo: (3,)
+    float64, metres, the box's near corner (world frame); out: (nx, ny, nz) bool, only set (never cleared)."""
     nx, ny, nz = out.shape
     half_diagonal = 0.5 * math.sqrt(3.0) * voxel
     for n in range(capsules.shape[0]):
@@ -161,7 +180,10 @@ def mark_capsule_voxels(lo, voxel, capsules, zone, out):
 @kernel(parallel=True)
 def mark_box_voxels(lo, voxel, center, half, R, out):
     """out[v] = True for the voxels whose centre lies at least voxel sqrt(3) / 2 inside every face of the box
-    (centre, half extents, R_world_box)."""
+    (centre, half extents, R_world_box). center: (3,) float64, metres, world frame; half: (3,) float64, metres, the
+    half extents along the box's own axes; R: (3, 3) float64, box frame -> world (its columns are the box's axes);
+    lo: (3,) float64, metres, the voxels' near corner (world frame); out: (nx, ny, nz) bool, only set (never
+    cleared)."""
     nx, ny, nz = out.shape
     inner = np.empty(3)
     for a in range(3):

@@ -1,4 +1,5 @@
-"""Numba kernels of the time-bounded free space (design §8a). They trust their inputs; ``depthguard/freespace/_memory.py`` checks them.
+"""Numba kernels of the time-bounded free space (design §8a). They trust their inputs;
+``depthguard/freespace/_memory.py`` checks them (``_near.py`` those of the last two kernels).
 
 Two jobs:
 
@@ -15,6 +16,20 @@ Two jobs:
   voxels on every side (a person may come from outside), which each 1-D transform sees as two sites of value 0 at
   positions -1 and n. Squared distances are in voxel units: at most 3 * (config.FREESPACE_MAX_SIDE + 1)^2, about
   8e8, within ``int32``.
+
+Voxel arrays are (nx, ny, nz), C order, indexed [i, j, k] along world x, y, z; images are indexed [row, column].
+
+Arguments used throughout:
+
+- ``lo``: (3,) float64, metres, world frame: the voxel box's near corner (voxel (i, j, k) spans lo + (i, j, k) *
+  voxel to lo + (i + 1, j + 1, k + 1) * voxel).
+- ``voxel``: float, metres: the side of the box's voxels.
+- ``sizes``: (n, 2) int64, pixels: each camera's image size (width, height).
+- ``floor_log2``: (w_max + 1,) int64, w_max the widest image's width: floor_log2[m] = floor(log2(m)) for m >= 1.
+- ``margin``: float, metres: how far beyond a voxel's deepest corner a camera must have seen free (calibration).
+- ``pad``: float64, pixels, a whole number: how far a voxel's footprint grows on every side (calibration).
+- ``d2``: (nx, ny, nz) int32: the distance transform's squared distances in voxel units (between voxel centres),
+  transformed in place pass by pass.
 """
 
 import numpy as np
@@ -29,8 +44,9 @@ from depthguard.kernels.jit import kernel
 def row_min_tables(free, sizes, table):
     """table[c, l, q, r] = the smallest free[c, r, q : q + 2^l] of camera c's free image (sizes[c] = (width, height)),
     for 2^l <= width and q + 2^l <= width (the rest is not written): a sparse table of each row, stored column-major
-    so that the rows of one footprint lie side by side. free: (n, >= h, >= w) float32; table: (n, >= levels, >= w,
-    >= h) float32. One task per camera (a single parallel region: on a busy machine each region's barrier costs)."""
+    so that the rows of one footprint lie side by side. free: (n, >= h, >= w) float32, metres, each camera's free
+    image (how far each pixel saw its ray free, 0 for nothing); table: (n, >= levels, >= w, >= h) float32, metres.
+    One task per camera (a single parallel region: on a busy machine each region's barrier costs)."""
     for p in prange(free.shape[0]):
         c = np.int64(p)
         w = sizes[c, 0]
@@ -49,7 +65,8 @@ def row_min_tables(free, sizes, table):
 
 @kernel(inline=True)
 def row_min(table, floor_log2, r, a, b):
-    """The smallest value of row r between columns a and b (inclusive, a <= b) of the image ``table`` holds."""
+    """The smallest value of row r between columns a and b (inclusive, a <= b; int, pixels) of the image ``table``
+    holds: table (levels, >= w, >= h) float32, metres, one camera's row-minimum table (:func:`row_min_tables`)."""
     level = floor_log2[b - a + 1]
     return min(table[level, a, r], table[level, b - (np.int64(1) << level) + 1, r])
 
@@ -59,7 +76,8 @@ def project_point(lo, voxel, i, j, k, pose, intrinsics, out):
     """out[:] = (u, v, z): the lattice point lo + (i, j, k) * voxel (world, metres) in one camera, its image
     coordinates (pixels; garbage where z <= 0) and optical depth (metres).
 
-    pose: (12,) the world -> optical rotation row by row, then the translation. intrinsics: (4,) fx, fy, cx, cy.
+    i, j, k: int, the lattice point's indices. pose: (12,) float64, the world -> optical rotation row by row, then
+    the translation (metres). intrinsics: (4,) float64, fx, fy, cx, cy, pixels. out: (3,) float64, written.
     The point is placed, transformed and projected as written, in this order, as ``seen_free_voxels``' docstring
     says (the tests' judge does the same arithmetic)."""
     x = lo[0] + i * voxel
@@ -76,7 +94,9 @@ def project_point(lo, voxel, i, j, k, pose, intrinsics, out):
 @kernel(inline=True)
 def camera_sees_box(corners, z_near, width, height, table, floor_log2, margin, pad):
     """Whether one camera sees a box of voxels entirely free, from its 8 corners in that camera (``corners``: (8, 3)
-    u, v, z as :func:`project_point` gives them). The confirmation rule of ``seen_free_voxels``."""
+    float64, u, v, z as :func:`project_point` gives them). The confirmation rule of ``seen_free_voxels``. z_near:
+    float, metres, the nearest depth a corner may have; width, height: int, pixels, the camera's image size; table:
+    (levels, >= w, >= h) float32, metres, its free image's row-minimum table (:func:`row_min_tables`)."""
     x_lo = np.inf
     x_hi = -np.inf
     y_lo = np.inf
@@ -115,10 +135,12 @@ def seen_free_voxels(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_
     """out[i, j, k] = True where some camera sees voxel (i, j, k) of the box with corner ``lo`` ((3,) metres, world)
     and side ``voxel`` entirely free; out (nx, ny, nz) bool comes all False.
 
-    Per camera c: poses[c] (12,) world -> optical (rotation rows, translation); intrinsics[c] (fx, fy, cx, cy);
-    z_near[c] the nearest depth a corner may have (metres); sizes[c] (width, height); tables[c] its free image's
-    row-minimum table (:func:`row_min_tables`). floor_log2[n] = floor(log2(n)) for n >= 1. margin: metres;
-    pad: pixels (float64, a whole number).
+    Per camera c: poses[c] (12,) world -> optical (rotation rows, translation in metres), poses (n, 12) float64;
+    intrinsics[c] (fx, fy, cx, cy), intrinsics (n, 4) float64, pixels; z_near[c] the nearest depth a corner may have
+    (metres), z_near (n,) float64; sizes[c] (width, height); tables[c] its free image's row-minimum table
+    (:func:`row_min_tables`), tables (n, levels, >= w, >= h) float32, metres. floor_log2[n] = floor(log2(n)) for
+    n >= 1. margin: metres; pad: pixels (float64, a whole number). block: int, voxels, a power of 2
+    (``config.FREESPACE_BLOCK``).
 
     Coarse to fine, in blocks of ``block`` (a power of 2) voxels a side, one column of blocks per task: a camera that
     sees a whole block free sees every voxel in it free (the voxel's corners project inside the convex hull of the
@@ -208,7 +230,8 @@ def seen_free_voxels(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_
 @kernel(inline=True)
 def _sweep_back(d2, i, j, nz):
     """The last axis' second sweep: d2[i, j, k] holds the distance (in voxels) to the nearest site at or before k
-    (0 on a site); make it the squared distance to the nearest site either side, position nz counting as one."""
+    (0 on a site); make it the squared distance to the nearest site either side, position nz counting as one. d2:
+    (nx, ny, nz) int32; i, j: int, the line's first two indices; nz: int, its length (d2's last axis)."""
     last = nz
     for k in range(nz - 1, -1, -1):
         d = d2[i, j, k]
@@ -239,7 +262,8 @@ def last_axis_of_mask(mask, d2):
 def last_axis_of_memory(arrival, seen, robot, use_robot, t, d2):
     """Pass 1 for the memory's update at time t: the sites are U = (arrival <= t) & ~seen & ~robot (robot only when
     use_robot), the voxels where a person may be now. arrival: (nx, ny, nz) float64 seconds; seen, robot: bool
-    (robot may be any shape when not use_robot); d2: (nx, ny, nz) int32."""
+    (robot may be any shape when not use_robot); use_robot: bool; t: float, seconds, the frames' clock; d2:
+    (nx, ny, nz) int32, written."""
     nx, ny, nz = arrival.shape
     for p in prange(nx * ny):
         ij = np.int64(p)
@@ -258,7 +282,8 @@ def _lower_envelope(f, n, v, fv, zn, zd, out):
     """out[q] = min over sites p of (q - p)^2 + f(p), for q in 0..n-1 (Felzenszwalb-Huttenlocher). Sites: p in
     0..n-1 with f(p) = f[p] (whole numbers), and the padding p = -1 and p = n with f = 0. Work space, (n + 2,) int64
     each: v, fv the envelope's parabolas and their values; zn / zd where each starts, as a fraction (zd > 0), so that
-    every comparison is exact in integers (|zn * den| stays below 2^63 for sides up to config.FREESPACE_MAX_SIDE)."""
+    every comparison is exact in integers (|zn * den| stays below 2^63 for sides up to config.FREESPACE_MAX_SIDE).
+    f, out: (n,) int64, squared distances in voxel units; n: int, the line's length."""
     top = 0
     v[0] = -1
     fv[0] = 0
@@ -291,7 +316,8 @@ def _lower_envelope(f, n, v, fv, zn, zd, out):
 @kernel(inline=True)
 def _envelope_slab(slab, lines, f, v, fv, zn, zd, out):
     """Transform every line along the first axis of ``slab`` ((m, nz) int32 view) in place, through ``lines`` ((nz,
-    m) int64 work space: the slab transposed so each line is contiguous)."""
+    m) int64 work space: the slab transposed so each line is contiguous). f, v, fv, zn, zd, out: int64 work space
+    for :func:`_lower_envelope`, (m,), (m + 2,) each and (m,), as :func:`_slab_scratch` makes them."""
     m, nz = slab.shape
     for q in range(m):
         for k in range(nz):
@@ -318,7 +344,8 @@ def _slab_scratch(n, nz):
 
 @kernel(parallel=True)
 def middle_axis(d2):
-    """Pass 2: the lower envelope along the second axis, in place, one (ny, nz) slab per task. d2: int32."""
+    """Pass 2: the lower envelope along the second axis, in place, one (ny, nz) slab per task. d2: (nx, ny, nz)
+    int32."""
     nx, ny, nz = d2.shape
     for p in prange(nx):
         i = np.int64(p)
@@ -328,7 +355,8 @@ def middle_axis(d2):
 
 @kernel(parallel=True)
 def first_axis(d2):
-    """Pass 3: the lower envelope along the first axis, in place, one (nx, nz) slab per task. d2: int32."""
+    """Pass 3: the lower envelope along the first axis, in place, one (nx, nz) slab per task. d2: (nx, ny, nz)
+    int32."""
     nx, ny, nz = d2.shape
     for p in prange(ny):
         j = np.int64(p)
@@ -340,7 +368,9 @@ def first_axis(d2):
 def advance_arrival(d2, t, voxel, clearance, v_max, rounding, arrival):
     """arrival = max(arrival, t + max(0, D - clearance) / v_max), D = voxel * sqrt(d2) metres between voxel centres,
     lowered by ``rounding`` * D metres and one unit in the last place of the sum so that float rounding never makes
-    it later than the exact value. d2: (nx, ny, nz) int32 squared distances (voxels); arrival: float64 seconds."""
+    it later than the exact value. d2: (nx, ny, nz) int32 squared distances (voxels); arrival: (nx, ny, nz) float64
+    seconds, edited in place. t: float, seconds; voxel, clearance: float, metres (clearance: voxel sqrt(3)); v_max:
+    float, metres per second; rounding: float, no unit (``config.FREESPACE_ROUNDING``)."""
     nx, ny, nz = arrival.shape
     for p in prange(nx):
         i = np.int64(p)
@@ -357,7 +387,8 @@ def advance_arrival(d2, t, voxel, clearance, v_max, rounding, arrival):
 @kernel(parallel=True)
 def voxels_within_radii(mask, lo, voxel, points, radii, out):
     """out[p] = some True voxel of mask lies nearer than radii[p] to points[p] (the voxels of side ``voxel`` from
-    corner ``lo``)."""
+    corner ``lo``), the distance being to the voxel's cube. mask: (nx, ny, nz) bool; points: (n, 3) float64, metres,
+    world frame; radii: (n,) float64, metres (0 or less, or NaN: never); out: (n,) bool, written."""
     nx, ny, nz = mask.shape
     for p in prange(points.shape[0]):
         out[p] = False
@@ -398,7 +429,13 @@ def voxels_within_radii(mask, lo, voxel, points, radii, out):
 def mark_surface_voxels(raw, scale, z_start, invalid, fx, fy, cx, cy, R, t, lo, voxel, out):
     """out[voxel of (u, v)'s measured point] = True for every pixel with a valid measurement whose z_start is finite
     (a surface, not the robot nor a hole). Rows in parallel: threads may mark the same voxel, and every write is the
-    same True."""
+    same True.
+
+    raw: (h, w) uint16 in units of ``scale`` metres, or float32 metres (scale 1.0); z_start, invalid: (h, w) float32
+    metres and uint8, the frame's :class:`depthguard.depth.OccupancyImage`; fx, fy, cx, cy: float, pixels, the
+    camera's intrinsics; R (3, 3), t (3,): float64, the camera's optical frame -> world (t in metres). The measured
+    point lies on the pixel's centre ray at optical depth raw * scale. out: (nx, ny, nz) bool, only set (never
+    cleared)."""
     h, w = raw.shape
     nx, ny, nz = out.shape
     inv = 1.0 / voxel

@@ -7,6 +7,36 @@ public functions validate them. A pixel (u, v) spans the tangents [a0, a1] x [b0
 a0 = (u - 1/2 - cx)/fx, a1 = (u + 1/2 - cx)/fx, b0 = (v - 1/2 - cy)/fy, b1 = (v + 1/2 - cy)/fy.
 
 The tests hold these kernels against slow NumPy twins (``tests/naive.py``).
+
+Arguments used throughout:
+
+- ``X, Y, Z``: float64, metres: the point P (a control point) in the camera's optical frame.
+- ``a0, a1, b0, b1``: float64, tangents (x/z and y/z, no unit): the frustum {x/z in [a0, a1], y/z in [b0, b1]}; for
+  pixel (u, v) the values above, for a block of pixels those of its outer edges (b0, b1 alone: a row's).
+- ``z_lo, z_hi``: float64, metres: the frustum's segment between these optical depths, z_lo <= z_hi (z_hi may be
+  inf).
+- ``rho``: float64, metres: the radius of the surveillance region around P.
+- ``fx, fy, cx, cy``: float, pixels: the camera's intrinsics.
+- ``width, height``: int, pixels: the image's size.
+- ``z_min, z_max``: float, metres: the camera's valid depth range, which with the image's edges bounds the observed
+  volume (z_max may be inf).
+- ``u_lo, u_hi, v_lo, v_hi``: int, pixels: the window of columns and rows to visit, inclusive (:func:`cube_window`).
+- ``spans``: (height, 2) int64: per image row v, the first and last column to visit (first > last: none).
+- ``unseen_occupied``: bool: unseen space counts as possibly occupied (``unseen="occupied"``, design §3).
+- ``near_eps``: float, metres: a cube corner at or nearer than this optical depth makes the window the whole image
+  (``config.NEAR_PLANE_EPSILON``).
+- ``inside_tol``: float, metres: a distance at or below it means P is inside (``config.INSIDE_TOLERANCE``).
+- ``min_direction``: float, no unit: a sum of unit directions shorter than min_direction times their count gives the
+  zero vector (``config.MIN_DIRECTION_NORM``).
+- ``aggregate``: int: AGG_MIN, AGG_MEAN or AGG_HYBRID (0, 1, 2: the index in ``config.AGGREGATES``).
+- ``out_direction``: (3,) float64, written: the unit direction from the obstacle towards P, optical frame (zero for
+  none).
+- ``flags``: int: the bits of :class:`depthguard.results.Flag` (the FLAG_* values) set so far.
+- ``unseen_d, nx, ny, nz``: float64: the distance (metres) from P to the observed volume's boundary when the boundary
+  counts as a contributor (inf when it does not), and the boundary's inward unit normal (optical frame), as
+  :func:`surveillance_region` returns them.
+- ``best2, best_invalid``: float64, square metres: the nearest contributor's squared distance (inf: none); int, 1 when
+  it came from a pixel without a valid measurement, else 0.
 """
 
 import numpy as np
@@ -41,7 +71,7 @@ MIN_RHO2 = 2.2250738585072014e-308
 @kernel(inline=True)
 def noise_margin(d, m0, m1, m2):
     """m(d) = max(m0 + m1 d + m2 d^2, 0), metres: the noise margin of a measurement at depth d (design §3), from
-    the camera's NoiseModel.coefficients()."""
+    the camera's NoiseModel.coefficients(). All float64: d and m0 in metres, m1 no unit, m2 per metre."""
     return max(m0 + (m1 + m2 * d) * d, 0.0)
 
 
@@ -61,7 +91,8 @@ def rho_squared(rho):
 
 @kernel(inline=True)
 def clamped_index(x, lo, hi):
-    """int(x) for a float x clamped to the whole numbers [lo, hi] first (int() of a huge or NaN float is garbage);
+    """int(x) for a float x clamped to the whole numbers [lo, hi] (ints, lo <= hi) first (int() of a huge or NaN
+    float is garbage);
     NaN gives lo. (max(a, b) and min(a, b) return a unless b is larger, smaller: never a NaN b.)"""
     return int(min(float(hi), max(float(lo), x)))
 
@@ -88,8 +119,9 @@ def frustum_nearest(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
 
 @kernel(inline=True)
 def frustum_direction(X, Y, Z, a0, a1, b0, b1, z, d):
-    """The unit vector from the nearest point of a pixel frustum's slice at depth z, (clamp(X, a0 z, a1 z),
-    clamp(Y, b0 z, b1 z), z), towards P = (X, Y, Z), which lies d > 0 metres from it."""
+    """The unit vector from the nearest point of a pixel frustum's slice at depth z (float64, metres),
+    (clamp(X, a0 z, a1 z), clamp(Y, b0 z, b1 z), z), towards P = (X, Y, Z), which lies d > 0 metres (float64) from
+    it. Optical frame."""
     inv_d = 1.0 / d
     return ((X - min(max(X, a0 * z), a1 * z)) * inv_d, (Y - min(max(Y, b0 * z), b1 * z)) * inv_d,
             (Z - z) * inv_d)
@@ -120,14 +152,15 @@ def guessed_piece(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
 
 @kernel(inline=True)
 def _breakpoint(c, a):
-    """Depth c/a where a*z - c changes sign; -1 (never, for z > 0) when a == 0."""
+    """Depth c/a (metres) where a*z - c changes sign; -1 (never, for z > 0) when a == 0. c: float64, metres, X or Y;
+    a: float64, the tangent a0, a1, b0 or b1 it is compared with."""
     return c / a if a != 0.0 else -1.0
 
 
 @kernel(inline=True)
 def frustum_nearest_walk(X, Y, Z, a0, a1, b0, b1, t0, t1, t2, t3, z_lo, z_hi):
-    """:func:`frustum_nearest` by walking the pieces from z_lo, given the breakpoints t0 = X/a0, t1 = X/a1,
-    t2 = Y/b0, t3 = Y/b1 (any value <= z_lo, or NaN, for "none").
+    """:func:`frustum_nearest` by walking the pieces from z_lo to z_hi, given the breakpoints t0 = X/a0, t1 = X/a1,
+    t2 = Y/b0, t3 = Y/b1 (float64 optical depths, metres; any value <= z_lo, or NaN, for "none"). P = (X, Y, Z).
 
     On each piece the state (left of, inside or right of the frustum, in x and in y) is read at the piece's
     midpoint; the first piece that holds its own minimiser holds the global one, and if a piece's minimiser lies
@@ -179,7 +212,8 @@ def frustum_nearest_walk(X, Y, Z, a0, a1, b0, b1, t0, t1, t2, t3, z_lo, z_hi):
 
 @kernel(inline=True)
 def frustum_nearest_paper(X, Y, Z, a0, a1, b0, b1, z_lo, z_hi):
-    """The papers' distance (2015 eqs. 7-8): the frustum point at the fixed depth clamp(Z, z_lo, z_hi) nearest to P.
+    """The papers' distance (2015 eqs. 7-8): the point of frustum [a0, a1] x [b0, b1] at the fixed depth
+    clamp(Z, z_lo, z_hi) nearest to P = (X, Y, Z).
 
     It lies on the frustum, so it is an upper bound of the true distance: unsafe, kept for comparison only.
     Returns (squared distance, depth of the point).
@@ -198,7 +232,8 @@ def view_boundary(X, Y, Z, tx0, tx1, ty0, ty1, z_min, z_max):
     The observed volume {tx0 <= x/z <= tx1, ty0 <= y/z <= ty1, z_min <= z <= z_max} (image edges at tangents tx0..
     tx1, ty0..ty1; z_max may be inf) is convex, so for P inside it the distance to its boundary is the smallest
     distance to a face plane. Returns (s, nx, ny, nz): s >= 0 inside (the distance), s < 0 outside; (nx, ny, nz)
-    points from that face into the view.
+    points from that face into the view. P = (X, Y, Z); tx0 < tx1, ty0 < ty1: float64 tangents (x/z, y/z) of the
+    image's outer pixel edges.
     """
     k = 1.0 / np.sqrt(1.0 + tx0 * tx0)
     s = (X - tx0 * Z) * k
@@ -226,7 +261,8 @@ def view_boundary(X, Y, Z, tx0, tx1, ty0, ty1, z_min, z_max):
 
 @kernel(inline=True)
 def cube_window(X, Y, Z, rho, fx, fy, cx, cy, width, height, near_eps):
-    """Pixels to visit for P: the image bounding box of the cube [P - rho, P + rho] (design §5).
+    """Pixels to visit for P = (X, Y, Z): the image bounding box of the cube [P - rho, P + rho] (design §5), in the
+    image of width x height pixels with intrinsics fx, fy, cx, cy.
 
     Returns (u_lo, u_hi, v_lo, v_hi), inclusive, clamped to the image (u_lo > u_hi when it is empty). If a corner
     lies at or behind the near plane z = near_eps, the whole image.
@@ -247,14 +283,16 @@ def cube_window(X, Y, Z, rho, fx, fy, cx, cy, width, height, near_eps):
 @kernel(inline=True)
 def footprint_span(t_lo, t_hi, f, c, size):
     """Pixels i in [0, size) whose footprint [i - 1/2, i + 1/2] meets the image coordinates [f*t_lo + c, f*t_hi + c]
-    (t: tangents x/z or y/z). Returns (lo, hi), inclusive; lo > hi when there is none."""
+    (t: tangents x/z or y/z, float64). f, c: float, pixels (fx, cx or fy, cy); size: int, pixels (width or height).
+    Returns (lo, hi), inclusive; lo > hi when there is none."""
     return index_span(np.ceil(f * t_lo + c - 0.5), np.floor(f * t_hi + c + 0.5), size)
 
 
 @kernel(inline=True)
 def index_span(lo, hi, size):
-    """The whole numbers lo..hi (floats) clamped to [0, size) before they become integers: (first, last), first >
-    last when none. NaN (only from numbers the public functions refuse) gives the whole range."""
+    """The whole numbers lo..hi (float64, pixels) clamped to [0, size) (size: int) before they become integers:
+    (first, last), first > last when none. NaN (only from numbers the public functions refuse) gives the whole
+    range."""
     return int(min(float(size), max(0.0, lo))), int(max(-1.0, min(float(size - 1), hi)))
 
 
@@ -266,9 +304,9 @@ def ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, 
     Needs Z > rho (the ball in front of the camera, so the silhouette is an ellipse in the plane z = 1). The
     silhouette is {(x, y): (x*X + y*Y + Z)^2 >= c*(x^2 + y^2 + 1)}, c = |P|^2 - rho^2; its part inside the row's band
     of tangents [b0, b1] is convex, so its x-extent runs from the left boundary at the clamped y of the leftmost
-    point to the right boundary at the clamped y of the rightmost point. ``pad`` (tangent units) widens every span
-    against rounding. Writes spans[v, 0] = first column, spans[v, 1] = last column (first > last when none),
-    within [u_lo, u_hi].
+    point to the right boundary at the clamped y of the rightmost point. ``pad`` (float64, tangent units) widens
+    every span against rounding. Writes spans[v, 0] = first column, spans[v, 1] = last column (first > last when
+    none), within [u_lo, u_hi], for the image of ``width`` columns and intrinsics fx, fy, cx, cy.
 
     The cone is the same for (X, Y, Z, rho) scaled by any factor, so they are first divided by max(|X|, |Y|, |Z|):
     the squares below then never overflow, whatever the point's distance. A row whose span is not a number (only
@@ -318,11 +356,18 @@ def ball_silhouette_rows(X, Y, Z, rho, fx, fy, cx, cy, width, v_lo, v_hi, u_lo, 
 @kernel()
 def nearest_in_blocks(X, Y, Z, rho, z_start, z_end, bounded, invalid, block_min, block, fx, fy, cx, cy, u_lo, u_hi,
                        v_lo, v_hi, near_eps, spans):
-    """The nearest contributing pixel for ``min``: visit blocks of pixels in rings around P's pixel, skipping a
-    block whose minimum start depth lies behind the region or whose bounding frustum is farther than the best
-    distance so far. Ties go to the smallest (v, u), as in a full scan. Pixel segments are [z_start, z_end] if
-    ``bounded``, else [z_start, inf). (Callers pass ``np.bool_(True)``, not ``True``: numba would compile the kernel
-    once for each literal.)
+    """The nearest contributing pixel for ``min``: visit blocks of pixels in rings around P's pixel, skipping a block
+    whose minimum start depth lies behind the region or whose bounding frustum is farther than the best distance so far.
+    Ties go to the smallest (v, u), as in a full scan. Pixel segments are [z_start, z_end] if ``bounded`` (bool), else
+    [z_start, inf). (Callers pass ``np.bool_(True)``, not ``True``: numba would compile the kernel once for each
+    literal.)
+
+    P = (X, Y, Z); z_start, z_end: (height, width) float32, metres, the pixels' segments (the start depths and their
+    ends, or ``blind``, or the depth grid's ``unchecked_from`` and ``blind_from``); invalid: (height, width) uint8, 1
+    for a pixel without a valid measurement, read for the nearest pixel only (fusion passes its ``certain``, whose
+    answer it does not use); block_min: (ceil(height / block), ceil(width / block)) float32, metres, z_start's minima
+    over blocks of ``block`` (int) pixels a side. Only the window u_lo..u_hi, v_lo..v_hi and, in each row, its ``spans``
+    are visited; the camera's intrinsics fx, fy, cx, cy and ``near_eps`` find P's pixel.
 
     Returns (best d^2 (inf if none below rho^2), v, u, z*, invalid flag of that pixel).
     """
@@ -399,7 +444,11 @@ def nearest_in_blocks(X, Y, Z, rho, z_start, z_end, bounded, invalid, block_min,
 def guess_piece_row(X, Y, Z, b0, b1, z_in, z_hi_in, u_in, m, inv_fx, cx, d2_out, z_out):
     """:func:`guessed_piece` for m pixels of one row (tangents b0, b1): pixel k has column u_in[k] and segment
     [z_in[k], z_hi_in[k]]. Writes d2_out[k] = g(z*) and z_out[k] = z*, or d2_out[k] = -1 where the guessed piece does
-    not hold the minimiser and the caller must walk. A loop of its own, so that it vectorises."""
+    not hold the minimiser and the caller must walk. A loop of its own, so that it vectorises.
+
+    P = (X, Y, Z); z_in, z_hi_in, u_in, d2_out, z_out: float64 arrays of at least m (int) entries (rows of the
+    callers' scratch): metres, metres, columns (whole numbers, pixels), square metres, metres; inv_fx: float, 1 / fx,
+    per pixel; cx: float, pixels."""
     for k in range(m):
         d2, z, ok = guessed_piece(X, Y, Z, (u_in[k] - 0.5 - cx) * inv_fx, (u_in[k] + 0.5 - cx) * inv_fx, b0, b1,
                                   z_in[k], z_hi_in[k])
@@ -410,8 +459,9 @@ def guess_piece_row(X, Y, Z, b0, b1, z_in, z_hi_in, u_in, m, inv_fx, cx, d2_out,
 @kernel()
 def surveillance_region(X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_max, unseen_occupied, near_eps,
                         inside_tol, spans, out_direction):
-    """What every query of one point P starts with (single camera and fused): the observed volume's boundary and the
-    pixels to visit.
+    """What every query of one point P = (X, Y, Z) starts with (single camera and fused): the observed volume's
+    boundary and the pixels to visit, in the image of width x height pixels (intrinsics fx, fy, cx, cy, valid depths
+    z_min..z_max).
 
     Clears out_direction (3,). Returns (flags, P unseen?, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi): the
     REGION_OUTSIDE_VIEW flag; whether P itself lies in unseen space under ``unseen_occupied`` (the answer is then
@@ -476,9 +526,10 @@ def surveillance_region(X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_ma
 
 @kernel(inline=True)
 def finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, inside_tol, out_direction):
-    """``min``'s answer from the nearest pixel (squared distance best2, its unit direction (ex, ey, ez), whether it
-    had no measurement) and the observed volume's boundary (distance unseen_d, inward normal). Returns (distance,
-    count, invalid_count, flags) and writes the direction."""
+    """``min``'s answer from the nearest pixel (squared distance best2, its unit direction (ex, ey, ez), float64,
+    optical frame; whether it had no measurement, best_invalid) and the observed volume's boundary (distance
+    unseen_d, inward normal nx, ny, nz). Returns (distance, count, invalid_count, flags) and writes the direction into
+    out_direction."""
     if best_invalid:
         flags |= FLAG_INVALID_PIXELS_USED
     if best2 <= inside_tol * inside_tol:
@@ -497,10 +548,26 @@ def finish_min(best2, best_invalid, ex, ey, ez, unseen_d, nx, ny, nz, flags, ins
 
 
 @kernel(inline=True)
+def contribution(X, Y, Z, a0, a1, b0, b1, z, d2):
+    """One contributing pixel's share of the ``mean`` and ``hybrid`` aggregations (design §6), from the nearest point
+    of its frustum [a0, a1] x [b0, b1] to P = (X, Y, Z), at depth z (metres), squared distance d2 > 0 (square
+    metres) or 0 inside: (P inside its frustum?, distance d, unit direction (x, y, z)
+    from that point towards P; 0 inside). Both walks that sum contributors, the single camera's
+    (:mod:`depthguard.kernels.depthspace`) and the depth grid's (:mod:`depthguard.kernels.depthgrid`), add these;
+    :func:`finish_sum` turns the sums into the answer."""
+    if d2 <= 0.0:
+        return True, 0.0, 0.0, 0.0, 0.0
+    d = np.sqrt(d2)
+    ex, ey, ez = frustum_direction(X, Y, Z, a0, a1, b0, b1, z, d)
+    return False, d, ex, ey, ez
+
+
+@kernel(inline=True)
 def finish_min_at_pixel(X, Y, Z, best2, best_u, best_v, best_z, best_invalid, fx, fy, cx, cy, unseen_d, nx, ny, nz,
                          flags, inside_tol, out_direction):
-    """:func:`finish_min` when the nearest point lies on pixel (best_u, best_v)'s frustum at depth best_z: its unit
-    direction towards P is derived here."""
+    """:func:`finish_min` when the nearest point lies on pixel (best_u, best_v)'s frustum (int, pixels) at depth
+    best_z (float64, metres): its unit direction towards P = (X, Y, Z) is derived here, with the intrinsics fx, fy,
+    cx, cy."""
     ex = ey = ez = 0.0
     if inside_tol * inside_tol < best2 < np.inf:
         ex, ey, ez = frustum_direction(X, Y, Z, (best_u - 0.5 - cx) / fx, (best_u + 0.5 - cx) / fx,
@@ -513,7 +580,11 @@ def finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, un
                 min_direction, out_direction):
     """``mean``'s and ``hybrid``'s answer from the sums over the contributing pixels and the observed volume's
     boundary (distance unseen_d, inward normal, one more contributor when finite). Returns (distance, count,
-    invalid_count, flags) and writes the normalised mean direction."""
+    invalid_count, flags) and writes the normalised mean direction.
+
+    The sums: count (int) contributing pixels, n_invalid (int) of them without a measurement, inside (bool) whether
+    P lies in one, sum_d (float64, metres) their distances, sx, sy, sz (float64) their unit directions (optical
+    frame), best2 the smallest squared distance."""
     if n_invalid:
         flags |= FLAG_INVALID_PIXELS_USED
     if unseen_d < np.inf:
@@ -541,9 +612,10 @@ def finish_sum(aggregate, count, n_invalid, inside, sum_d, sx, sy, sz, best2, un
 
 @kernel(parallel=True)
 def frustum_nearest_many(points, bounds, nearest_out, distance_out, paper):
-    """For each i: distance_out[i] (metres) from points[i] ((n, 3) float64, optical frame) to the frustum segment
-    bounds[i] ((n, 6) float64: a0, a1, b0, b1 tangents, z_lo, z_hi metres) and nearest_out[i] (n, 3) its nearest
-    point; ``paper``: the papers' fixed-depth formula instead of the exact one (design §4)."""
+    """For each i: distance_out[i] (metres) from points[i] ((n, 3) float64, metres, optical frame) to the frustum
+    segment bounds[i] ((n, 6) float64: a0, a1, b0, b1 tangents, z_lo, z_hi metres) and nearest_out[i] its nearest
+    point (optical frame, metres); nearest_out (n, 3) and distance_out (n,), float64, written. ``paper`` (bool): the
+    papers' fixed-depth formula instead of the exact one (design §4)."""
     for i in prange(points.shape[0]):
         X, Y, Z = points[i, 0], points[i, 1], points[i, 2]
         a0, a1, b0, b1, z_lo, z_hi = bounds[i, 0], bounds[i, 1], bounds[i, 2], bounds[i, 3], bounds[i, 4], bounds[i, 5]

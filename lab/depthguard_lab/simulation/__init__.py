@@ -26,6 +26,7 @@ from depthguard_lab.simulation._scene import (
     save_workcell,
     workcell_from_dict,
 )
+from depthguard_lab.simulation._standing import standing_person
 from depthguard_lab.simulation._sensors import (
     SensorModel,
     discontinuity_mask,
@@ -66,6 +67,7 @@ __all__ = [
     "simulate",
     "simulate_depth",
     "simulate_intensity",
+    "standing_person",
     "workcell_from_dict",
     "write_episode",
 ]

@@ -1,10 +1,10 @@
-"""Simple people made of capsules and spheres, for synthetic scenes and benchmarks."""
+"""A simple standing person made of capsules and a sphere, for synthetic scenes and benchmarks."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from depthguard.scenes._primitives import Capsule, Sphere
+from depthguard.scenes import Capsule, Sphere
 
 
 def standing_person(position, height: float = 1.75, facing: float = 0.0, reach: float = 0.0) -> list:
