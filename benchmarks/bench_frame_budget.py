@@ -44,6 +44,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(__file__))
 
 import depthguard as dg  # noqa: E402
+import depthguard._answer as answer_module  # noqa: E402
 import depthguard._monitor as monitor_module  # noqa: E402
 import depthguard.depthgrid as depthgrid  # noqa: E402
 import depthguard.freespace as freespace  # noqa: E402
@@ -210,7 +211,7 @@ STEPS = [  # (step, owner, attribute), in the order the monitor calls them
     ("fusion set-up: copies, allocations", FusedFrames, "__init__"),
     ("first query: fused (cell classification)", FusedFrames, "distances"),
     ("remembered flag", _near, "voxels_within"),
-    ("single-camera query", monitor_module, "single_camera_distances"),
+    ("single-camera query", answer_module, "single_camera_distances"),
     ("build map (first set only)", depthgrid, "build_map"),
 ]
 OTHER = "other (plan, Python, result)"

@@ -7,7 +7,7 @@ memory, the depth grid's set-up, and the cells the robot's own control points ne
 prepared waits; a newer one replaces it (``dropped`` counts them): the worker always prepares the newest frames.
 
 The worker owns the :class:`DistanceMonitor` (created on it, so that its OpenGL context lives on the thread that
-renders); a query reads only the :class:`~depthguard._monitor.PreparedSet` the worker published, which the worker
+renders); a query reads only the :class:`~depthguard.PreparedSet` the worker published, which the worker
 never changes afterwards.
 
 numba runs the worker's and the query's parallel kernels at once only under a thread-safe threading layer (omp or

@@ -345,7 +345,7 @@ def test_the_judge_catches_a_known_solid_band_twice_as_thick(cases, robot, monke
 def test_the_judge_catches_an_unflagged_concession(cases, robot, monkeypatch):
     """Concessions that hide without saying so (no flag, no concession distance): the known solid's (the bare table
     reads far, unflagged: rules 1 and 3) and the robot zone's (rule 4)."""
-    from depthguard._monitor import Concessions
+    from depthguard._answer import Concessions
 
     monkeypatch.setattr(Concessions, "flag", lambda self, points, distance, rho, flags, query=True:
                         (list(flags), np.full(len(points), np.inf)))
