@@ -156,3 +156,20 @@ def test_every_kernel_lives_in_the_kernel_layer():
 
     outside = [name for name in jit.KERNEL_MODULES if not name.startswith("depthguard.kernels.")]
     assert outside == ["depthguard.baselines"]
+
+
+def test_every_kernel_releases_the_gil():
+    """Every kernel is compiled with ``nogil``: a thread that receives frames runs while another prepares a set
+    (benchmarks/bench_gil.py measures it)."""
+    import importlib
+
+    from numba.core.registry import CPUDispatcher
+
+    from depthguard.kernels import jit
+
+    kernels = [(name, attr, value) for name in jit.KERNEL_MODULES
+               for attr, value in vars(importlib.import_module(name)).items() if isinstance(value, CPUDispatcher)
+               and value.py_func.__module__ == name]
+    assert len(kernels) > 80
+    holding = [f"{name}.{attr}" for name, attr, value in kernels if not value.targetoptions.get("nogil")]
+    assert holding == []

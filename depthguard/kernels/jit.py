@@ -55,6 +55,12 @@ def kernel(*, parallel: bool = False, inline: bool = False, error_model: str = "
     """numba's ``njit`` as every depthguard kernel uses it: cached on disk, stamped with the sources it depends on,
     and a warning when it compiles at run time.
 
+    Every kernel releases the GIL while it runs (``nogil``): a thread that receives frames (``LiveMonitor``'s
+    caller, a ROS or zenoh callback) runs while another prepares a set (``benchmarks/bench_gil.py``). A kernel
+    touches no Python object; what two threads may run at once is settled above the kernels (a ``PreparedSet``
+    does not change when the next is prepared; ``LiveMonitor`` serialises kernels under numba's workqueue threading
+    layer, which cannot run two parallel regions at once).
+
     ``inline``: numba copies the function's body into each caller instead of compiling it on its own. Each kernel
     compiled on its own costs about half a second, and its code is compiled again into every kernel that calls it,
     so small helpers and functions with one caller are inlined; larger functions with several callers are not
@@ -62,7 +68,7 @@ def kernel(*, parallel: bool = False, inline: bool = False, error_model: str = "
     a half). LLVM still inlines small functions into their callers when it optimises.
     """
     _install()
-    jit = numba.njit(parallel=parallel, error_model=error_model, inline="always" if inline else "never")
+    jit = numba.njit(parallel=parallel, error_model=error_model, inline="always" if inline else "never", nogil=True)
 
     def decorate(py_func):
         dispatcher = jit(py_func)
