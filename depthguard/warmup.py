@@ -187,6 +187,16 @@ def _run_workloads() -> None:
         project(np.array([[[box.lo, box.hi]]], dtype=np.float64), np.array([0.05]), np.ascontiguousarray(T[:3, :3]),
                 np.ascontiguousarray(T[:3, 3]), cam.fx, cam.fy, cam.cx, cam.cy, grids[0].col_edges,
                 grids[0].row_edges, grids[0].words, np.zeros((1, grids[0].words), dtype=np.uint64))
+    # The collision test's difference images: the tiles' features of intensity images (8 and 16 bits, floats) and the
+    # depth variant's changes (uint16 and float frames against a float64 reference in metres).
+    from depthguard.collision import depth_difference_image, tile_features
+
+    for dtype in (np.uint8, np.uint16, np.float32, np.float64):
+        tile_features(np.zeros(cam.shape, dtype=dtype), grids[0])
+    reference = np.full(cam.shape, 1.0)
+    for image in (np.full(cam.shape, 1000, dtype=np.uint16), np.full(cam.shape, 1.0, dtype=np.float32),
+                  np.full(cam.shape, 1.0)):
+        depth_difference_image(image, reference, grids[0])
     # The wave-propagation planner over a small configuration grid, around a wall.
     from depthguard.collision import ConfigurationGrid, plan_path
 

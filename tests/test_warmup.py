@@ -72,6 +72,13 @@ for aggregate in ("min", "hybrid"):
         monitor.query({"principal": floats["principal"]}, pts)
         monitor.query(floats, pts)
 dg.frustum_distance([0.0, 0.0, 1.0], [[-0.1, 0.1, -0.1, 0.1]], [0.5, np.inf])
+# The collision test's difference images (depthguard collide), intensity and depth.
+from depthguard.collision import TileGrid, depth_difference_image, tile_features
+grid = TileGrid(rig.cameras["principal"], 6, 8)
+reference = np.load(folder / "principal.npy").astype(np.float64)
+for image in (frames["principal"].data, floats["principal"].data, reference):
+    depth_difference_image(image, reference, grid)
+tile_features(np.zeros(rig.cameras["principal"].shape, dtype=np.uint8), grid)
 print(json.dumps(compiles))
 """
 

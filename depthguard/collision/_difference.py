@@ -61,6 +61,14 @@ def _tile_sums(values: np.ndarray, grid: TileGrid) -> np.ndarray:
     return np.add.reduceat(rows, grid.first_col[:-1], axis=1)
 
 
+def _read_only(image: np.ndarray) -> np.ndarray:
+    """A C-contiguous read-only view of ``image`` (a copy only where it is not contiguous): frames arrive read-only
+    and references writable, and the kernels are compiled (and warmed up) for read-only arrays alone."""
+    view = np.ascontiguousarray(image).view()
+    view.flags.writeable = False
+    return view
+
+
 def tile_features(image, grid: TileGrid) -> np.ndarray:
     """Step 2's features of every tile, (rows, cols, 2) float64: the mean grey value, and the y coordinate of the
     grey-value balance point within the tile (0 at its first pixel row's centre, 1 at its last; 0.5 for a tile
@@ -76,7 +84,7 @@ def tile_features(image, grid: TileGrid) -> np.ndarray:
     last = grid.first_row[tile_row + 1] - 1
     y = np.where(last > first, (np.arange(cam.height) - first) / np.maximum(last - first, 1), 0.5)
     moments = np.empty((grid.rows, grid.cols, 2))
-    collision_kernels.tile_moments(np.ascontiguousarray(image), grid.first_row, grid.first_col, y, moments)
+    collision_kernels.tile_moments(_read_only(image), grid.first_row, grid.first_col, y, moments)
     total, moment = moments[..., 0], moments[..., 1]
     with np.errstate(invalid="ignore", divide="ignore"):
         balance = np.where(total > 0.0, moment / np.where(total > 0.0, total, 1.0), 0.5)
@@ -123,8 +131,8 @@ def depth_difference_image(image, reference, grid: TileGrid, thresholds=(0.05, 0
     scale = cam.depth_scale if now.dtype == np.uint16 else 1.0
     changed = np.empty((grid.rows, grid.cols))
     k0, k1, k2 = cam.noise.coefficients()
-    collision_kernels.depth_changes(np.ascontiguousarray(now), scale, np.ascontiguousarray(ref), thresholds[0], k0, k1, k2,
-                           grid.first_row, grid.first_col, changed)
+    collision_kernels.depth_changes(_read_only(now), scale, _read_only(ref), thresholds[0], k0, k1, k2,
+                                    grid.first_row, grid.first_col, changed)
     counts = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
     return _closed(changed / counts > thresholds[1])
 
