@@ -195,32 +195,40 @@ class DistanceMonitor:
         frame's joints (the space that is the robot at all of them) and the static solids' inside are free."""
         if self.detectable is None:
             return None
-        from depthguard.freespace import DetectableSpace, robot_voxels, seen_free_voxels
+        from depthguard.freespace import CameraViews, DetectableSpace, FreeSources
 
         box = self.detectable.box
         space = DetectableSpace(box, self.detectable.capability, self.detectable.beyond)
         if not usable:
             return space  # never updated: every distance 0, as with no usable frame it must be
         states = list(usable.values())
-        free = seen_free_voxels(box, [state.camera for state in states], [state.measured_free for state in states],
-                                margin=self.fusion_margin, pad=self.fusion_pixels, check=False)
-        if self._static_voxels is not None:
-            free |= self._static_voxels
+        views = CameraViews.of([state.camera for state in states], [state.measured_free for state in states],
+                               margin=self.fusion_margin, pad=self.fusion_pixels)
+        robot = None
         joints = {state.joints.tobytes(): state.joints for state in states if state.joints is not None}
         if self.robot is not None and joints and self.robot_zone > 0.0:
-            robot = None  # the voxels that are the robot at every frame's joints (marked into free for one)
-            for q in joints.values():
-                mask = free if len(joints) == 1 else np.zeros(box.shape, dtype=bool)
-                capsules = [tuple(c.p0) + tuple(c.p1) + (c.radius,) for c in self.robot.capsules_world(q, check=False)]
-                robot_voxels(box, np.array(capsules), self.robot_zone, mask)
-                robot = mask if robot is None else robot & mask
-            if len(joints) > 1:
-                free |= robot
+            # the space that is the robot at every frame's joints: its capsules grown by the zone at each of them
+            capsules = [[tuple(c.p0) + tuple(c.p1) + (c.radius,) for c in self.robot.capsules_world(q, check=False)]
+                        for q in joints.values()]
+            robot = (np.array(capsules, dtype=np.float64).reshape(len(capsules), -1, 7), self.robot_zone)
+        remembered = None
         if self.memory is not None and self.memory.time is not None:
             times = [state.occupancy.timestamp for state in states if state.occupancy.timestamp is not None]
-            self._remembered_voxels(box, max(times + [self.memory.time]), free)
-        space.update(free)
+            remembered = self._remembered_coarse(box, max(times + [self.memory.time]))
+        space.watch(FreeSources(views, self._static_voxels, remembered, robot))
         return space
+
+    def _remembered_coarse(self, box, t: float):
+        """(coarse, ratio): the memory's voxels certified free at time ``t`` ((mx, my, mz) bool) and how many of
+        ``box``'s voxels make one of its a side; None unless the two boxes share their near corner and the memory's
+        voxel is a whole number of ``box``'s."""
+        ratio = self.memory.box.voxel / box.voxel
+        whole = int(round(ratio))
+        coarse = self.memory.box
+        if whole >= 1 and abs(whole - ratio) <= 1e-9 and np.allclose(coarse.lo, box.lo, rtol=0, atol=1e-12) and \
+                all(coarse.shape[a] * whole >= box.shape[a] for a in range(3)):
+            return np.ascontiguousarray(self.memory.free_at(t)), whole
+        return None
 
     def _remembered_voxels(self, box, t: float, out: np.ndarray | None = None) -> np.ndarray:
         """Mark in ``out`` (box.shape bool, a new all-False one if None) the memory's voxels certified free at time
@@ -230,12 +238,9 @@ class DistanceMonitor:
         from depthguard.freespace import or_coarse
 
         out = np.zeros(box.shape, dtype=bool) if out is None else out
-        ratio = self.memory.box.voxel / box.voxel
-        whole = int(round(ratio))
-        coarse = self.memory.box
-        if whole >= 1 and abs(whole - ratio) <= 1e-9 and np.allclose(coarse.lo, box.lo, rtol=0, atol=1e-12) and \
-                all(coarse.shape[a] * whole >= box.shape[a] for a in range(3)):
-            or_coarse(out, self.memory.free_at(t), whole)
+        found = self._remembered_coarse(box, t)
+        if found is not None:
+            or_coarse(out, *found)
         return out
 
     def _principals(self, principals) -> tuple[str, ...]:

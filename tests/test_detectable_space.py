@@ -297,7 +297,7 @@ def test_the_monitor_refuses_a_detection_capability_it_cannot_use():
 
 def test_the_robot_counts_free_only_where_it_is_at_every_frames_joints(monkeypatch):
     """Frames captured at different joints: the space free as the robot is the robot's (grown) capsules at all of
-    them, not at any one. With nothing seen free (seen_free_voxels stubbed out), the voxels deep inside both poses'
+    them, not at any one. With nothing seen free (every camera's view made blind), the voxels deep inside both poses'
     capsules hold no ball, and those deep inside one pose's only do."""
     import depthguard as dg
     from depthguard import config, freespace
@@ -306,7 +306,9 @@ def test_the_robot_counts_free_only_where_it_is_at_every_frames_joints(monkeypat
     (t, q, frame), robot = frames[0], workcell.robot
     moved = q.copy()
     moved[0] += 0.8  # the arm swung about its base between two captures
-    monkeypatch.setattr(freespace, "seen_free_voxels", lambda box, *args, **kwargs: np.zeros(box.shape, dtype=bool))
+    views = freespace.CameraViews.of.__func__
+    monkeypatch.setattr(freespace.CameraViews, "of", classmethod(  # every camera blind: it sees nothing free
+        lambda cls, cameras, free_images, **kwargs: views(cls, cameras, [None] * len(cameras), **kwargs)))
     # The mechanism only: with the iiwa's capsules (2 cm padding, up to 6.7 cm from its meshes) any robot zone makes
     # the monitor refuse d = 4 cm (the test above). Here the band is taken as 0 to look at the zone's voxels.
     monkeypatch.setattr(dg.DistanceMonitor, "_hidden_band", lambda self: (0.0, "none"))
@@ -332,3 +334,47 @@ def test_the_robot_counts_free_only_where_it_is_at_every_frames_joints(monkeypat
     assert both.sum() > 50 and only_one.sum() > 50
     assert not fits[both].any()  # the robot at every frame: no person there
     assert fits[only_one].all()  # the robot at one frame only: possibly a person now
+
+
+@pytest.mark.parametrize("zone", [0.0, 0.03])
+def test_a_watched_space_gives_the_whole_masks_answers_bit_for_bit(zone, monkeypatch):
+    """The monitor decides the detectable space block by block, where queries reach (DetectableSpace.watch). Its
+    twin computes every voxel of the box with the whole-box kernels (FreeSources.mask, then update): every distance,
+    with and without a limit, at the robot's control points and anywhere in the box, and every voxel of E_vox agree
+    exactly, so the speed-up clears nothing the twin keeps. Four cameras of scenario B, known solids, the memory,
+    and with a robot zone the robot's capsules at two joint sets (frames captured at different joints)."""
+    import depthguard as dg
+    from depthguard import config
+
+    if zone:  # the mechanism only (with the iiwa's capsules any zone makes d = 4 cm refused, see above)
+        monkeypatch.setattr(dg.DistanceMonitor, "_hidden_band", lambda self: (0.0, "none"))
+    workcell, frames = _workcell_frames([1.3, 1.7, 3.3])
+    robot = workcell.robot
+    monitor = dg.DistanceMonitor(workcell.rig, rho=1.5, robot=robot, aggregate="min", static=workcell.background_parts(),
+                                 detection_capability=D, robot_zone=zone)
+    rng = np.random.default_rng(11)
+    names = list(workcell.rig.cameras)
+    compared = remembered = 0
+    for t, q, frame in frames:
+        moved = q.copy()
+        moved[1] += 0.3
+        joints = {name: (moved if zone and i == 1 else q) for i, name in enumerate(names)}
+        space = monitor.prepare_set(frame.depth, camera_joints=joints, now=t).detectable
+        sources = space._watched[0]
+        assert sources.views.count == 4 and sources.static is not None
+        assert (sources.robot is not None) == bool(zone) and sources.remembered is not None
+        remembered += int(sources.remembered[0].sum())
+        if zone:
+            assert sources.robot[0].shape[0] == 2
+        twin = DetectableSpace(space.box, D, space.beyond)
+        twin.update(sources.mask(space.box))
+        box = space.box
+        control = robot.control_point_positions(q)
+        anywhere = rng.uniform(np.asarray(box.lo) - 0.1, np.asarray(box.hi) + 0.1, (150, 3))
+        for points, limit in ((control, 1.2), (control, math.inf), (anywhere, 0.5), (anywhere, math.inf)):
+            lazy = space.distances(points, limit)
+            np.testing.assert_array_equal(lazy, twin.distances(points, limit))
+            compared += int(np.sum((lazy > 0.0) & (lazy < limit)))
+        np.testing.assert_array_equal(space.fits, twin.fits)
+    assert compared > 100  # distances that neither limit nor an occupied point decided
+    assert remembered > 0  # the memory's voxels were among the sources

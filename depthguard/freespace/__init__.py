@@ -3,10 +3,11 @@ could next be in each voxel, so that space seen free a moment ago stays free whi
 for speed and separation monitoring, where in the possibly occupied space a ball the size of the cameras' detection
 capability fits."""
 
-from depthguard.freespace._detectable import closed_faces, DetectableSpace, robot_voxels, solid_voxels
+from depthguard.freespace._detectable import closed_faces, DetectableSpace, FreeSources, robot_voxels, solid_voxels
 from depthguard.kernels.detectable import or_coarse
 from depthguard.freespace._near import surface_voxels, voxels_within
 from depthguard.freespace._memory import (
+    CameraViews,
     FreeSpaceMemory,
     VoxelBox,
     remember_frames,
@@ -14,5 +15,5 @@ from depthguard.freespace._memory import (
     squared_distance_transform,
 )
 
-__all__ = ["DetectableSpace", "FreeSpaceMemory", "VoxelBox", "closed_faces", "or_coarse", "remember_frames", "robot_voxels",
+__all__ = ["CameraViews", "DetectableSpace", "FreeSources", "FreeSpaceMemory", "VoxelBox", "closed_faces", "or_coarse", "remember_frames", "robot_voxels",
            "seen_free_voxels", "solid_voxels", "squared_distance_transform", "surface_voxels", "voxels_within"]

@@ -40,13 +40,62 @@ import math
 import numpy as np
 
 from depthguard import config
+import threading
+from dataclasses import dataclass
+
+from depthguard.kernels import detectable as detectable_kernels
 from depthguard.kernels.detectable import erode_fits, mark_box_voxels, mark_capsule_voxels, nearest_fit
 from depthguard.errors import InputError
 from depthguard.validation import check_limit, check_real
-from depthguard.freespace._memory import VoxelBox, _check_box
+from depthguard.freespace._buffers import reusable
+from depthguard.freespace._memory import CameraViews, VoxelBox, _check_box
 
 #: Voxels a side of the blocks whose counts let a distance query skip the empty parts of the box.
 BLOCK = 8
+
+
+@dataclass(frozen=True)
+class FreeSources:
+    """What certifies a voxel of a :class:`DetectableSpace`'s box free now, for :meth:`DetectableSpace.watch`: the
+    same as the mask :meth:`DetectableSpace.update` takes, decided voxel by voxel where a query needs it.
+
+    - ``views``: the cameras that see now (:class:`~depthguard.freespace.CameraViews`): a voxel some camera sees
+      entirely free (:func:`seen_free_voxels`'s rule); None for none.
+    - ``static``: (nx, ny, nz) bool, the voxels inside a known solid (:func:`solid_voxels`), or None.
+    - ``remembered``: (coarse, ratio): the memory's voxels certified free now ((mx, my, mz) bool, each ``ratio``
+      of the box's voxels a side, the same near corner), or None.
+    - ``robot``: (capsules, zone): (s, n, 7) float64 capsules (p0, p1, radius, metres, world) at each of s joint
+      sets, and the zone in metres: a voxel that :func:`robot_voxels` marks at every one of them; or None.
+    """
+
+    views: CameraViews | None = None
+    static: np.ndarray | None = None
+    remembered: tuple | None = None
+    robot: tuple | None = None
+
+    def mask(self, box: VoxelBox) -> np.ndarray:
+        """(nx, ny, nz) bool: every voxel of ``box`` these sources certify free, computed for the whole box by the
+        whole-box kernels (what :meth:`DetectableSpace.update` takes; the tests' twin of a watched space)."""
+        from depthguard.kernels import freespace as freespace_kernels
+
+        free = np.zeros(box.shape, dtype=bool)
+        if self.views is not None and self.views.count:
+            freespace_kernels.seen_free_voxels(box.lo, box.voxel, *self.views.kernel_arguments(),
+                                               config.FREESPACE_BLOCK, free)
+        if self.static is not None:
+            free |= self.static
+        if self.remembered is not None:
+            detectable_kernels.or_coarse(free, self.remembered[0], int(self.remembered[1]))
+        if self.robot is not None:
+            capsules, zone = self.robot
+            robot = None
+            for pose in capsules:
+                mask = np.zeros(box.shape, dtype=bool)
+                robot_voxels(box, pose, zone, mask)
+                robot = mask if robot is None else robot & mask
+            if robot is not None:
+                free |= robot
+        return free
 
 
 class DetectableSpace:
@@ -66,6 +115,13 @@ class DetectableSpace:
 
     Call :meth:`update` with the voxels certified free, then :meth:`distances`. Memory: 1 byte a voxel from the first
     update on (the voxels a ball's centre may be in; the free mask is the caller's).
+
+    Or call :meth:`watch` with what certifies a voxel free (:class:`FreeSources`): the voxels are then decided
+    block by block (``config.FREESPACE_BLOCK`` voxels a side), only in the blocks a query reaches, by the same
+    predicates in the same arithmetic, so every answer is the one :meth:`update` with the whole mask gives
+    (``tests/test_detectable_space.py`` holds them equal). A query then costs what the blocks nearer than its answer
+    cost, once per set of frames: the first query of a set pays for them, later ones reuse them. The per-block
+    state is guarded by a lock (two threads may query one space).
     """
 
     def __init__(self, box: VoxelBox, capability: float = config.SSM_DETECTION_CAPABILITY, beyond=None):
@@ -94,12 +150,23 @@ class DetectableSpace:
         self._fits = None  # made by the first update (a space never updated holds nothing but its settings)
         self._counts = None
         self._updated = False
+        self._watched = None  # (sources, free_b, fits_b, state) once watch() is called
+        self._lock = threading.Lock()
 
     @property
     def fits(self) -> np.ndarray:
         """(nx, ny, nz) bool, read-only: E_vox, the voxels that may hold the centre of a ball of diameter d lying in
         possibly occupied space (all False before the first :meth:`update`)."""
-        view = np.zeros(self.box.shape, dtype=np.bool_) if self._fits is None else self._fits.view()
+        if self._watched is not None:
+            with self._lock:
+                _, free_b, fits_b, state = self._watched
+                self._fill(np.arange(state.size, dtype=np.int64))
+                b = fits_b.shape[3]
+                whole = fits_b.transpose(0, 3, 1, 4, 2, 5).reshape(state.shape[0] * b, state.shape[1] * b,
+                                                                   state.shape[2] * b)
+                view = np.ascontiguousarray(whole[:self.box.shape[0], :self.box.shape[1], :self.box.shape[2]])
+        else:
+            view = np.zeros(self.box.shape, dtype=np.bool_) if self._fits is None else self._fits.view()
         view.setflags(write=False)
         return view
 
@@ -115,6 +182,42 @@ class DetectableSpace:
             self._counts = np.empty(tuple(-(-n // BLOCK) for n in self.box.shape), dtype=np.int32)
         erode_fits(np.ascontiguousarray(free), self._offsets, BLOCK, self._fits, self._counts)
         self._updated = True
+        self._watched = None
+
+    def watch(self, sources: FreeSources) -> None:
+        """Take what certifies a voxel free now (:class:`FreeSources`, unchecked: the monitor builds it) instead of a
+        whole mask: the blocks are decided when a query reaches them. Costs nothing until then but the block
+        arrays' address space (2 bytes a voxel, touched block by block)."""
+        block = config.FREESPACE_BLOCK
+        blocks = tuple(-(-n // block) for n in self.box.shape)
+        free_b = reusable(blocks + (block,) * 3, np.bool_, self)  # written block by block before it is read
+        fits_b = reusable(blocks + (block,) * 3, np.bool_, self)
+        state = np.zeros(blocks, dtype=np.uint8)
+        self._counts = np.zeros(blocks, dtype=np.int32)
+        self._watched = (sources, free_b, fits_b, state)
+        self._updated = True
+        self._fits = None
+
+    def _fill(self, blocks: np.ndarray) -> None:
+        """Decide E_vox in ``blocks`` ((m,) int64 flat block indices, each once) of a watched space: first the free
+        voxels of them and their neighbours, then their fits. The caller holds the lock."""
+        sources, free_b, fits_b, state = self._watched
+        mark = np.zeros(state.size, dtype=np.uint8)
+        to_free = detectable_kernels.blocks_to_free(blocks, state, mark)
+        if len(to_free):
+            views = sources.views
+            cameras = views.kernel_arguments() if views is not None and views.count else _NO_CAMERAS
+            static = sources.static if sources.static is not None else _NO_MASK
+            coarse, ratio = sources.remembered if sources.remembered is not None else (_NO_MASK, 1)
+            capsules, zone = sources.robot if sources.robot is not None else (_NO_CAPSULES, 0.0)
+            detectable_kernels.fill_free_blocks(to_free, np.asarray(self.box.lo, dtype=np.float64),
+                                                float(self.box.voxel), *cameras, static, coarse, int(ratio),
+                                                capsules, float(zone), self._shape, free_b, state)
+        detectable_kernels.fill_fit_blocks(blocks, self._offsets, self._shape, free_b, state, fits_b, self._counts)
+
+    @property
+    def _shape(self) -> np.ndarray:
+        return np.asarray(self.box.shape, dtype=np.int64)
 
     def distances(self, points_world, limit: float = math.inf) -> np.ndarray:
         """(n,) float64 metres: for each point ((n, 3), metres, world frame), a lower bound of its distance to every
@@ -126,11 +229,57 @@ class DetectableSpace:
             raise InputError("points_world must be finite", field="points_world")
         limit = check_limit(limit)
         out = np.zeros(len(points))
-        if self._updated and len(points):
+        if self._watched is not None and len(points):
+            with self._lock:
+                out = self._search(points, float(limit) + self.radius)
+            out = np.minimum(np.maximum(out - self.radius, 0.0), limit)
+        elif self._updated and len(points):
             nearest_fit(self._fits, self._counts, BLOCK, np.asarray(self.box.lo, dtype=np.float64),
                         float(self.box.voxel), self.beyond, points, float(limit) + self.radius, out)
             out = np.minimum(np.maximum(out - self.radius, 0.0), limit)
         return out
+
+
+    def _search(self, points: np.ndarray, limit: float) -> np.ndarray:
+        """:func:`nearest_fit`'s answer over a watched space: rounds of the ring search (the kernels'
+        ``search_fits``), each followed by deciding the blocks the stalled points need. The caller holds the lock."""
+        _, _, fits_b, state = self._watched
+        shape = self.box.shape
+        voxel = float(self.box.voxel)
+        rel = points - np.asarray(self.box.lo, dtype=np.float64)
+        size = np.asarray(shape, dtype=np.float64) * voxel
+        outside = np.min(np.concatenate([rel, size - rel], axis=1), axis=1) <= 0.0
+        beyond = self.beyond
+        best = np.minimum.reduce([rel[:, 0] + beyond[0], size[0] - rel[:, 0] + beyond[1], rel[:, 1] + beyond[2],
+                                  size[1] - rel[:, 1] + beyond[3], rel[:, 2] + beyond[4], size[2] - rel[:, 2] + beyond[5],
+                                  np.full(len(points), limit)])
+        best[outside] = 0.0
+        pending = ~outside
+        ring = np.zeros(len(points), dtype=np.int64)
+        need = np.empty((len(points), _NEED), dtype=np.int64)
+        need_count = np.zeros(len(points), dtype=np.int64)
+        lo = np.asarray(self.box.lo, dtype=np.float64)
+        rounds = 0
+        while pending.any():
+            # rings asked for beyond a stalled one: none for the first rounds (most answers lie a ring or two away;
+            # each ring asked for too many costs blocks), then 1, 3, 7, ... (an answer far away costs few rounds)
+            lookahead = (1 << max(rounds - 3, 0)) - 1
+            detectable_kernels.search_fits(fits_b, self._counts, state, self._shape, lo, voxel, points, pending, ring,
+                                           best, lookahead, need, need_count)
+            rounds += 1
+            if not pending.any():
+                break
+            blocks = np.unique(np.concatenate([need[p, :need_count[p]] for p in np.flatnonzero(need_count)]))
+            self._fill(blocks)
+        return best
+
+
+#: Blocks a stalled point asks for at most in one round of a watched search.
+_NEED = 512
+_NO_CAMERAS = (np.zeros((0, 12)), np.zeros((0, 4)), np.zeros(0), np.zeros((0, 2), dtype=np.int64),
+               np.zeros((0, 1, 1, 1), dtype=np.float32), np.zeros(2, dtype=np.int64), 0.0, 0.0)
+_NO_MASK = np.zeros((0, 0, 0), dtype=np.bool_)
+_NO_CAPSULES = np.zeros((0, 0, 7))
 
 
 def robot_voxels(box: VoxelBox, capsules: np.ndarray, zone: float, out: np.ndarray) -> None:

@@ -20,6 +20,7 @@ from depthguard.cameras import PinholeCamera
 from depthguard.errors import InputError
 from depthguard.validation import check_real, short_repr
 from depthguard.kernels import freespace as freespace_kernels
+from depthguard.freespace._buffers import reusable
 
 _SQRT3 = math.sqrt(3.0)
 
@@ -144,34 +145,61 @@ def seen_free_voxels(box: VoxelBox, cameras: Sequence[PinholeCamera], free_image
                 not 0 <= pad <= config.MAX_FUSION_PIXELS:
             raise InputError(f"pad must be a whole number of pixels in [0, {config.MAX_FUSION_PIXELS}], got "
                              f"{short_repr(pad)}", field="pad")
-    views = [(camera, free) for camera, free in zip(cameras, free_images) if free is not None]
     out = np.zeros(box.shape, dtype=bool)
-    if not views:
-        return out
-    n = len(views)
-    height = max(camera.height for camera, _ in views)
-    width = max(camera.width for camera, _ in views)
-    levels = width.bit_length()  # runs of 1, 2, 4, ... up to the widest image's width
-    poses = np.empty((n, 12))
-    intrinsics = np.empty((n, 4))
-    z_near = np.empty(n)
-    sizes = np.empty((n, 2), dtype=np.int64)
-    tables = np.empty((n, levels, width, height), dtype=np.float32)
-    stacked = np.empty((n, height, width), dtype=np.float32)
-    for c, (camera, free) in enumerate(views):
-        T_camera_world = camera.T_camera_world
-        poses[c, :9] = T_camera_world[:3, :3].ravel()
-        poses[c, 9:] = T_camera_world[:3, 3]
-        intrinsics[c] = (camera.fx, camera.fy, camera.cx, camera.cy)
-        z_near[c] = max(camera.depth_range[0], config.NEAR_PLANE_EPSILON)
-        sizes[c] = (camera.width, camera.height)
-        stacked[c, :camera.height, :camera.width] = free
-    freespace_kernels.row_min_tables(stacked, sizes, tables)
-    floor_log2 = np.zeros(width + 1, dtype=np.int64)  # floor(log2(m)) for m >= 1: frexp's exponent, exactly
-    floor_log2[1:] = np.frexp(np.arange(1.0, width + 1.0))[1] - 1
-    freespace_kernels.seen_free_voxels(box.lo, box.voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, float(margin),
-                              float(pad), config.FREESPACE_BLOCK, out)
+    views = CameraViews.of(cameras, free_images, margin, pad)
+    if views.count:
+        freespace_kernels.seen_free_voxels(box.lo, box.voxel, *views.kernel_arguments(), config.FREESPACE_BLOCK, out)
     return out
+
+
+class CameraViews:
+    """What :func:`seen_free_voxels`' kernels need of the cameras that see now, built once per set of frames: each
+    camera's pose (world -> optical, (n, 12) float64, rotation rows then translation in metres), intrinsics ((n, 4)
+    fx, fy, cx, cy, pixels), nearest corner depth ((n,) metres), image size ((n, 2) width, height) and the
+    row-minimum table of its free image ((n, levels, w, h) float32, metres; 4 bytes x width x height x
+    (log2(width) + 1), 12 MB for 640x480), with the margin (metres) and pad (pixels) of the confirmation rule."""
+
+    def __init__(self, poses, intrinsics, z_near, sizes, tables, floor_log2, margin: float, pad: float):
+        self.poses, self.intrinsics, self.z_near, self.sizes = poses, intrinsics, z_near, sizes
+        self.tables, self.floor_log2, self.margin, self.pad = tables, floor_log2, margin, pad
+        self.count = len(poses)
+
+    @classmethod
+    def of(cls, cameras: Sequence[PinholeCamera], free_images: Sequence, margin: float = 0.0,
+           pad: int = 0) -> "CameraViews":
+        """The views of ``cameras`` whose free image (as :func:`seen_free_voxels` takes them, unchecked) is not
+        None."""
+        views = [(camera, free) for camera, free in zip(cameras, free_images) if free is not None]
+        n = len(views)
+        height = max((camera.height for camera, _ in views), default=1)
+        width = max((camera.width for camera, _ in views), default=1)
+        levels = width.bit_length()  # runs of 1, 2, 4, ... up to the widest image's width
+        poses = np.empty((n, 12))
+        intrinsics = np.empty((n, 4))
+        z_near = np.empty(n)
+        sizes = np.empty((n, 2), dtype=np.int64)
+        views_ = cls.__new__(cls)  # owns the reused arrays (tables: 12 MB a 640x480 camera)
+        tables = reusable((n, levels, width, height), np.float32, views_)
+        stacked = np.empty((n, height, width), dtype=np.float32)
+        for c, (camera, free) in enumerate(views):
+            T_camera_world = camera.T_camera_world
+            poses[c, :9] = T_camera_world[:3, :3].ravel()
+            poses[c, 9:] = T_camera_world[:3, 3]
+            intrinsics[c] = (camera.fx, camera.fy, camera.cx, camera.cy)
+            z_near[c] = max(camera.depth_range[0], config.NEAR_PLANE_EPSILON)
+            sizes[c] = (camera.width, camera.height)
+            stacked[c, :camera.height, :camera.width] = free
+        if n:
+            freespace_kernels.row_min_tables(stacked, sizes, tables)
+        floor_log2 = np.zeros(width + 1, dtype=np.int64)  # floor(log2(m)) for m >= 1: frexp's exponent, exactly
+        floor_log2[1:] = np.frexp(np.arange(1.0, width + 1.0))[1] - 1
+        views_.__init__(poses, intrinsics, z_near, sizes, tables, floor_log2, float(margin), float(pad))
+        return views_
+
+    def kernel_arguments(self) -> tuple:
+        """(poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad), in the kernels' order."""
+        return (self.poses, self.intrinsics, self.z_near, self.sizes, self.tables, self.floor_log2, self.margin,
+                self.pad)
 
 
 def _check_views(cameras, free_images) -> tuple[list, list]:

@@ -130,6 +130,111 @@ def camera_sees_box(corners, z_near, width, height, table, floor_log2, margin, p
     return True
 
 
+@kernel(inline=True)
+def seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad, block, i0, j0, k0,
+                    nx, ny, nz, lattice, corners, stack, out):
+    """out[a, b, c] = True where some camera sees voxel (i0 + a, j0 + b, k0 + c) entirely free, for the block of
+    ``block`` voxels a side at (i0, j0, k0) (cut at the box's size nx, ny, nz); out: (>= block, >= block, >= block)
+    bool, only set (a voxel already True is free by another source: a box of such voxels is not tested). poses, intrinsics, z_near, sizes, tables:
+    the cameras, as :func:`seen_free_voxels` takes them. Scratch: lattice (n_cameras, block + 1,
+    block + 1, block + 1, 3) float64, corners (8, 3) float64, stack (7 * (log2(block) + 1) + 1, 4) int64. The other
+    arguments as :func:`seen_free_voxels`.
+
+    Coarse to fine: a camera that sees a whole block free sees every voxel in it free (the voxel's corners project
+    inside the convex hull of the block's, and lie no deeper than its deepest corner), so the block is first tested
+    whole, then its 8 halves, and so on down to single voxels. Only a block that is not seen whole has its inner
+    lattice points projected (once per camera). Each test asks first the camera that saw the last box (the answer
+    is the same; it comes sooner)."""
+    n_cameras = poses.shape[0]
+    last = 0
+    ex = min(block, nx - i0)
+    ey = min(block, ny - j0)
+    ez = min(block, nz - k0)
+    projected = False
+    stack[0, 0] = 0
+    stack[0, 1] = 0
+    stack[0, 2] = 0
+    stack[0, 3] = block
+    top = 1
+    while top > 0:
+        top -= 1
+        a = stack[top, 0]
+        b = stack[top, 1]
+        c = stack[top, 2]
+        side = stack[top, 3]
+        if a >= ex or b >= ey or c >= ez:
+            continue
+        a1 = min(a + side, ex)
+        b1 = min(b + side, ey)
+        c1 = min(c + side, ez)
+        covered = True  # every voxel of the box already free (marked by another source): nothing to test
+        for da in range(a, a1):
+            for db in range(b, b1):
+                for dc in range(c, c1):
+                    if not out[da, db, dc]:
+                        covered = False
+                        break
+                if not covered:
+                    break
+            if not covered:
+                break
+        if covered:
+            continue
+        if side < block and not projected:
+            for cam in range(n_cameras):
+                for da in range(ex + 1):
+                    for db in range(ey + 1):
+                        for dc in range(ez + 1):
+                            project_point(lo, voxel, i0 + da, j0 + db, k0 + dc, poses[cam], intrinsics[cam],
+                                          lattice[cam, da, db, dc])
+            projected = True
+        seen = False
+        for m in range(n_cameras):
+            cam = (last + m) % n_cameras
+            for corner in range(8):
+                da = a1 if corner & 1 else a
+                db = b1 if corner & 2 else b
+                dc = c1 if corner & 4 else c
+                if side < block:
+                    for e in range(3):
+                        corners[corner, e] = lattice[cam, da, db, dc, e]
+                else:
+                    project_point(lo, voxel, i0 + da, j0 + db, k0 + dc, poses[cam], intrinsics[cam],
+                                  corners[corner])
+            if camera_sees_box(corners, z_near[cam], sizes[cam, 0], sizes[cam, 1], tables[cam], floor_log2,
+                               margin, pad):
+                seen = True
+                last = cam
+                break
+        if seen:
+            for da in range(a, a1):
+                for db in range(b, b1):
+                    for dc in range(c, c1):
+                        out[da, db, dc] = True
+        elif side > 1:
+            half = side // 2
+            for child in range(8):
+                stack[top, 0] = a + (half if child & 1 else 0)
+                stack[top, 1] = b + (half if child & 2 else 0)
+                stack[top, 2] = c + (half if child & 4 else 0)
+                stack[top, 3] = half
+                top += 1
+
+
+@kernel(inline=True)
+def block_scratch(n_cameras, block):
+    """The scratch arrays :func:`seen_free_block` needs: (lattice, corners, stack, out) for blocks of ``block``
+    voxels a side (a power of 2) seen by ``n_cameras`` cameras; out comes all False."""
+    levels = 1
+    while (np.int64(1) << (levels - 1)) < block:
+        levels += 1
+    lattice = np.empty((n_cameras, block + 1, block + 1, block + 1, 3))
+    corners = np.empty((8, 3))
+    stack = np.empty((7 * levels + 1, 4), dtype=np.int64)  # (a, b, c, side) relative to the block's origin
+    out = np.zeros((block, block, block), dtype=np.bool_)
+    return lattice, corners, stack, out
+
+
 @kernel(parallel=True)
 def seen_free_voxels(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad, block, out):
     """out[i, j, k] = True where some camera sees voxel (i, j, k) of the box with corner ``lo`` ((3,) metres, world)
@@ -142,86 +247,24 @@ def seen_free_voxels(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_
     n >= 1. margin: metres; pad: pixels (float64, a whole number). block: int, voxels, a power of 2
     (``config.FREESPACE_BLOCK``).
 
-    Coarse to fine, in blocks of ``block`` (a power of 2) voxels a side, one column of blocks per task: a camera that
-    sees a whole block free sees every voxel in it free (the voxel's corners project inside the convex hull of the
-    block's, and lie no deeper than its deepest corner), so a block is first tested whole, then its 8 halves, and so
-    on down to single voxels. Only a block that is not seen whole has its inner lattice points projected (once per
-    camera). Each test asks first the camera that saw the last box (the answer is the same; it comes sooner)."""
+    Block by block (:func:`seen_free_block`, coarse to fine inside each), one column of blocks per task."""
     nx, ny, nz = out.shape
-    n_cameras = poses.shape[0]
     nbx = (nx + block - 1) // block
     nby = (ny + block - 1) // block
-    levels = 1
-    while (np.int64(1) << (levels - 1)) < block:
-        levels += 1
     for p in prange(nbx * nby):
         column = np.int64(p)
         i0 = (column // nby) * block
         j0 = (column % nby) * block
-        lattice = np.empty((n_cameras, block + 1, block + 1, block + 1, 3))
-        corners = np.empty((8, 3))
-        stack = np.empty((7 * levels + 1, 4), dtype=np.int64)  # (a, b, c, side) relative to the block's origin
-        last = 0
+        lattice, corners, stack, seen = block_scratch(poses.shape[0], block)
         for k0 in range(0, nz, block):
-            ex = min(block, nx - i0)
-            ey = min(block, ny - j0)
-            ez = min(block, nz - k0)
-            projected = False
-            stack[0, 0] = 0
-            stack[0, 1] = 0
-            stack[0, 2] = 0
-            stack[0, 3] = block
-            top = 1
-            while top > 0:
-                top -= 1
-                a = stack[top, 0]
-                b = stack[top, 1]
-                c = stack[top, 2]
-                side = stack[top, 3]
-                if a >= ex or b >= ey or c >= ez:
-                    continue
-                a1 = min(a + side, ex)
-                b1 = min(b + side, ey)
-                c1 = min(c + side, ez)
-                if side < block and not projected:
-                    for cam in range(n_cameras):
-                        for da in range(ex + 1):
-                            for db in range(ey + 1):
-                                for dc in range(ez + 1):
-                                    project_point(lo, voxel, i0 + da, j0 + db, k0 + dc, poses[cam], intrinsics[cam],
-                                                  lattice[cam, da, db, dc])
-                    projected = True
-                seen = False
-                for m in range(n_cameras):
-                    cam = (last + m) % n_cameras
-                    for corner in range(8):
-                        da = a1 if corner & 1 else a
-                        db = b1 if corner & 2 else b
-                        dc = c1 if corner & 4 else c
-                        if side < block:
-                            for e in range(3):
-                                corners[corner, e] = lattice[cam, da, db, dc, e]
-                        else:
-                            project_point(lo, voxel, i0 + da, j0 + db, k0 + dc, poses[cam], intrinsics[cam],
-                                          corners[corner])
-                    if camera_sees_box(corners, z_near[cam], sizes[cam, 0], sizes[cam, 1], tables[cam], floor_log2,
-                                       margin, pad):
-                        seen = True
-                        last = cam
-                        break
-                if seen:
-                    for da in range(a, a1):
-                        for db in range(b, b1):
-                            for dc in range(c, c1):
-                                out[i0 + da, j0 + db, k0 + dc] = True
-                elif side > 1:
-                    half = side // 2
-                    for child in range(8):
-                        stack[top, 0] = a + (half if child & 1 else 0)
-                        stack[top, 1] = b + (half if child & 2 else 0)
-                        stack[top, 2] = c + (half if child & 4 else 0)
-                        stack[top, 3] = half
-                        top += 1
+            seen[:] = False
+            seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad, block,
+                            i0, j0, k0, nx, ny, nz, lattice, corners, stack, seen)
+            for da in range(min(block, nx - i0)):
+                for db in range(min(block, ny - j0)):
+                    for dc in range(min(block, nz - k0)):
+                        if seen[da, db, dc]:
+                            out[i0 + da, j0 + db, k0 + dc] = True
 
 
 # ----------------------------------------------------------------------------------------- the distance transform

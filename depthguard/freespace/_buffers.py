@@ -1,0 +1,41 @@
+"""Large per-set arrays reused from one set of frames to the next.
+
+A set's row-minimum tables (12 MB a 640x480 camera) and a watched detectable space's block arrays (2 bytes a voxel)
+are made anew for every set. Above glibc's largest mmap threshold (32 MB) each such array is mapped afresh and every
+page it touches faults in again, which on this project's machines cost 10-100 ms a set. :func:`reusable` hands out
+an array that an earlier owner no longer holds (its contents are whatever that owner left: the caller writes before
+it reads), and takes it back when its new owner is garbage collected.
+"""
+
+from __future__ import annotations
+
+import threading
+import weakref
+
+import numpy as np
+
+#: Spare arrays kept per (shape, dtype): a live monitor holds a set being queried and one being prepared.
+SPARES = 3
+
+_spares: dict[tuple, list[np.ndarray]] = {}
+_lock = threading.Lock()
+
+
+def reusable(shape: tuple, dtype, owner) -> np.ndarray:
+    """An uninitialised C-contiguous array of ``shape`` and ``dtype``, given back to the spares when ``owner`` (any
+    object that supports weak references) is collected: the array must not outlive it."""
+    key = (tuple(int(n) for n in shape), np.dtype(dtype).str)
+    with _lock:
+        spares = _spares.setdefault(key, [])
+        array = spares.pop() if spares else None
+    if array is None:
+        array = np.empty(key[0], dtype=key[1])
+    weakref.finalize(owner, _give_back, key, array)
+    return array
+
+
+def _give_back(key: tuple, array: np.ndarray) -> None:
+    with _lock:
+        spares = _spares.setdefault(key, [])
+        if len(spares) < SPARES:
+            spares.append(array)
