@@ -10,7 +10,7 @@
 # Setup: system packages (when missing, through apt-get), a virtual environment in .venv with the library
 # (depthguard, this folder) and the lab beside it (depthguard-lab, ./lab) installed in editable mode with the test
 # dependencies. It is skipped when neither pyproject.toml has changed since the last run.
-# Then, every time, `depthguard warmup` compiles the numba kernels not cached yet (about two minutes after a fresh clone
+# Then, every time, `depthguard warmup` compiles the numba kernels not cached yet (about a minute after a fresh clone
 # or an upgrade of depthguard or numba; a few seconds when everything is cached), so that no query waits for them.
 set -euo pipefail
 cd "$(dirname "$0")"

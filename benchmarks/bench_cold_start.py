@@ -5,7 +5,8 @@ It copies the committed package (``git archive HEAD``: no numba caches, as a fre
 runs it from there with this virtual environment, each step a new process:
 
 1. ``depthguard warmup`` with an empty cache: what ``./dev.sh setup`` does after a fresh clone (compile time of all
-   kernels, and the slowest ones);
+   kernels, and the slowest ones), after the baseline in the same run: the same in one process (``--processes 1``,
+   as the warm-up compiled before it used a process per core);
 2. ``depthguard warmup`` again: what every later ``./dev.sh`` command pays;
 3. ``depthguard simulate`` writes a short recording of scenario B (two cameras, the iiwa);
 4. ``depthguard distance`` on its first frame, one camera and then both fused, with the robot filtered out: seconds
@@ -86,9 +87,13 @@ def main(argv=None) -> None:
             (s_wall, s_cpu, _), (f_wall, f_cpu, _) = first_answers(cold, sim)
             rows += [("first single-camera answer, empty cache, no warm-up", s_wall, s_cpu),
                      ("then the first fused answer, no warm-up", f_wall, f_cpu)]
+        baseline = fresh_copy(tmp / "baseline")
+        wall, cpu, _ = run(["warmup", "--processes", "1"], baseline, "warmup in one process")
+        rows.append(("baseline: warmup --processes 1, empty cache", wall, cpu))
         copy = fresh_copy(tmp / "clone")
         wall, cpu, out = run(["warmup"], copy, "warmup")
-        rows.append(("depthguard warmup, empty cache (compiles every kernel)", wall, cpu))
+        rows.append((f"depthguard warmup, empty cache ({os.cpu_count()} cores; x{rows[-1][1] / wall:.2f} faster)",
+                     wall, cpu))
         slowest = [line for line in out.splitlines() if re.match(r"\s+[\d.]+ s\s+depthguard\.", line)]
         summary = next(line for line in out.splitlines() if "kernel signatures in" in line)
         wall, cpu, _ = run(["warmup"], copy, "warmup again")

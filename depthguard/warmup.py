@@ -15,6 +15,7 @@ Once the kernels are cached it takes a few seconds (mostly imports and loading t
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field
 
@@ -37,10 +38,12 @@ class Compile:
 
 @dataclass
 class WarmupReport:
-    """What :func:`warm_up` did: every compile (empty when everything was cached) and the seconds it took in all."""
+    """What :func:`warm_up` did: every compile (empty when everything was cached), the seconds it took in all (wall)
+    and in how many processes it compiled."""
 
     compiles: list[Compile] = field(default_factory=list)
     seconds: float = 0.0
+    processes: int = 1
 
     @property
     def top_level(self) -> list[Compile]:
@@ -82,23 +85,70 @@ class CompileRecorder(event.Listener):
         return False
 
 
-def warm_up(progress=None) -> WarmupReport:
+def warm_up(progress=None, processes: int | None = None) -> WarmupReport:
     """Run every kernel the product uses once, compiling (and caching) those not in the cache yet.
 
-    ``progress``: called with a kernel's name as it starts compiling. Returns the :class:`WarmupReport`.
+    Compiling is single-threaded, so after an install or an upgrade (the largest kernels not in the cache) the
+    workloads (:data:`WORKLOADS`) run in ``processes`` processes at once (default: one per core, at most one per
+    workload), each writing the shared cache; then every workload runs again in this process, which loads what they
+    compiled and compiles whatever a race between two processes' writes of one cache index lost. ``processes=1``, or
+    a warm cache, runs them here only.
+
+    ``progress``: called with a kernel's name as it starts compiling (from the processes: as each workload ends).
+    Returns the :class:`WarmupReport` (its compiles from every process; its seconds the wall time).
     """
     start = time.perf_counter()
+    compiles = []
+    if processes is None:
+        processes = min(len(WORKLOADS), len(os.sched_getaffinity(0))) if _cold() else 1
+    if processes > 1:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(processes, mp_context=multiprocessing.get_context("spawn")) as pool:
+            for done in as_completed([pool.submit(_run_workload, index) for index in range(len(WORKLOADS))]):
+                for compile_ in done.result():
+                    compiles.append(compile_)
+                    if compile_.depth == 0 and progress is not None:
+                        progress(compile_.kernel)
     with jit.quiet_compiles(), CompileRecorder(progress) as recorder:
         _run_workloads()
-    return WarmupReport(compiles=recorder.compiles, seconds=time.perf_counter() - start)
+    return WarmupReport(compiles=compiles + recorder.compiles, seconds=time.perf_counter() - start,
+                        processes=processes)
+
+
+def _run_workload(index: int) -> list[Compile]:
+    """Run workload ``index`` of :data:`WORKLOADS` (in a process of the warm-up's pool): the compiles it made."""
+    with jit.quiet_compiles(), CompileRecorder() as recorder:
+        WORKLOADS[index]()
+    return recorder.compiles
+
+
+def _cold() -> bool:
+    """Whether the largest kernels have nothing in the cache for their current sources (after an install or an
+    upgrade): then the warm-up compiles in several processes."""
+    from depthguard.kernels import depthgrid, depthspace
+
+    for kernel_ in (depthgrid.fused_query_points, depthspace.query_points):
+        try:
+            if not kernel_._cache._cache_file._load_index():
+                return True
+        except Exception:  # no cache (NUMBA_DISABLE_JIT, no writable folder) or a numba without these internals
+            return False
+    return False
 
 
 def _run_workloads() -> None:
+    for group in WORKLOADS:
+        group()
+
+
+def _frames_and_fusion() -> None:
+    """Frame preparation, single-camera queries, the depth grid's fusion, the monitor (with the memory too), the
+    baselines."""
     import depthguard as dg
     from depthguard import baselines
     from depthguard.depthgrid import FusedFrames, build_map, free_image, seen_free
-    from depthguard.freespace import FreeSpaceMemory, VoxelBox, seen_free_voxels, squared_distance_transform
-    from depthguard.robots import enclosing_circle, fit_capsule
 
     rig, frames, robot, points = _small_workcell()
     grid = build_map(rig, "principal")
@@ -136,27 +186,36 @@ def _run_workloads() -> None:
             monitor.query({"principal": images["principal"]}, pts)
             monitor.query(images, pts)
         baselines.cartesian_region_distances(images["principal"], rig.cameras["principal"], several, 0.3)
-    # The free-space memory (design §8a): the voxels both cameras see free, two updates (without and with a robot).
-    box = VoxelBox([-0.5, -0.5, 0.0], [0.5, 0.5, 1.0], 0.1)
+    # The monitor with the free-space memory: its fused queries (the memory's own kernels: _memory_and_detectable).
+    remembering = _remembering_monitor(rig)
+    for k, (stamped, pts) in enumerate(_stamped_sets(rig, frames, (one, several))):
+        remembering.query(stamped, pts, now=0.1 * k)
+
+
+def _memory_and_detectable() -> None:
+    """The free-space memory (design §8a) and SSM's detectable space, alone and in the monitor."""
+    import depthguard as dg
+    from depthguard.depthgrid import free_image
+    from depthguard.freespace import FreeSpaceMemory, seen_free_voxels, squared_distance_transform, voxels_within
+
+    rig, frames, _, points = _small_workcell()
+    one, several = points[:1], points
+    box = _memory_box()
+    # The voxels both cameras see free, two updates (without and with a robot).
+    images = {name: dg.depth_image(frames["float32"][name], rig.cameras[name]) for name in rig.cameras}
     cameras = list(rig.cameras.values())
     seen = seen_free_voxels(box, cameras, [free_image(images[c.name], c) for c in cameras], margin=0.01, pad=1)
     memory = FreeSpaceMemory(box)
     memory.update(0.0, seen)
     memory.update(0.1, seen, robot=np.zeros(box.shape, dtype=bool))
     squared_distance_transform(seen)
-    # The monitor with the memory (a rig with a workspace, stamped frames), and the test behind its flag.
-    from depthguard.freespace import voxels_within
-
-    remembering = dg.DistanceMonitor(dg.Rig(rig.cameras, principal="principal", workspace=[box.lo, box.hi]), rho=0.3,
-                                     memory_voxel=0.1, detection_capability=0.06, detectable_voxel=0.03)
-    for k, (kind, pts) in enumerate([(kind, pts) for kind in ("uint16", "float32") for pts in (one, several)]):
-        stamped = {name: dg.depth_image(frames[kind][name], camera, timestamp=0.1 * k)
-                   for name, camera in rig.cameras.items()}
-        remembering.query(stamped, pts, now=0.1 * k)
+    # The monitor with the memory (a rig with a workspace, stamped frames): its sets and their detectable space.
+    remembering = _remembering_monitor(rig)
+    for k, (stamped, pts) in enumerate(_stamped_sets(rig, frames, (one, several))):
         remembering.prepare_set(stamped, now=0.1 * k).detectable_distances(pts)
     voxels_within(np.ones(box.shape, dtype=bool), box, several, np.full(len(several), 0.2))
     # Where a ball of the detection capability fits (SSM), with the robot's and a solid's voxels free.
-    from depthguard.freespace import DetectableSpace, robot_voxels, solid_voxels
+    from depthguard.freespace import DetectableSpace, VoxelBox, robot_voxels, solid_voxels
     from depthguard.scenes import Box
 
     fine = VoxelBox(box.lo, box.hi, 0.05)
@@ -166,6 +225,16 @@ def _run_workloads() -> None:
     space = DetectableSpace(fine, 0.1)
     space.update(free)
     space.distances(several)
+
+
+def _geometry_and_collision() -> None:
+    """The frustum distance, the collision test (epipolar bands, tile images, difference images, the planner), the
+    capsule fit."""
+    import depthguard as dg
+    from depthguard.robots import enclosing_circle, fit_capsule
+
+    rig = _small_workcell()[0]
+    box = _memory_box()
     tangents = np.array([[-0.1, 0.1, -0.1, 0.1], [0.0, 0.2, 0.0, 0.2]])
     dg.frustum_distance([0.0, 0.0, 1.0], tangents, [0.5, np.inf])
     dg.paper_frustum_distance([0.0, 0.0, 1.0], tangents, [0.5, np.inf])
@@ -206,6 +275,35 @@ def _run_workloads() -> None:
     rng = np.random.default_rng(0)
     fit_capsule(rng.normal(size=(40, 3)) * [0.05, 0.05, 0.2], link="warmup", padding=0.01)
     enclosing_circle(rng.normal(size=(20, 2)))
+
+
+#: The warm-up's workloads: each runs in a process of its own when there are cores for it (:func:`warm_up`).
+WORKLOADS = (_frames_and_fusion, _memory_and_detectable, _geometry_and_collision)
+
+
+def _memory_box():
+    """The small workcell's workspace in voxels of 10 cm."""
+    from depthguard.freespace import VoxelBox
+
+    return VoxelBox([-0.5, -0.5, 0.0], [0.5, 0.5, 1.0], 0.1)
+
+
+def _remembering_monitor(rig):
+    """A monitor of the small workcell with the free-space memory and a detectable space."""
+    import depthguard as dg
+
+    box = _memory_box()
+    return dg.DistanceMonitor(dg.Rig(rig.cameras, principal="principal", workspace=[box.lo, box.hi]), rho=0.3,
+                              memory_voxel=0.1, detection_capability=0.06, detectable_voxel=0.03)
+
+
+def _stamped_sets(rig, frames, point_sets):
+    """[(stamped frames, points)]: uint16 and float32 frames stamped 0.1 s apart, each with each set of points."""
+    import depthguard as dg
+
+    return [({name: dg.depth_image(frames[kind][name], camera, timestamp=0.1 * k)
+              for name, camera in rig.cameras.items()}, pts)
+            for k, (kind, pts) in enumerate([(kind, pts) for kind in ("uint16", "float32") for pts in point_sets])]
 
 
 def _small_workcell():

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 from depthguard.kernels import jit
 from depthguard.warmup import warm_up
 
@@ -9,7 +11,9 @@ HELP = 'compile every numba kernel that is not cached yet (after an install or a
 
 
 def add_arguments(parser) -> None:
-    pass
+    parser.add_argument("--processes", type=int, default=None, metavar="N",
+                        help="compile in N processes at once (default: one per core, at most one per workload, when "
+                             "the largest kernels are not cached; 1: in this process only)")
 
 
 def run(args) -> int:
@@ -23,7 +27,10 @@ def run(args) -> int:
         started.append(kernel)
         print(f"  compiling {kernel} ...", flush=True)
 
-    report = warm_up(progress)
+    if args.processes is not None and args.processes < 1:
+        print(f"depthguard warmup: --processes must be at least 1, got {args.processes}", file=sys.stderr)
+        return 2
+    report = warm_up(progress, processes=args.processes)
     if jit.uncached_kernels():
         print(f"depthguard warmup: {jit.uncached_kernels()} kernels have no writable cache folder: they were compiled "
               "for this process only (see the warning above)")
@@ -31,8 +38,9 @@ def run(args) -> int:
         print(f"depthguard warmup: every kernel was already compiled and cached; checked in {report.seconds:.1f} s")
         return 0
     top = report.top_level
-    print(f"depthguard warmup: compiled {len(top)} kernel signatures in {report.compile_seconds:.1f} s "
-          f"({report.seconds:.1f} s in all); the slowest:")
+    print(f"depthguard warmup: compiled {len(top)} kernel signatures in {report.seconds:.1f} s "
+          f"({report.compile_seconds:.1f} s of compiling, summed over {report.processes} process"
+          f"{'es' if report.processes > 1 else ''}); the slowest:")
     for c in sorted(top, key=lambda c: -c.seconds)[:10]:
         print(f"  {c.seconds:6.1f} s  {c.kernel}")
     return 0

@@ -130,7 +130,7 @@ def camera_sees_box(corners, z_near, width, height, table, floor_log2, margin, p
     return True
 
 
-@kernel(inline=True)
+@kernel()
 def seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad, block, i0, j0, k0,
                     nx, ny, nz, lattice, corners, stack, out):
     """out[a, b, c] = True where some camera sees voxel (i0 + a, j0 + b, k0 + c) entirely free, for the block of
