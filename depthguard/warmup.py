@@ -143,33 +143,37 @@ def _run_workloads() -> None:
         group()
 
 
-def _frames_and_fusion() -> None:
-    """Frame preparation, single-camera queries, the depth grid's fusion, the monitor (with the memory too), the
-    baselines."""
+def _single_camera() -> None:
+    """Frame preparation (each invalid-pixel policy, with and without a robot), single-camera queries (the serial
+    kernel for one point, the parallel one for several), the monitor on one camera, the baselines."""
     import depthguard as dg
     from depthguard import baselines
-    from depthguard.depthgrid import FusedFrames, build_map, free_image, seen_free
+
+    rig, frames, robot, points = _small_workcell()
+    for kind in ("uint16", "float32"):
+        images, prepared = _prepared_frames(rig, frames, robot, kind)
+        for plain, _, filtered in prepared.values():
+            for occupancy in (plain, filtered):
+                for pts in (points[:1], points):
+                    dg.single_camera_distances(occupancy, pts, 0.3, "hybrid")
+                    dg.single_camera_distances(occupancy, pts, 0.3, "min", method="paper")
+        monitor = dg.DistanceMonitor(rig, rho=0.3)
+        for pts in (points[:1], points):
+            monitor.query({"principal": images["principal"]}, pts)
+        baselines.cartesian_region_distances(images["principal"], rig.cameras["principal"], points, 0.3)
+
+
+def _fusion() -> None:
+    """The depth grid's fusion of two cameras (with the robot filtered out, without, with a blind secondary camera),
+    the monitor on both, and with the free-space memory."""
+    import depthguard as dg
+    from depthguard.depthgrid import FusedFrames, build_map, seen_free
 
     rig, frames, robot, points = _small_workcell()
     grid = build_map(rig, "principal")
     one, several = points[:1], points
     for kind in ("uint16", "float32"):
-        images = {name: dg.depth_image(frames[kind][name], rig.cameras[name]) for name in rig.cameras}
-        prepared = {}
-        for name, camera in rig.cameras.items():
-            depth = images[name]
-            near, far, exit_ = robot[name]
-            plain = dg.prepare_depth(depth, camera)
-            filled = dg.prepare_depth(depth, camera, "neighbors")
-            filtered = dg.prepare_depth(depth, camera, "neighbors", robot_near=near, robot_far=far)
-            dg.prepare_depth(depth, camera, "free", robot_near=near)
-            for occupancy in (plain, filtered):
-                for pts in (one, several):
-                    dg.single_camera_distances(occupancy, pts, 0.3, "hybrid")
-                    dg.single_camera_distances(occupancy, pts, 0.3, "min", method="paper")
-            free_image(depth, camera)
-            prepared[name] = (plain, filled, filtered)
-        # The depth grid: with the robot filtered out (cases iii and iv), without, and with a blind secondary camera.
+        images, prepared = _prepared_frames(rig, frames, robot, kind)
         near, far, exit_ = robot["principal"]
         with_robot = FusedFrames(grid, rig, prepared["principal"][2],
                                  {"second": seen_free(images["second"], prepared["second"][2])},
@@ -183,13 +187,31 @@ def _frames_and_fusion() -> None:
                 frames_.distances(pts, 0.3, "min")
         monitor = dg.DistanceMonitor(rig, rho=0.3)
         for pts in (one, several):
-            monitor.query({"principal": images["principal"]}, pts)
             monitor.query(images, pts)
-        baselines.cartesian_region_distances(images["principal"], rig.cameras["principal"], several, 0.3)
     # The monitor with the free-space memory: its fused queries (the memory's own kernels: _memory_and_detectable).
     remembering = _remembering_monitor(rig)
     for k, (stamped, pts) in enumerate(_stamped_sets(rig, frames, (one, several))):
         remembering.query(stamped, pts, now=0.1 * k)
+
+
+def _prepared_frames(rig, frames, robot, kind: str):
+    """({camera: DepthImage}, {camera: (plain, filled, filtered) OccupancyImage}) of the small workcell's ``kind``
+    frames ("uint16" or "float32"): each invalid-pixel policy, with and without the rendered "robot"."""
+    import depthguard as dg
+    from depthguard.depthgrid import free_image
+
+    images = {name: dg.depth_image(frames[kind][name], rig.cameras[name]) for name in rig.cameras}
+    prepared = {}
+    for name, camera in rig.cameras.items():
+        depth = images[name]
+        near, far, _ = robot[name]
+        plain = dg.prepare_depth(depth, camera)
+        filled = dg.prepare_depth(depth, camera, "neighbors")
+        filtered = dg.prepare_depth(depth, camera, "neighbors", robot_near=near, robot_far=far)
+        dg.prepare_depth(depth, camera, "free", robot_near=near)
+        free_image(depth, camera)
+        prepared[name] = (plain, filled, filtered)
+    return images, prepared
 
 
 def _memory_and_detectable() -> None:
@@ -277,8 +299,9 @@ def _geometry_and_collision() -> None:
     enclosing_circle(rng.normal(size=(20, 2)))
 
 
-#: The warm-up's workloads: each runs in a process of its own when there are cores for it (:func:`warm_up`).
-WORKLOADS = (_frames_and_fusion, _memory_and_detectable, _geometry_and_collision)
+#: The warm-up's workloads, the longest to compile first: each runs in a process of its own when there are cores for
+#: it (:func:`warm_up`); a kernel two of them need is compiled by both.
+WORKLOADS = (_fusion, _memory_and_detectable, _single_camera, _geometry_and_collision)
 
 
 def _memory_box():
