@@ -322,9 +322,9 @@ def fill_free_blocks(blocks, lo, voxel, poses, intrinsics, z_near, sizes, tables
                         if robot[da, db, dc]:
                             out[da, db, dc] = True
         if poses.shape[0] > 0:  # last: the cheaper sources spare it the boxes they cover
-            lattice, corners, stack, _ = block_scratch(poses.shape[0], block)
+            lattice, corners, stack = block_scratch(poses.shape[0], block)
             seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad, block,
-                            i0, j0, k0, nx, ny, nz, lattice, corners, stack, out)
+                            i0, j0, k0, nx, ny, nz, lattice, corners, stack, True, 0, out, 0, 0, 0)
         state[a0, b0, c0] |= FREE_DONE
 
 

@@ -130,12 +130,24 @@ def camera_sees_box(corners, z_near, width, height, table, floor_log2, margin, p
     return True
 
 
-@kernel()
+@kernel(inline=True)
+def _all_true(out, i0, i1, j0, j1, k0, k1):
+    """Whether out[i0:i1, j0:j1, k0:k1] (3-D bool) is all True."""
+    for i in range(i0, i1):
+        for j in range(j0, j1):
+            for k in range(k0, k1):
+                if not out[i, j, k]:
+                    return False
+    return True
+
+
+@kernel(inline=True)
 def seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad, block, i0, j0, k0,
-                    nx, ny, nz, lattice, corners, stack, out):
-    """out[a, b, c] = True where some camera sees voxel (i0 + a, j0 + b, k0 + c) entirely free, for the block of
-    ``block`` voxels a side at (i0, j0, k0) (cut at the box's size nx, ny, nz); out: (>= block, >= block, >= block)
-    bool, only set (a voxel already True is free by another source: a box of such voxels is not tested). poses, intrinsics, z_near, sizes, tables:
+                    nx, ny, nz, lattice, corners, stack, skip_covered, last, out, oi, oj, ok):
+    """out[oi + a, oj + b, ok + c] = True where some camera sees voxel (i0 + a, j0 + b, k0 + c) entirely free, for
+    the block of ``block`` voxels a side at (i0, j0, k0) (cut at the box's size nx, ny, nz); out: 3-D bool holding
+    them (the whole box with (oi, oj, ok) = (i0, j0, k0), or one block's array with 0, 0, 0), only set; skip_covered: bool, whether a box whose voxels are all True already (free by another source) goes
+    untested (a check that costs the whole box's kernel about 4 %, where nothing is marked before). poses, intrinsics, z_near, sizes, tables:
     the cameras, as :func:`seen_free_voxels` takes them. Scratch: lattice (n_cameras, block + 1,
     block + 1, block + 1, 3) float64, corners (8, 3) float64, stack (7 * (log2(block) + 1) + 1, 4) int64. The other
     arguments as :func:`seen_free_voxels`.
@@ -144,9 +156,8 @@ def seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_l
     inside the convex hull of the block's, and lie no deeper than its deepest corner), so the block is first tested
     whole, then its 8 halves, and so on down to single voxels. Only a block that is not seen whole has its inner
     lattice points projected (once per camera). Each test asks first the camera that saw the last box (the answer
-    is the same; it comes sooner)."""
+    is the same; it comes sooner): ``last`` (int) on entry, the camera that saw a box last on return."""
     n_cameras = poses.shape[0]
-    last = 0
     ex = min(block, nx - i0)
     ey = min(block, ny - j0)
     ez = min(block, nz - k0)
@@ -167,18 +178,7 @@ def seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_l
         a1 = min(a + side, ex)
         b1 = min(b + side, ey)
         c1 = min(c + side, ez)
-        covered = True  # every voxel of the box already free (marked by another source): nothing to test
-        for da in range(a, a1):
-            for db in range(b, b1):
-                for dc in range(c, c1):
-                    if not out[da, db, dc]:
-                        covered = False
-                        break
-                if not covered:
-                    break
-            if not covered:
-                break
-        if covered:
+        if skip_covered and _all_true(out, oi + a, oi + a1, oj + b, oj + b1, ok + c, ok + c1):
             continue
         if side < block and not projected:
             for cam in range(n_cameras):
@@ -210,7 +210,7 @@ def seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_l
             for da in range(a, a1):
                 for db in range(b, b1):
                     for dc in range(c, c1):
-                        out[da, db, dc] = True
+                        out[oi + da, oj + db, ok + dc] = True
         elif side > 1:
             half = side // 2
             for child in range(8):
@@ -219,20 +219,20 @@ def seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_l
                 stack[top, 2] = c + (half if child & 4 else 0)
                 stack[top, 3] = half
                 top += 1
+    return last
 
 
 @kernel(inline=True)
 def block_scratch(n_cameras, block):
-    """The scratch arrays :func:`seen_free_block` needs: (lattice, corners, stack, out) for blocks of ``block``
-    voxels a side (a power of 2) seen by ``n_cameras`` cameras; out comes all False."""
+    """The scratch arrays :func:`seen_free_block` needs: (lattice, corners, stack) for blocks of ``block`` voxels a
+    side (a power of 2) seen by ``n_cameras`` cameras."""
     levels = 1
     while (np.int64(1) << (levels - 1)) < block:
         levels += 1
     lattice = np.empty((n_cameras, block + 1, block + 1, block + 1, 3))
     corners = np.empty((8, 3))
     stack = np.empty((7 * levels + 1, 4), dtype=np.int64)  # (a, b, c, side) relative to the block's origin
-    out = np.zeros((block, block, block), dtype=np.bool_)
-    return lattice, corners, stack, out
+    return lattice, corners, stack
 
 
 @kernel(parallel=True)
@@ -255,16 +255,12 @@ def seen_free_voxels(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_
         column = np.int64(p)
         i0 = (column // nby) * block
         j0 = (column % nby) * block
-        lattice, corners, stack, seen = block_scratch(poses.shape[0], block)
+        lattice, corners, stack = block_scratch(poses.shape[0], block)
+        last = 0
         for k0 in range(0, nz, block):
-            seen[:] = False
-            seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad, block,
-                            i0, j0, k0, nx, ny, nz, lattice, corners, stack, seen)
-            for da in range(min(block, nx - i0)):
-                for db in range(min(block, ny - j0)):
-                    for dc in range(min(block, nz - k0)):
-                        if seen[da, db, dc]:
-                            out[i0 + da, j0 + db, k0 + dc] = True
+            last = seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad,
+                                   block, i0, j0, k0, nx, ny, nz, lattice, corners, stack, False, last, out, i0, j0,
+                                   k0)
 
 
 # ----------------------------------------------------------------------------------------- the distance transform
