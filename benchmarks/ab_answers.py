@@ -5,8 +5,9 @@ The lab records scenario B's reach scene (four cameras, the person reaching in) 
 same frames in a fresh process of its own, one side after the other: the control points of the robot, fused,
 self-filtered, with the memory, in three configurations (the defaults; a robot zone with hole fills; known solids).
 It prints per configuration whether the distances agree bit for bit (else how far apart and where), and the median
-time per set (preparation and the first query) of each side with their ratio. Both sides compile their kernels first
-(a warm-up query on the first set, not timed).
+time per set (preparation and the first query) of each side with their ratio, and of the later queries on each set
+(15, the robot moving 2 mrad a query, as a controller between two sets; their answers are compared too). Both sides
+compile their kernels first (a warm-up query on the first set, not timed).
 
     .venv/bin/python benchmarks/ab_answers.py --base 73482fc [--sets 10]
 """
@@ -37,6 +38,7 @@ CONFIGURATIONS = {
 WORKER = r"""
 import json, sys, time
 import numpy as np
+LATER = 15
 import depthguard as dg
 from depthguard.robots import RobotModel
 from depthguard.scenes import Box
@@ -53,16 +55,24 @@ for label, options in meta["configurations"].items():
     if options.pop("static", False):
         options["static"] = boxes
     monitor = dg.DistanceMonitor(rig, rho=0.4, robot=robot, **options)
-    distances, seconds = [], []
+    distances, seconds, later = [], [], []
     for k, t in enumerate(meta["times"]):
         frames = {name: dg.depth_image(data[f"{name}_{k}"], rig.cameras[name], timestamp=t) for name in rig.cameras}
         q = data[f"joints_{k}"]
         points = robot.control_point_positions(q)
         start = time.perf_counter()
-        result = monitor.query(frames, points, joints=q, now=t)
+        prepared = monitor.prepare_set(frames, joints=q, now=t)
+        result = prepared.query(points)
         seconds.append(time.perf_counter() - start)
         distances.append(result.distance.tolist())
-    out[label] = {"distances": distances, "seconds": seconds[1:]}  # the first set compiled what it needed
+        for step in range(1, LATER + 1):  # the controller between two sets: the robot moving 2 mrad a query
+            moved = robot.control_point_positions(q + 0.002 * step)
+            start = time.perf_counter()
+            result = prepared.query(moved)
+            if k:
+                later.append(time.perf_counter() - start)
+            distances.append(result.distance.tolist())
+    out[label] = {"distances": distances, "seconds": seconds[1:], "later": later}  # set 0 compiled what it needed
 out["__file__"] = dg.__file__
 json.dump(out, sys.stdout)
 """
@@ -129,7 +139,7 @@ def main(argv=None) -> None:
     print(f"A/B: the library at {commit} (base) against this tree, scenario B's reach scene, four cameras, "
           f"{args.sets} sets, 9 control points, rho 0.4 m, robot filtered, memory on\n")
     print(f"{'configuration':30s} {'same distances':>16s} {'largest difference':>19s} {'base ms/set':>12s} "
-          f"{'this ms/set':>12s} {'ratio':>6s}")
+          f"{'this ms/set':>12s} {'ratio':>6s} {'base later ms':>14s} {'this later ms':>14s} {'ratio':>6s}")
     for label in CONFIGURATIONS:
         a, b = (np.array(sides[side][label]["distances"]) for side in ("base", "this tree"))
         same = np.array_equal(a, b)
@@ -137,8 +147,10 @@ def main(argv=None) -> None:
         diff = float(np.max(np.abs(a[finite] - b[finite]))) if finite.any() else 0.0
         mismatched = int(np.count_nonzero(np.isfinite(a) != np.isfinite(b)))
         t_a, t_b = (float(np.median(sides[side][label]["seconds"])) * 1e3 for side in ("base", "this tree"))
+        l_a, l_b = (float(np.median(sides[side][label]["later"])) * 1e3 for side in ("base", "this tree"))
         shown = "yes" if same else f"no ({mismatched} inf/finite)" if mismatched else "no"
-        print(f"{label:30s} {shown:>16s} {diff:19.3g} {t_a:12.1f} {t_b:12.1f} {t_b / t_a:6.2f}")
+        print(f"{label:30s} {shown:>16s} {diff:19.3g} {t_a:12.1f} {t_b:12.1f} {t_b / t_a:6.2f} {l_a:14.2f} "
+              f"{l_b:14.2f} {l_b / l_a:6.2f}")
 
 
 if __name__ == "__main__":

@@ -348,8 +348,8 @@ def test_nearest_by_run_equals_the_walk_on_random_pixels():
         d2, z = K.frustum_nearest(X, Y, Z, a0, a1, b0, b1, lo, hi)
         if not d2 < bound2:
             continue
-        got2, got_z, ok = K.nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, lo, certain_to, hi, bound2, u, v, state,
-                                           runs)
+        got2, got_z, ok = K.nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, lo, certain_to, hi, bound2, u, v, d_min,
+                                           delta_d, n, frames._cells, runs)
         if not ok:
             continue
         want2, want_z = K.nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, u, v, state, runs)

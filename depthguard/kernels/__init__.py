@@ -34,8 +34,11 @@ Conventions, the same in every module:
   voxels ``voxel`` metres a side.
 - Records: a kernel that needs many arrays of one thing takes them as one namedtuple, documented where it is
   defined (the depth grid's ``GridState``, ``PrincipalView``, ``QueryOptions``, ``FusedOutput``); numba compiles a
-  namedtuple of arrays and scalars as separate arguments, at no cost. The depth grid is passed one way only: as its
-  ``GridState`` ``grid``, to every kernel that reads it, down to ``cell_index(z, grid)``.
+  namedtuple of arrays and scalars as separate arguments. The depth grid is passed as its ``GridState`` ``grid``
+  to every kernel that reads it, except the small helpers called per pixel (``depthgrid.cell_index``,
+  ``known_free``, ``surface_cell_end``, ``nearest_by_run``, ``distance_by_runs``), which take its numbers and arrays
+  apart: a record holding arrays, handed to an inlined function, costs a reference count per array per call (per
+  pixel it made later fused queries 1.7 times as slow).
 - One aggregation (design §6): both walks over contributing pixels, the single camera's (``depthspace``) and the
   depth grid's (``depthgrid``), add each pixel's :func:`frustum.contribution` and finish with
   :func:`frustum.finish_sum` (``mean``, ``hybrid``) or :func:`frustum.finish_min_at_pixel` (``min``).

@@ -29,6 +29,11 @@ Arguments used throughout:
 - ``lo, hi``: float64, metres: the ends of a segment [lo, hi] of principal pixel (u, v)'s frustum (optical depths).
 - ``bound2``: float64, square metres: only what comes nearer than sqrt(bound2) to P counts.
 - ``grid``: :class:`GridState`: the depth grid and its per-frame state (the fields as documented there).
+- ``d_min, delta_d, n_cells``: float64 metres, float64 metres, int: the grid's first depth, its cells' depth and
+  their number along each principal pixel (``grid``'s; the helpers called per pixel take them apart).
+- ``cells``: (H, W, n_cells) uint8: ``grid``'s classification of every cell (0 not yet, 1 free, 2 occupied, 3 free
+  by the memory).
+- ``free_run, behind_run``: (H, W) int64: ``grid``'s two runs of known free cells per pixel (``runs`` above).
 - ``view``: :class:`PrincipalView`: the principal camera's frame.
 - ``runs``: (H, W) int64: per principal pixel, one run of cells known free, (first << 32) | last (NO_FREE_RUN for
   none): ``grid``'s free_run (a gray area, or the frustum of a pixel without a measurement) or behind_run (the space
@@ -130,12 +135,12 @@ def free_depths(raw, scale, z_min, z_max, m0, m1, m2, free):
 
 
 @kernel(inline=True)
-def surface_cell_end(zs, grid):
+def surface_cell_end(zs, d_min, delta_d):
     """Where the grid cell holding a measured surface at depth zs ends (d_min for a surface before the grid). zs and
     the answer: float64, metres, principal optical depth."""
-    if zs < grid.d_min:
-        return grid.d_min
-    return grid.d_min + (np.floor((zs - grid.d_min) / grid.delta_d) + 1.0) * grid.delta_d
+    if zs < d_min:
+        return d_min
+    return d_min + (np.floor((zs - d_min) / delta_d) + 1.0) * delta_d
 
 
 @kernel(parallel=True)
@@ -538,21 +543,26 @@ def remember_free_run(free_run, v, u, k_lo, k_hi):
 
 
 @kernel(inline=True)
-def known_free(lo, hi, u, v, grid, runs):
+def known_free(lo, hi, u, v, d_min, delta_d, n_cells, runs):
     """Whether every cell of the candidate range [lo, hi] (inside the grid) of pixel (u, v) is known free: inside
     the run ``runs`` holds for it."""
-    if not (grid.d_min <= lo <= hi <= grid.d_min + grid.n_cells * grid.delta_d):
+    if not (d_min <= lo <= hi <= d_min + n_cells * delta_d):
         return False
     run = runs[v, u]
-    return (run >> 32) <= cell_index(lo, grid) and min(cell_index(hi, grid), grid.n_cells - 1) <= (run & 0xFFFFFFFF)
+    return (run >> 32) <= cell_index(lo, d_min, delta_d, n_cells) and \
+        min(cell_index(hi, d_min, delta_d, n_cells), n_cells - 1) <= (run & 0xFFFFFFFF)
 
 
 @kernel(inline=True)
-def cell_index(z, grid):
+def cell_index(z, d_min, delta_d, n_cells):
     """int((z - d_min) / delta_d), the grid cell holding depth z (float64, metres), with the quotient clamped to
-    [-1, n_cells] first:
-    a depth far beyond the grid (or NaN) gives an end, never an index int() made garbage of."""
-    return clamped_index((z - grid.d_min) / grid.delta_d, -1, grid.n_cells)
+    [-1, n_cells] first: a depth far beyond the grid (or NaN) gives an end, never an index int() made garbage of.
+
+    The helpers called per pixel (this one, :func:`known_free`, :func:`surface_cell_end`, :func:`nearest_by_run`,
+    :func:`distance_by_runs`) take the grid's numbers and arrays apart, not the :data:`GridState`: a record that
+    holds arrays, handed to an inlined function, costs a reference count per array per call, and per pixel that
+    made later fused queries 1.7 times as slow (1.3 -> 2.2 ms, ``benchmarks/bench_depth_grid.py``)."""
+    return clamped_index((z - d_min) / delta_d, -1, n_cells)
 
 
 @kernel(inline=True)
@@ -604,10 +614,10 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
     above = max(d_max, below)
     candidates_only = below <= lo and hi <= above
     if candidates_only:
-        if known_free(lo, hi, u, v, grid, runs):
+        if known_free(lo, hi, u, v, d_min, delta_d, n_cells, runs):
             return np.inf, 0.0
-        k_lo = cell_index(lo, grid)
-        k_hi = min(cell_index(hi, grid), n_cells - 1)
+        k_lo = cell_index(lo, d_min, delta_d, n_cells)
+        k_hi = min(cell_index(hi, d_min, delta_d, n_cells), n_cells - 1)
     run = runs[v, u]
     run_lo = run >> 32
     run_hi = run & 0xFFFFFFFF
@@ -620,11 +630,11 @@ def nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, lo, certain_to, hi, bound2, 
         # g(z), the squared distance from P to the frustum's slice at depth z, is convex with g'' >= 2, so
         # g(z) >= d2 + (z - z*)^2 and only cells within reach of z* can come nearer than bound2.
         reach = np.sqrt(bound2 - d2)
-        k_lo = max(cell_index(max(below, lo), grid),
-                   cell_index(max(z - reach, d_min), grid))
-        k_hi = min(cell_index(min(hi, d_max, z + reach), grid), n_cells - 1)
+        k_lo = max(cell_index(max(below, lo), d_min, delta_d, n_cells),
+                   cell_index(max(z - reach, d_min), d_min, delta_d, n_cells))
+        k_hi = min(cell_index(min(hi, d_max, z + reach), d_min, delta_d, n_cells), n_cells - 1)
     k_lo = max(k_lo, 0)
-    k_star = min(max(cell_index(z, grid), k_lo), k_hi)
+    k_star = min(max(cell_index(z, d_min, delta_d, n_cells), k_lo), k_hi)
     # Skip the run of cells already known free around z*, if there is one; else start at z*'s own cell. (No cell
     # in reach, k_lo > k_hi, happens only with numbers the public functions refuse.)
     in_run = run_lo <= k_star <= run_hi
@@ -665,7 +675,8 @@ def _slice_distance2(X, Y, Z, a0, a1, b0, b1, z):
 
 
 @kernel(inline=True)
-def nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, lo, certain_to, hi, bound2, u, v, grid, runs):
+def nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, lo, certain_to, hi, bound2, u, v, d_min, delta_d, n_cells, cells,
+                   runs):
     """:func:`nearest_confirmed` on [lo, hi] (certain part [lo, certain_to]) when the pixel's known free run in
     ``runs`` holds the cell of the segment's nearest point z (d2 = g(z) < bound2): the first occupied part each way
     is then the cell just past each end of the run, or the part occupied as it stands past the cells in reach. g is
@@ -674,20 +685,21 @@ def nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, lo, certain_to, hi, bound2, u
     True), (inf, 0, True) for nothing nearer than bound2, or (.., False) when the run does not decide it (a cell past
     its end not yet classified, or z outside it in a cell not known occupied): the caller asks the grid.
 
-    P = (X, Y, Z); pixel (u, v) with frustum a0..b1; d2: float64, square metres; z, certain_to: float64, metres."""
-    d_min, delta_d, n_cells, cells = grid.d_min, grid.delta_d, grid.n_cells, grid.cells
+    P = (X, Y, Z); pixel (u, v) with frustum a0..b1; d2: float64, square metres; z, certain_to: float64, metres.
+    The grid's numbers and cells come apart (:data:`GridState`'s d_min, delta_d, n_cells, cells), as for every helper
+    called per pixel (see :func:`cell_index`)."""
     d_max = d_min + n_cells * delta_d
     below = max(certain_to, min(d_min, hi)) if lo < d_min else certain_to
     above = max(d_max, below)
     if (below > lo and z <= below) or (hi > above and z >= above):
         return d2, z, True
     reach = np.sqrt(bound2 - d2)
-    k_lo = max(cell_index(max(below, lo), grid),
-               cell_index(max(z - reach, d_min), grid), 0)
-    k_hi = min(cell_index(min(hi, d_max, z + reach), grid), n_cells - 1)
+    k_lo = max(cell_index(max(below, lo), d_min, delta_d, n_cells),
+               cell_index(max(z - reach, d_min), d_min, delta_d, n_cells), 0)
+    k_hi = min(cell_index(min(hi, d_max, z + reach), d_min, delta_d, n_cells), n_cells - 1)
     if k_lo > k_hi:
         return d2, z, False
-    k_star = min(max(cell_index(z, grid), k_lo), k_hi)
+    k_star = min(max(cell_index(z, d_min, delta_d, n_cells), k_lo), k_hi)
     run = runs[v, u]
     run_lo = run >> 32
     run_hi = run & 0xFFFFFFFF
@@ -719,7 +731,8 @@ def nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, lo, certain_to, hi, bound2, u
 
 
 @kernel(inline=True)
-def distance_by_runs(X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, ze, certain, bf, z_far, bound2, u, v, grid):
+def distance_by_runs(X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, ze, certain, bf, z_far, bound2, u, v, d_min,
+                     delta_d, n_cells, cells, free_run, behind_run):
     """:func:`pixel_distance` from the pixel's known free runs alone (:func:`nearest_by_run` on each of its
     candidate segments: the surface's gray area, or the frustum of a pixel without a measurement, with free_run; the
     space behind the robot with behind_run), when they decide it. (d2, z): the nearest point of the span fused_rows
@@ -731,8 +744,8 @@ def distance_by_runs(X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, ze, certain,
     P = (X, Y, Z); pixel (u, v) with frustum a0..b1; d2 (square metres), z (metres): float64; one_piece: bool; zs,
     ze: float64, metres, the principal's possibly-occupied segment; certain: it starts at a measured surface (uint8
     0 or 1); bf: float64, metres, where the space behind the robot starts (inf: none); z_far: float64, metres,
-    Z + rho."""
-    free_run, behind_run = grid.free_run, grid.behind_run
+    Z + rho. The grid's numbers, cells and runs come apart (:data:`GridState`'s fields), as for every helper called
+    per pixel (see :func:`cell_index`)."""
     best2, best_z, from_invalid = np.inf, 0.0, False
     if zs <= z_far:
         if certain and zs >= Z:
@@ -742,9 +755,9 @@ def distance_by_runs(X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, ze, certain,
             if not one_piece:
                 d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, zs, hi)
             if d2 < bound2:
-                certain_to = surface_cell_end(zs, grid) if certain else zs
+                certain_to = surface_cell_end(zs, d_min, delta_d) if certain else zs
                 best2, best_z, decided = nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, zs, certain_to, hi, bound2, u,
-                                                        v, grid, free_run)
+                                                        v, d_min, delta_d, n_cells, cells, free_run)
                 if not decided:
                     return best2, best_z, False, False
                 from_invalid = not certain and best2 < np.inf
@@ -753,8 +766,8 @@ def distance_by_runs(X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, ze, certain,
             d2, z = frustum_nearest(X, Y, Z, a0, a1, b0, b1, bf, z_far)
         bound_behind = min(best2, bound2)  # as pixel_distance asks it: only to beat the gray area's answer
         if d2 < bound_behind:
-            d2, z, decided = nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, bf, bf, z_far, bound_behind, u, v, grid,
-                                            behind_run)
+            d2, z, decided = nearest_by_run(X, Y, Z, a0, a1, b0, b1, d2, z, bf, bf, z_far, bound_behind, u, v, d_min,
+                                            delta_d, n_cells, cells, behind_run)
             if not decided:
                 return d2, z, False, False
             if d2 < best2:
@@ -787,7 +800,7 @@ def pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, ze, certain, blind_fr
                     best2 = np.inf
             else:  # case (iii): the surface's own cell is certain, the gray area behind it is a candidate
                 best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs,
-                                                  surface_cell_end(zs, grid),
+                                                  surface_cell_end(zs, grid.d_min, grid.delta_d),
                                                   min(ze, z_far), bound2, u, v, grid, free_run)
         else:  # no measurement: the whole segment is a candidate
             best2, best_z = nearest_confirmed(X, Y, Z, rho, a0, a1, b0, b1, zs, zs, min(ze, z_far), bound2, u, v,
@@ -821,7 +834,8 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
     rho: metres; v_first, v_last, v_step: int, rows; ``view``, ``grid``: the principal's frame and the grid; with
     ``prune_min`` (bool: the aggregate is ``min``) only pixels that can beat the nearest so far are followed and no
     sums are kept. acc: (N_ACC,) float64, written, laid out as the ACC_* constants say."""
-    d_min, delta_d, n_cells, cells, behind_run = grid.d_min, grid.delta_d, grid.n_cells, grid.cells, grid.behind_run
+    d_min, delta_d, n_cells, cells = grid.d_min, grid.delta_d, grid.n_cells, grid.cells
+    free_run, behind_run = grid.free_run, grid.behind_run
     z_start, z_end, certain, blind_from = view.z_start, view.z_end, view.certain, view.blind_from
     fx, fy, cx, cy = view.fx, view.fy, view.cx, view.cy
     rho2 = rho_squared(rho)
@@ -855,7 +869,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
             bf = np.float64(blind_from[v, u])
             if min(zs, bf) > z_far:
                 continue
-            if zs > z_far and known_free(bf, z_far, u, v, grid, behind_run):
+            if zs > z_far and known_free(bf, z_far, u, v, d_min, delta_d, n_cells, behind_run):
                 continue  # the space behind the robot, every cell in reach known free
             z_in[m] = min(zs, bf)
             z_hi_in[m] = min(np.float64(z_end[v, u]), z_far) if (certain[v, u] and bf > z_far) else z_far
@@ -888,7 +902,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
             answered = False
             if certain[v, u] and zs <= z_far:  # the surface's certain part: the frustum on (case ii), or its cell
                 ze = np.float64(z_end[v, u])
-                answered = z <= (ze if zs >= Z else min(surface_cell_end(zs, grid), ze))
+                answered = z <= (ze if zs >= Z else min(surface_cell_end(zs, d_min, delta_d), ze))
             if not answered and (one_piece or zs > z_far) and d_min <= z < d_max:
                 answered = cells[v, u, min(int((z - d_min) / delta_d), n_cells - 1)] == 2
             # Earlier queries' runs of free cells decide it, without a walk: the nearest occupied cell is the one
@@ -896,7 +910,7 @@ def fused_rows(X, Y, Z, rho, v_first, v_last, v_step, spans, view, prune_min, gr
             if not answered:
                 d2, z, from_invalid, answered = distance_by_runs(
                     X, Y, Z, a0, a1, b0, b1, d2, z, one_piece, zs, np.float64(z_end[v, u]), certain[v, u], bf, z_far,
-                    bound2, u, v, grid)
+                    bound2, u, v, d_min, delta_d, n_cells, cells, free_run, behind_run)
             if not answered:
                 d2, z, from_invalid = pixel_distance(X, Y, Z, rho, u, v, a0, a1, b0, b1, zs, np.float64(z_end[v, u]),
                                                      certain[v, u], bf, bound2, grid)
