@@ -112,6 +112,7 @@ class DistanceMonitor:
         self._seen_now = None  # voxels the frames of the last memory update saw free
         self._free_now = None  # (free, box, remembered only) behind the fused frames last built
         self._prepared: dict[str, tuple[object, _CameraFrame]] = {}
+        self._masks: dict = {}  # camera name -> the RobotMask of its last frame (reused while the robot stands still)
         self._fused_frames: dict[str, tuple[tuple, object]] = {}  # principal -> (its frames, their FusedFrames)
 
     def _detectable_space(self, static, capability, voxel) -> None:
@@ -316,7 +317,14 @@ class DistanceMonitor:
                                  "joint positions at the frame's capture time (query(..., joints=...))")
             from depthguard.self_filter import robot_mask
 
-            mask = robot_mask(self._silhouette, camera, self.robot.joint_vector(joints), self._static)
+            q = self.robot.joint_vector(joints)
+            mask = self._masks.get(name)
+            if mask is None or not np.array_equal(mask.joints, q):
+                # A robot that stood still since this camera's last frame (the same joints, exactly) is where it
+                # was: its renders are kept, not made again (they depend on the joints, the camera and the solids
+                # alone, and nothing writes into them).
+                mask = robot_mask(self._silhouette, camera, q, self._static)
+                self._masks[name] = mask
         # prepare (depthguard.depth)
         occupancy = prepare_depth(image, camera, self.invalid, self.hole_pixels,
                                   robot_near=None if mask is None else mask.near,

@@ -106,3 +106,28 @@ def test_cli_robot_options(scene, tmp_path, capsys):
         assert cli.main(base + bad) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and message in err[0], (bad, err)
+
+
+def test_a_robot_that_stood_still_is_not_rendered_again(scene, monkeypatch):
+    """New frames at exactly the joints of the camera's last frame reuse its robot renders (the same answers as a
+    monitor that renders them afresh); a joint moved by a microradian renders again, and so does a frame at the old
+    joints after one at other joints."""
+    from depthguard import self_filter
+
+    robot, camera, depth = scene
+    calls = []
+    real = self_filter.robot_mask
+    monkeypatch.setattr(self_filter, "robot_mask", lambda *args, **kwargs: calls.append(1) or real(*args, **kwargs))
+    rig = dg.Rig({"right": camera})
+    monitor = dg.DistanceMonitor(rig, robot=robot)
+    points = robot.control_point_positions(Q)
+    moved = Q.copy()
+    moved[2] += 1e-6
+    answers = []
+    for k, q in enumerate([Q, Q, Q, moved, Q]):
+        frame = dg.depth_image(depth.copy(), camera, timestamp=0.1 * k)  # a new frame each time
+        answers.append(monitor.query({"right": frame}, points, joints=q, now=0.1 * k))
+    assert len(calls) == 3  # Q, moved, Q again
+    fresh = dg.DistanceMonitor(rig, robot=robot).query({"right": depth}, points, joints=Q)
+    for answer in answers[:3] + answers[4:]:
+        assert np.array_equal(answer.distance, fresh.distance) and answer.flags == fresh.flags
