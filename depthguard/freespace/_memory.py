@@ -169,32 +169,28 @@ class CameraViews:
            pad: int = 0) -> "CameraViews":
         """The views of ``cameras`` whose free image (as :func:`seen_free_voxels` takes them, unchecked) is not
         None."""
-        views = [(camera, free) for camera, free in zip(cameras, free_images) if free is not None]
-        n = len(views)
-        height = max((camera.height for camera, _ in views), default=1)
-        width = max((camera.width for camera, _ in views), default=1)
+        seeing = [(camera, free) for camera, free in zip(cameras, free_images) if free is not None]
+        n = len(seeing)
+        height = max((camera.height for camera, _ in seeing), default=1)
+        width = max((camera.width for camera, _ in seeing), default=1)
         levels = width.bit_length()  # runs of 1, 2, 4, ... up to the widest image's width
-        poses = np.empty((n, 12))
-        intrinsics = np.empty((n, 4))
-        z_near = np.empty(n)
-        sizes = np.empty((n, 2), dtype=np.int64)
-        views_ = cls.__new__(cls)  # owns the reused arrays (tables: 12 MB a 640x480 camera)
-        tables = reusable((n, levels, width, height), np.float32, views_)
-        stacked = np.empty((n, height, width), dtype=np.float32)
-        for c, (camera, free) in enumerate(views):
-            T_camera_world = camera.T_camera_world
-            poses[c, :9] = T_camera_world[:3, :3].ravel()
-            poses[c, 9:] = T_camera_world[:3, 3]
-            intrinsics[c] = (camera.fx, camera.fy, camera.cx, camera.cy)
-            z_near[c] = max(camera.depth_range[0], config.NEAR_PLANE_EPSILON)
-            sizes[c] = (camera.width, camera.height)
-            stacked[c, :camera.height, :camera.width] = free
-        if n:
-            freespace_kernels.row_min_tables(stacked, sizes, tables)
         floor_log2 = np.zeros(width + 1, dtype=np.int64)  # floor(log2(m)) for m >= 1: frexp's exponent, exactly
         floor_log2[1:] = np.frexp(np.arange(1.0, width + 1.0))[1] - 1
-        views_.__init__(poses, intrinsics, z_near, sizes, tables, floor_log2, float(margin), float(pad))
-        return views_
+        views = cls(np.empty((n, 12)), np.empty((n, 4)), np.empty(n), np.empty((n, 2), dtype=np.int64), None,
+                    floor_log2, float(margin), float(pad))
+        views.tables = reusable((n, levels, width, height), np.float32, views)  # given back with the views
+        stacked = np.empty((n, height, width), dtype=np.float32)
+        for c, (camera, free) in enumerate(seeing):
+            T_camera_world = camera.T_camera_world
+            views.poses[c, :9] = T_camera_world[:3, :3].ravel()
+            views.poses[c, 9:] = T_camera_world[:3, 3]
+            views.intrinsics[c] = (camera.fx, camera.fy, camera.cx, camera.cy)
+            views.z_near[c] = max(camera.depth_range[0], config.NEAR_PLANE_EPSILON)
+            views.sizes[c] = (camera.width, camera.height)
+            stacked[c, :camera.height, :camera.width] = free
+        if n:
+            freespace_kernels.row_min_tables(stacked, views.sizes, views.tables)
+        return views
 
     def kernel_arguments(self) -> tuple:
         """(poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad), in the kernels' order."""
