@@ -231,19 +231,6 @@ class DistanceMonitor:
             return np.ascontiguousarray(self.memory.free_at(t)), whole
         return None
 
-    def _remembered_voxels(self, box, t: float, out: np.ndarray | None = None) -> np.ndarray:
-        """Mark in ``out`` (box.shape bool, a new all-False one if None) the memory's voxels certified free at time
-        ``t`` (the latest capture time of the frames, as the fused answers take them), on ``box``'s finer voxels
-        (none unless the two boxes share their near corner and the memory's voxel is a whole number of ``box``'s).
-        Returns ``out``."""
-        from depthguard.freespace import or_coarse
-
-        out = np.zeros(box.shape, dtype=bool) if out is None else out
-        found = self._remembered_coarse(box, t)
-        if found is not None:
-            or_coarse(out, *found)
-        return out
-
     def _principals(self, principals) -> tuple[str, ...]:
         """The principal cameras' names: a list or tuple of names of the rig's cameras (a bare string is refused:
         ``"cam"`` is not the three cameras 'c', 'a', 'm')."""

@@ -92,7 +92,7 @@ def warm_up(progress=None, processes: int | None = None) -> WarmupReport:
     workloads (:data:`WORKLOADS`) run in ``processes`` processes at once (default: one per core, at most one per
     workload), each writing the shared cache; then every workload runs again in this process, which loads what they
     compiled and compiles whatever a race between two processes' writes of one cache index lost. ``processes=1``, or
-    a warm cache, runs them here only.
+    a warm cache, runs them here only; more processes than workloads are not started.
 
     ``progress``: called with a kernel's name as it starts compiling (from the processes: as each workload ends).
     Returns the :class:`WarmupReport` (its compiles from every process; its seconds the wall time).
@@ -101,6 +101,7 @@ def warm_up(progress=None, processes: int | None = None) -> WarmupReport:
     compiles = []
     if processes is None:
         processes = min(len(WORKLOADS), len(os.sched_getaffinity(0))) if _cold() else 1
+    processes = max(1, min(int(processes), len(WORKLOADS)))  # more than one per workload would idle
     if processes > 1:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor, as_completed

@@ -228,7 +228,10 @@ def test_the_monitors_detectable_distances_never_exceed_the_truth_to_a_person():
     assert checked >= 1000 and near >= 20, (checked, near)  # the person was near points the space saw round
     # the memory's remembered voxels (4 cm) count free on the detectable space's 1 cm voxels, each inside its own
     memory = monitor.memory
-    fine = monitor._remembered_voxels(monitor.detectable.box, memory.time)
+    from depthguard.freespace import FreeSources
+
+    fine = FreeSources(remembered=monitor._remembered_coarse(monitor.detectable.box, memory.time)).mask(
+        monitor.detectable.box)
     i, j, k = np.indices(fine.shape, sparse=True)
     np.testing.assert_array_equal(fine, memory.free_at(memory.time)[i // 4, j // 4, k // 4])
     assert fine.any() and not fine.all()
@@ -344,7 +347,6 @@ def test_a_watched_space_gives_the_whole_masks_answers_bit_for_bit(zone, monkeyp
     exactly, so the speed-up clears nothing the twin keeps. Four cameras of scenario B, known solids, the memory,
     and with a robot zone the robot's capsules at two joint sets (frames captured at different joints)."""
     import depthguard as dg
-    from depthguard import config
 
     if zone:  # the mechanism only (with the iiwa's capsules any zone makes d = 4 cm refused, see above)
         monkeypatch.setattr(dg.DistanceMonitor, "_hidden_band", lambda self: (0.0, "none"))

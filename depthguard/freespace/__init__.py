@@ -15,5 +15,19 @@ from depthguard.freespace._memory import (
     squared_distance_transform,
 )
 
-__all__ = ["CameraViews", "DetectableSpace", "FreeSources", "FreeSpaceMemory", "VoxelBox", "closed_faces", "or_coarse", "remember_frames", "robot_voxels",
-           "seen_free_voxels", "solid_voxels", "squared_distance_transform", "surface_voxels", "voxels_within"]
+__all__ = [
+    "CameraViews",
+    "DetectableSpace",
+    "FreeSources",
+    "FreeSpaceMemory",
+    "VoxelBox",
+    "closed_faces",
+    "or_coarse",
+    "remember_frames",
+    "robot_voxels",
+    "seen_free_voxels",
+    "solid_voxels",
+    "squared_distance_transform",
+    "surface_voxels",
+    "voxels_within",
+]

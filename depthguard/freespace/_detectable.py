@@ -244,21 +244,14 @@ class DetectableSpace:
         """:func:`nearest_fit`'s answer over a watched space: rounds of the ring search (the kernels'
         ``search_fits``), each followed by deciding the blocks the stalled points need. The caller holds the lock."""
         _, _, fits_b, state = self._watched
-        shape = self.box.shape
         voxel = float(self.box.voxel)
-        rel = points - np.asarray(self.box.lo, dtype=np.float64)
-        size = np.asarray(shape, dtype=np.float64) * voxel
-        outside = np.min(np.concatenate([rel, size - rel], axis=1), axis=1) <= 0.0
-        beyond = self.beyond
-        best = np.minimum.reduce([rel[:, 0] + beyond[0], size[0] - rel[:, 0] + beyond[1], rel[:, 1] + beyond[2],
-                                  size[1] - rel[:, 1] + beyond[3], rel[:, 2] + beyond[4], size[2] - rel[:, 2] + beyond[5],
-                                  np.full(len(points), limit)])
-        best[outside] = 0.0
-        pending = ~outside
+        lo = np.asarray(self.box.lo, dtype=np.float64)
+        best = np.empty(len(points))
+        pending = np.empty(len(points), dtype=np.bool_)
+        detectable_kernels.search_start(points, lo, voxel, self._shape, self.beyond, limit, best, pending)
         ring = np.zeros(len(points), dtype=np.int64)
         need = np.empty((len(points), _NEED), dtype=np.int64)
         need_count = np.zeros(len(points), dtype=np.int64)
-        lo = np.asarray(self.box.lo, dtype=np.float64)
         rounds = 0
         while pending.any():
             # rings asked for beyond a stalled one: none for the first rounds (most answers lie a ring or two away;

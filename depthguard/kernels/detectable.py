@@ -39,9 +39,7 @@ def erode_fits(free, offsets, block, fits, counts):
     nx, ny, nz = free.shape
     bx, by, bz = counts.shape
     for p in prange(bx * by * bz):
-        c0 = p % bz
-        b0 = (p // bz) % by
-        a0 = p // (bz * by)
+        a0, b0, c0 = unflatten(np.int64(p), by, bz)
         n = 0
         for i in range(a0 * block, min((a0 + 1) * block, nx)):
             for j in range(b0 * block, min((b0 + 1) * block, ny)):
@@ -80,6 +78,49 @@ def to_interval(x, lo, hi):
     return max(lo - x, 0.0, x - hi)
 
 
+@kernel(inline=True)
+def unflatten(flat, by, bz):
+    """Block (a, b, c) of the flat index (a * by + b) * bz + c (int64), blocks (bx, by, bz)."""
+    return flat // (bz * by), (flat // bz) % by, flat % bz
+
+
+@kernel(inline=True)
+def box_start(x, y, z, shape, voxel, beyond, limit):
+    """Where a nearest-fit search from the point (x, y, z) (metres from the box's near corner) starts: (outside the
+    box?, the distance to the box's outside, beyond[f] metres past face f, or ``limit`` if nearer). shape: (nx, ny,
+    nz); beyond: (6,) float64, metres."""
+    nx, ny, nz = shape[0], shape[1], shape[2]
+    if min(x, nx * voxel - x, y, ny * voxel - y, z, nz * voxel - z) <= 0.0:
+        return True, 0.0
+    return False, min(x + beyond[0], nx * voxel - x + beyond[1], y + beyond[2], ny * voxel - y + beyond[3],
+                      z + beyond[4], nz * voxel - z + beyond[5], limit)
+
+
+@kernel(inline=True)
+def scan_block(cube, i0, j0, k0, voxel, x, y, z, best):
+    """The smallest distance below ``best`` from (x, y, z) (metres from the box's near corner) to the cube of a True
+    voxel of ``cube`` (a 3-D bool array: the voxels from (i0, j0, k0) on, as many as it holds); ``best`` if none is
+    nearer."""
+    for da in range(cube.shape[0]):
+        i = i0 + da
+        dx = to_interval(x, i * voxel, (i + 1) * voxel)
+        if dx >= best:
+            continue
+        for db in range(cube.shape[1]):
+            j = j0 + db
+            dy = to_interval(y, j * voxel, (j + 1) * voxel)
+            if dx * dx + dy * dy >= best * best:
+                continue
+            for dc in range(cube.shape[2]):
+                if cube[da, db, dc]:
+                    k = k0 + dc
+                    dz = to_interval(z, k * voxel, (k + 1) * voxel)
+                    d = math.sqrt(dx * dx + dy * dy + dz * dz)
+                    if d < best:
+                        best = d
+    return best
+
+
 @kernel(parallel=True)
 def nearest_fit(fits, counts, block, lo, voxel, beyond, points, limit, out):
     """out[p] = min(distance from points[p] to the nearest True voxel's cube, to the outside of the box (beyond[f]
@@ -95,11 +136,10 @@ def nearest_fit(fits, counts, block, lo, voxel, beyond, points, limit, out):
         x = points[p, 0] - lo[0]
         y = points[p, 1] - lo[1]
         z = points[p, 2] - lo[2]
-        if min(x, nx * voxel - x, y, ny * voxel - y, z, nz * voxel - z) <= 0.0:
+        outside, best = box_start(x, y, z, fits.shape, voxel, beyond, limit)
+        if outside:
             out[p] = 0.0
             continue
-        best = min(x + beyond[0], nx * voxel - x + beyond[1], y + beyond[2], ny * voxel - y + beyond[3],
-                   z + beyond[4], nz * voxel - z + beyond[5], limit)
         near = np.empty(bx * by * bz)
         index = np.empty(bx * by * bz, dtype=np.int64)
         m = 0
@@ -124,24 +164,9 @@ def nearest_fit(fits, counts, block, lo, voxel, beyond, points, limit, out):
         for n in range(m):
             if near[order[n]] >= best:
                 break
-            flat = index[order[n]]
-            c = flat % bz
-            b = (flat // bz) % by
-            a = flat // (bz * by)
-            for i in range(a * block, min((a + 1) * block, nx)):
-                dx = to_interval(x, i * voxel, (i + 1) * voxel)
-                if dx >= best:
-                    continue
-                for j in range(b * block, min((b + 1) * block, ny)):
-                    dy = to_interval(y, j * voxel, (j + 1) * voxel)
-                    if dx * dx + dy * dy >= best * best:
-                        continue
-                    for k in range(c * block, min((c + 1) * block, nz)):
-                        if fits[i, j, k]:
-                            dz = to_interval(z, k * voxel, (k + 1) * voxel)
-                            d = math.sqrt(dx * dx + dy * dy + dz * dz)
-                            if d < best:
-                                best = d
+            a, b, c = unflatten(index[order[n]], by, bz)
+            best = scan_block(fits[a * block:(a + 1) * block, b * block:(b + 1) * block, c * block:(c + 1) * block],
+                              a * block, b * block, c * block, voxel, x, y, z, best)
         out[p] = best
 
 
@@ -220,7 +245,7 @@ def mark_box_voxels(lo, voxel, center, half, R, out):
                     out[i, j, k] = True
 
 
-# ------------------------------------------------------------------------------ the same space, block by block on demand
+# ------------------------------------------------------------------------- the same space, block by block on demand
 #
 # A watched detectable space (``DetectableSpace.watch``) computes the voxels certified free, and E_vox, only in the
 # blocks a distance query reaches. Its arrays are block-major: ``free_b`` and ``fits_b`` (bx, by, bz, block, block,
@@ -255,10 +280,7 @@ def fill_free_blocks(blocks, lo, voxel, poses, intrinsics, z_near, sizes, tables
     half_diagonal = 0.5 * math.sqrt(3.0) * voxel
     block_half = 0.5 * math.sqrt(3.0) * block * voxel
     for n in prange(blocks.shape[0]):
-        flat = blocks[n]
-        c0 = flat % bz
-        b0 = (flat // bz) % by
-        a0 = flat // (bz * by)
+        a0, b0, c0 = unflatten(blocks[n], by, bz)
         if state[a0, b0, c0] & FREE_DONE:
             continue
         out = free_b[a0, b0, c0]
@@ -337,10 +359,7 @@ def blocks_to_free(blocks, state, mark):
     out = np.empty(27 * blocks.shape[0], dtype=np.int64)
     m = 0
     for n in range(blocks.shape[0]):
-        flat = blocks[n]
-        c0 = flat % bz
-        b0 = (flat // bz) % by
-        a0 = flat // (bz * by)
+        a0, b0, c0 = unflatten(blocks[n], by, bz)
         for a in range(max(a0 - 1, 0), min(a0 + 2, bx)):
             for b in range(max(b0 - 1, 0), min(b0 + 2, by)):
                 for c in range(max(c0 - 1, 0), min(c0 + 2, bz)):
@@ -377,10 +396,7 @@ def fill_fit_blocks(blocks, offsets, shape, free_b, state, fits_b, counts):
     for o in range(offsets.shape[0]):
         delta[o] = (offsets[o, 0] * side + offsets[o, 1]) * side + offsets[o, 2]
     for n in prange(blocks.shape[0]):
-        flat = blocks[n]
-        c0 = flat % bz
-        b0 = (flat // bz) % by
-        a0 = flat // (bz * by)
+        a0, b0, c0 = unflatten(blocks[n], by, bz)
         if state[a0, b0, c0] & FITS_DONE:
             continue
         near = np.zeros(side * side * side, dtype=np.bool_)
@@ -417,28 +433,16 @@ def fill_fit_blocks(blocks, offsets, shape, free_b, state, fits_b, counts):
         state[a0, b0, c0] |= FITS_DONE
 
 
-@kernel(inline=True)
-def scan_block(fits_b, a0, b0, c0, block, shape, voxel, x, y, z, best):
-    """The smallest distance below ``best`` from (x, y, z) (metres from the box's near corner) to a True voxel's
-    cube of block (a0, b0, c0) of ``fits_b``; ``best`` if none is nearer."""
-    for da in range(min(block, shape[0] - a0 * block)):
-        i = a0 * block + da
-        dx = to_interval(x, i * voxel, (i + 1) * voxel)
-        if dx >= best:
-            continue
-        for db in range(min(block, shape[1] - b0 * block)):
-            j = b0 * block + db
-            dy = to_interval(y, j * voxel, (j + 1) * voxel)
-            if dx * dx + dy * dy >= best * best:
-                continue
-            for dc in range(min(block, shape[2] - c0 * block)):
-                if fits_b[a0, b0, c0, da, db, dc]:
-                    k = c0 * block + dc
-                    dz = to_interval(z, k * voxel, (k + 1) * voxel)
-                    d = math.sqrt(dx * dx + dy * dy + dz * dz)
-                    if d < best:
-                        best = d
-    return best
+@kernel()
+def search_start(points, lo, voxel, shape, beyond, limit, best, pending):
+    """Where the watched search starts for each point (:func:`box_start`, as :func:`nearest_fit` starts): best[p],
+    and pending[p] False for a point outside the box (its answer 0). points: (n, 3) float64, metres, world frame;
+    beyond: (6,) float64, metres, as :func:`nearest_fit` takes it; limit: float, metres; best: (n,) float64 and
+    pending: (n,) bool, written."""
+    for p in range(points.shape[0]):
+        outside, best[p] = box_start(points[p, 0] - lo[0], points[p, 1] - lo[1], points[p, 2] - lo[2], shape, voxel,
+                                     beyond, limit)
+        pending[p] = not outside
 
 
 @kernel(parallel=True)
@@ -453,8 +457,9 @@ def search_fits(fits_b, counts, state, shape, lo, voxel, points, pending, ring, 
     whose rings reach past best[p] (or past the box) has pending[p] = False and its answer in best[p].
 
     points: (n, 3) float64, metres, world frame; lo: (3,) float64, the box's near corner; shape: (3,) int64;
-    pending: (n,) bool; ring: (n,) int64; best: (n,) float64, metres (the first round: the box's faces and the
-    limit, as :func:`nearest_fit` starts); need: (n, cap) int64 flat block indices; need_count: (n,) int64."""
+    pending: (n,) bool; ring: (n,) int64; best: (n,) float64, metres (the first round: :func:`search_start`'s,
+    the box's faces and the limit, as :func:`nearest_fit` starts); need: (n, cap) int64 flat block indices;
+    need_count: (n,) int64."""
     bx, by, bz = state.shape
     block = fits_b.shape[3]
     side = block * voxel
@@ -494,7 +499,11 @@ def search_fits(fits_b, counts, state, shape, lo, voxel, points, pending, ring, 
                             if math.sqrt(dx * dx + dy * dy + dz * dz) < best[p]:
                                 if state[a, b, c] & FITS_DONE:
                                     if stalled < 0 and counts[a, b, c] > 0:
-                                        best[p] = scan_block(fits_b, a, b, c, block, shape, voxel, x, y, z, best[p])
+                                        best[p] = scan_block(fits_b[a, b, c, :min(block, shape[0] - a * block),
+                                                                    :min(block, shape[1] - b * block),
+                                                                    :min(block, shape[2] - c * block)],
+                                                             a * block, b * block, c * block, voxel, x, y, z,
+                                                             best[p])
                                 elif need_count[p] < need.shape[1]:
                                     if stalled < 0:
                                         stalled = r
