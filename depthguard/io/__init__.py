@@ -6,6 +6,8 @@
 - :mod:`depthguard.io.images`: depth images (16-bit PNG and PGM in the camera's units, ``.npy``, float TIFF) and
   intensity PNGs, as arrays.
 - :mod:`depthguard.io.points`: control points (CSV ``x,y,z`` or a JSON list, metres, world frame).
+- :mod:`depthguard.io.ros_messages`: ROS 2 messages (``sensor_msgs/Image`` ``16UC1``/``32FC1``, ``CameraInfo``,
+  ``JointState``) decoded and checked against the rig, and written: one decoder for bags and live topics.
 - :mod:`depthguard.io.recordings`: recordings, as folders and as ROS 2 bags (MCAP or sqlite3, with ROS 2 message
   types: ``sensor_msgs/Image`` ``16UC1``/``32FC1``, ``CameraInfo``, ``JointState``), read and written.
 

@@ -49,16 +49,18 @@ import math
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass
-from decimal import Decimal
 from pathlib import Path
 
 import numpy as np
 
 from depthguard import config
 from depthguard.io.files import atomic_folder, check_regular_file, load_yaml, read_text
-from depthguard.cameras import PinholeCamera, Rig, load_rig, save_rig
+from depthguard.cameras import Rig, load_rig, save_rig
 from depthguard.depth import DepthImage, depth_image, load_depth
 from depthguard.errors import DepthguardError, DepthImageError, InputError
+from depthguard.io.ros_messages import (CAMERA_INFO, IMAGE, JOINT_STATE, JOINT_STATES_TOPIC, check_camera_info,
+                                        depth_messages, header_seconds, image_array, joint_state, joint_state_message,
+                                        ros_nanoseconds, ros_typestore)
 from depthguard.validation import check_path, short_repr
 
 __all__ = ["FrameRecord", "FrameSet", "Recording", "open_recording", "write_bag"]
@@ -78,14 +80,6 @@ _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?
 _WHOLE = re.compile(r"[0-9]{1,10}")
 #: The bag's topics: /<camera>/depth/image_raw and /<camera>/depth/camera_info.
 _CAMERA_TOPIC = re.compile(r"/(?P<camera>.+)/depth/(?P<kind>image_raw|camera_info)")
-JOINT_STATES_TOPIC = "/joint_states"
-_IMAGE = "sensor_msgs/msg/Image"
-_CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
-_JOINT_STATE = "sensor_msgs/msg/JointState"
-#: Image encodings read: ROS name -> numpy dtype (byte order from is_bigendian).
-_ENCODINGS = {"16UC1": np.uint16, "32FC1": np.float32}
-#: Intrinsics in a camera_info agree with the rig's within this many pixels.
-_INTRINSICS_TOLERANCE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -407,13 +401,6 @@ def _finite(text: str, what: str, path: Path, **context) -> float:
 # ------------------------------------------------------------------------------------------------------ bags
 
 
-def ros_typestore():
-    """The ROS 2 message types (Humble) bags are read and written with."""
-    from rosbags.typesys import Stores, get_typestore
-
-    return get_typestore(Stores.ROS2_HUMBLE)
-
-
 class _Bag:
     """A rosbag2 folder or a bare MCAP file, opened for one pass: ``connections``, ``messages(connections)`` ->
     (connection, log time ns, raw bytes), ``deserialize(raw, msgtype)``. Every failure of the bag library is an
@@ -503,11 +490,11 @@ def _open_bag(path: Path, rig, folder: bool) -> Recording:
         for connection in bag.connections:
             match = _CAMERA_TOPIC.fullmatch(connection.topic)
             if connection.topic == JOINT_STATES_TOPIC:
-                _check_type(connection, _JOINT_STATE, source)
+                _check_type(connection, JOINT_STATE, source)
                 joints_connection = connection
             elif match:
                 kind = match["kind"]
-                _check_type(connection, _IMAGE if kind == "image_raw" else _CAMERA_INFO, source)
+                _check_type(connection, IMAGE if kind == "image_raw" else CAMERA_INFO, source)
                 camera = match["camera"]
                 if camera not in rig.cameras:
                     raise InputError(f"topic {connection.topic} is of a camera the rig lacks (cameras: "
@@ -516,11 +503,11 @@ def _open_bag(path: Path, rig, folder: bool) -> Recording:
         for name in rig.cameras:
             for kind in ("image_raw", "camera_info"):
                 if kind not in topics.get(name, {}):
-                    msgtype = _IMAGE if kind == "image_raw" else _CAMERA_INFO
+                    msgtype = IMAGE if kind == "image_raw" else CAMERA_INFO
                     raise InputError(f"the bag has no topic /{name}/depth/{kind} ({msgtype})", source=source,
                                      camera=name, field="topic")
         if joints_connection is None:
-            raise InputError(f"the bag has no topic {JOINT_STATES_TOPIC} ({_JOINT_STATE})", source=source,
+            raise InputError(f"the bag has no topic {JOINT_STATES_TOPIC} ({JOINT_STATE})", source=source,
                              field="topic")
         image_cameras = {topics[name]["image_raw"].id: name for name in rig.cameras}
         info_cameras = {topics[name]["camera_info"].id: name for name in rig.cameras}
@@ -533,14 +520,14 @@ def _open_bag(path: Path, rig, folder: bool) -> Recording:
                 message = bag.deserialize(raw, connection.msgtype)
             if connection.id in image_cameras:
                 camera = image_cameras[connection.id]
-                _image_array(message, rig.cameras[camera], source, counts[camera], check_only=True)
-                frames.append(FrameRecord(camera, counts[camera], _stamp(message, source, camera, counts[camera])))
+                image_array(message, rig.cameras[camera], source, counts[camera], check_only=True)
+                frames.append(FrameRecord(camera, counts[camera], header_seconds(message, source, camera, counts[camera])))
                 counts[camera] += 1
             elif connection.id in info_cameras:
-                _check_camera_info(message, rig.cameras[info_cameras[connection.id]], source)
+                check_camera_info(message, rig.cameras[info_cameras[connection.id]], source)
             else:
                 index = len(joint_times)
-                names, values = _joint_state(message, source, index)
+                names, values = joint_state(message, source, index)
                 if joint_names is None:
                     joint_names = names
                 elif set(names) != set(joint_names) or len(names) != len(joint_names):
@@ -549,7 +536,7 @@ def _open_bag(path: Path, rig, folder: bool) -> Recording:
                 else:
                     order = [names.index(n) for n in joint_names]
                     values = values[order]
-                time = _stamp(message, source, None, index, what="joint state")
+                time = header_seconds(message, source, None, index, what="joint state")
                 if joint_times and not time > joint_times[-1]:
                     raise InputError(f"joint state #{index} at {time!r} s does not come after the previous one at "
                                      f"{joint_times[-1]!r} s (header stamps must increase)", source=source,
@@ -575,15 +562,15 @@ def _open_bag(path: Path, rig, folder: bool) -> Recording:
         with _Bag(path, folder) as bag:
             # This reader's own connections (a connection belongs to the reader that opened it).
             cameras = {f"/{name}/depth/image_raw": name for name in rig.cameras}
-            connections = [c for c in bag.connections if c.topic in cameras and c.msgtype == _IMAGE]
+            connections = [c for c in bag.connections if c.topic in cameras and c.msgtype == IMAGE]
             for connection, _, raw in bag.messages(connections):
                 camera = cameras[connection.topic]
                 index = counts[camera]
                 counts[camera] += 1
                 with bag.errors():
                     message = bag.deserialize(raw, connection.msgtype)
-                data = _image_array(message, rig.cameras[camera], source, index)
-                time = _stamp(message, source, camera, index)
+                data = image_array(message, rig.cameras[camera], source, index)
+                time = header_seconds(message, source, camera, index)
                 pending[(camera, index)] = depth_image(data, rig.cameras[camera], timestamp=time)
                 while current is not None and all((r.camera, r.frame) in pending for r in current[2]):
                     frame, set_time, records = current
@@ -600,102 +587,6 @@ def _check_type(connection, msgtype: str, source: str) -> None:
     if connection.msgtype != msgtype:
         raise InputError(f"topic {connection.topic} holds {connection.msgtype}, expected {msgtype}", source=source,
                          field="topic")
-
-
-def _stamp(message, source: str, camera, index: int, what: str = "image") -> float:
-    """The header stamp in seconds (nanoseconds / 1e9: a time written by :func:`write_bag` reads back equal)."""
-    stamp = message.header.stamp
-    if not (0 <= stamp.nanosec < 1_000_000_000):
-        raise InputError(f"{what} #{index}: header.stamp.nanosec {stamp.nanosec} is not in [0, 1e9)", source=source,
-                         camera=camera, field="header.stamp")
-    return (int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)) / 1e9
-
-
-def _image_array(message, camera: PinholeCamera, source: str, index: int, check_only: bool = False):
-    """A (height, width) uint16 or float32 array of an Image message, checked against the camera."""
-    name = camera.name
-    where = f"image #{index}: "
-    dtype = _ENCODINGS.get(message.encoding)
-    if dtype is None:
-        raise InputError(f"{where}encoding {short_repr(message.encoding)} holds no depth (16UC1: units of "
-                         f"depth_scale, 32FC1: metres)", source=source, camera=name, field="encoding")
-    if (message.height, message.width) != camera.shape:
-        raise InputError(f"{where}image is {message.width}x{message.height} (width x height) but the camera is "
-                         f"{camera.width}x{camera.height}", source=source, camera=name, field="width/height")
-    itemsize = np.dtype(dtype).itemsize
-    row = camera.width * itemsize
-    if message.step < row or message.step % itemsize or len(message.data) != message.step * camera.height:
-        raise InputError(f"{where}step {message.step} and {len(message.data)} data bytes do not hold "
-                         f"{camera.height} rows of {camera.width} {message.encoding} pixels", source=source,
-                         camera=name, field="step")
-    if message.is_bigendian not in (0, 1):
-        raise InputError(f"{where}is_bigendian must be 0 or 1, got {message.is_bigendian}", source=source,
-                         camera=name, field="is_bigendian")
-    if check_only:
-        return None
-    order = ">" if message.is_bigendian else "<"
-    array = np.frombuffer(message.data, dtype=np.dtype(dtype).newbyteorder(order))
-    return array.reshape(camera.height, message.step // itemsize)[:, : camera.width].astype(dtype)
-
-
-def _check_camera_info(message, camera: PinholeCamera, source: str) -> None:
-    """A CameraInfo message of ``image_raw`` agrees with the rig's camera: size, intrinsics from k, zero distortion of
-    a pinhole model, r the identity, no binning or ROI (p, of the rectified image, is not used)."""
-    name = camera.name
-    context = {"source": source, "camera": name}
-    for key in ("width", "height"):
-        if int(getattr(message, key)) != getattr(camera, key):
-            raise InputError(f"camera_info says {key} {getattr(message, key)}, the rig {getattr(camera, key)}",
-                             field=key, **context)
-    k = np.asarray(message.k, dtype=np.float64)
-    if k.shape != (9,) or not np.isfinite(k).all():
-        raise InputError(f"camera_info k must be 9 finite numbers, got {short_repr(k.tolist(), 80)}", field="k",
-                         **context)
-    for key, value in (("fx", float(k[0])), ("fy", float(k[4])), ("cx", float(k[2])), ("cy", float(k[5]))):
-        expected = getattr(camera, key)
-        if not abs(value - expected) <= _INTRINSICS_TOLERANCE * max(1.0, abs(expected)):
-            raise InputError(f"camera_info says {key} {value!r}, the rig {expected!r}", field=key, **context)
-    if k[1] != 0.0 or k[3] != 0.0 or tuple(k[6:]) != (0.0, 0.0, 1.0):
-        raise InputError(f"camera_info k is not a pinhole camera matrix without skew: {k.tolist()}", field="k",
-                         **context)
-    d = np.asarray(message.d, dtype=np.float64)
-    if d.size and not (np.isfinite(d).all() and (d == 0.0).all()):
-        raise InputError(f"camera_info has distortion {short_repr(d.tolist(), 80)}; depthguard needs rectified "
-                         "images (all coefficients zero)", field="d", **context)
-    model = str(message.distortion_model)
-    if model and model not in config.PINHOLE_DISTORTION_MODELS:
-        raise InputError(f"camera_info has distortion_model {short_repr(model)}, which is not known to be a pinhole "
-                         f"camera with zero coefficients (equidistant's is a fisheye); image_raw is read only with "
-                         f"{' or '.join(config.PINHOLE_DISTORTION_MODELS)}", field="distortion_model", **context)
-    r = np.asarray(message.r, dtype=np.float64)
-    if r.shape != (9,) or not (np.abs(r - np.eye(3).ravel()) <= config.ROTATION_TOLERANCE).all():
-        raise InputError(f"camera_info r must be the identity, got {short_repr(r.tolist(), 80)}: depthguard cannot "
-                         "tell whether the rig's pose is that of the raw camera frame or of the rectified frame, which "
-                         "r turns", field="r", **context)
-    if message.binning_x > 1 or message.binning_y > 1:
-        raise InputError(f"camera_info has binning {message.binning_x}x{message.binning_y}; the rig's intrinsics "
-                         "are of unbinned images", field="binning", **context)
-    roi = message.roi
-    if (roi.x_offset, roi.y_offset, roi.width, roi.height) not in ((0, 0, 0, 0), (0, 0, camera.width, camera.height)):
-        raise InputError("camera_info has a region of interest smaller than the image", field="roi", **context)
-
-
-def _joint_state(message, source: str, index: int):
-    names = [str(n) for n in message.name]
-    values = np.asarray(message.position, dtype=np.float64)
-    if not names:
-        raise InputError(f"joint state #{index} names no joints", source=source, field="name")
-    if len(set(names)) != len(names):
-        raise InputError(f"joint state #{index} names a joint twice: {', '.join(names)}", source=source,
-                         field="name")
-    if values.shape != (len(names),):
-        raise InputError(f"joint state #{index} has {values.size} positions for {len(names)} joint names",
-                         source=source, field="position")
-    if not np.isfinite(values).all():
-        bad = [f"{n}={v}" for n, v in zip(names, values) if not math.isfinite(v)]
-        raise InputError(f"joint state #{index}: positions must be finite, got {', '.join(bad)}", source=source,
-                         field="position")
-    return names, values
 
 
 # ------------------------------------------------------------------------------------------------ writing bags
@@ -734,10 +625,10 @@ def write_bag(recording: Recording, path, storage: str = "mcap") -> Path:
         with atomic_folder(path) as folder, Writer(folder, version=Writer.VERSION_LATEST,
                                                    storage_plugin=plugins[storage]) as writer:
             save_rig(rig, folder / "rig.yaml")
-            joints_out = writer.add_connection(JOINT_STATES_TOPIC, _JOINT_STATE, typestore=store)
-            images_out = {n: writer.add_connection(f"/{n}/depth/image_raw", _IMAGE, typestore=store)
+            joints_out = writer.add_connection(JOINT_STATES_TOPIC, JOINT_STATE, typestore=store)
+            images_out = {n: writer.add_connection(f"/{n}/depth/image_raw", IMAGE, typestore=store)
                           for n in rig.cameras}
-            infos_out = {n: writer.add_connection(f"/{n}/depth/camera_info", _CAMERA_INFO, typestore=store)
+            infos_out = {n: writer.add_connection(f"/{n}/depth/camera_info", CAMERA_INFO, typestore=store)
                          for n in rig.cameras}
             written = 0
 
@@ -746,7 +637,7 @@ def write_bag(recording: Recording, path, storage: str = "mcap") -> Path:
                 while written < len(joint_ns) and joint_ns[written] <= ns_limit:
                     ns = joint_ns[written]
                     message = joint_state_message(store, ns, names, recording.joint_positions[written])
-                    writer.write(joints_out, ns, store.serialize_cdr(message, _JOINT_STATE))
+                    writer.write(joints_out, ns, store.serialize_cdr(message, JOINT_STATE))
                     written += 1
 
             for frame_set in recording.frame_sets():
@@ -754,8 +645,8 @@ def write_bag(recording: Recording, path, storage: str = "mcap") -> Path:
                 for name, image in frame_set.images.items():
                     ns = ros_nanoseconds(image.timestamp, "capture time")
                     info, message = depth_messages(store, ns, rig.cameras[name], image.data)
-                    writer.write(infos_out[name], ns, store.serialize_cdr(info, _CAMERA_INFO))
-                    writer.write(images_out[name], ns, store.serialize_cdr(message, _IMAGE))
+                    writer.write(infos_out[name], ns, store.serialize_cdr(info, CAMERA_INFO))
+                    writer.write(images_out[name], ns, store.serialize_cdr(message, IMAGE))
             joints_until(math.inf)
     except DepthguardError:
         raise
@@ -765,43 +656,3 @@ def write_bag(recording: Recording, path, storage: str = "mcap") -> Path:
     return path
 
 
-def ros_header(store, ns: int, frame_id: str):
-    """A std_msgs/Header stamped ``ns`` nanoseconds."""
-    types = store.types
-    return types["std_msgs/msg/Header"](stamp=types["builtin_interfaces/msg/Time"](
-        sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=frame_id)
-
-
-def joint_state_message(store, ns: int, names, positions):
-    """A sensor_msgs/JointState of ``positions`` (radians, ``names`` order) stamped ``ns`` nanoseconds."""
-    empty = np.zeros(0)
-    return store.types[_JOINT_STATE](header=ros_header(store, ns, ""), name=list(names),
-                                      position=np.array(positions, dtype=np.float64), velocity=empty, effort=empty)
-
-
-def depth_messages(store, ns: int, camera: PinholeCamera, data: np.ndarray):
-    """(sensor_msgs/CameraInfo, sensor_msgs/Image) of one depth image of ``camera`` stamped ``ns`` nanoseconds, in
-    frame ``<camera>_optical_frame``: ``16UC1`` for an unsigned image (units of the rig's depth_scale), ``32FC1``
-    for a float one (metres); a pinhole camera without distortion."""
-    types = store.types
-    frame_id = f"{camera.name}_optical_frame"
-    roi = types["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
-    info = types[_CAMERA_INFO](
-        header=ros_header(store, ns, frame_id), height=camera.height, width=camera.width,
-        distortion_model="plumb_bob", d=np.zeros(5),
-        k=np.array([camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0]), r=np.eye(3).ravel(),
-        p=np.array([camera.fx, 0.0, camera.cx, 0.0, 0.0, camera.fy, camera.cy, 0.0, 0.0, 0.0, 1.0, 0.0]),
-        binning_x=0, binning_y=0, roi=roi)
-    data = np.ascontiguousarray(data, dtype=data.dtype.newbyteorder("<"))
-    encoding = "16UC1" if data.dtype.kind == "u" else "32FC1"
-    image = types[_IMAGE](header=ros_header(store, ns, frame_id), height=data.shape[0], width=data.shape[1],
-                          encoding=encoding, is_bigendian=0, step=data.shape[1] * data.itemsize,
-                          data=data.view(np.uint8).ravel())
-    return info, image
-
-
-def ros_nanoseconds(time: float, what: str) -> int:
-    """A time in seconds as whole nanoseconds: its shortest decimal (repr) rounded, so 0.033333 is 33333000."""
-    if time is None or not math.isfinite(time) or not 0.0 <= time < 2.0**31:
-        raise InputError(f"a {what} of {short_repr(time)} s cannot be a ROS time (0 to 2**31 s)", field="time")
-    return int((Decimal(repr(float(time))) * 1_000_000_000).to_integral_value())

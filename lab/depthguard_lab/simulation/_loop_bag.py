@@ -29,7 +29,7 @@ from depthguard.io.files import atomic_folder
 from depthguard.cameras import save_rig
 from depthguard.errors import InputError
 from depthguard.validation import check_path
-from depthguard.io.recordings import (
+from depthguard.io.ros_messages import (
     JOINT_STATES_TOPIC,
     depth_messages,
     joint_state_message,
