@@ -217,6 +217,17 @@ CLOCK_SKEW_TOLERANCE = 0.01
 #: freezes stops clearing space within three frames. Frames without a timestamp cannot age and are not held to it.
 DEFAULT_MAX_AGE = 0.1
 
+#: Live input and replay (design §12b). A set of frames waits at most FRAME_SET_WAIT seconds (stamp clock) after its
+#: first new frame for the other cameras' frames; with no new frame, an answer still comes every max_age seconds.
+FRAME_SET_WAIT = 0.02
+#: Joints at a frame's stamp: interpolated between two joint states at most JOINT_GAP seconds apart around it, or
+#: the last state held when the stamp is at most JOINT_HOLD seconds after it (the joints then err by at most the
+#: robot's joint speed times JOINT_HOLD: 5 mrad at 1 rad/s, inside the self-filter's padding). Otherwise the camera
+#: has no joints for that frame and counts as stale for the set. JOINT_HISTORY states are kept (8 s at 500 Hz).
+JOINT_GAP = 0.05
+JOINT_HOLD = 0.005
+JOINT_HISTORY = 4096
+
 #: Camera intrinsics, pixels: focal lengths fx, fy in [FOCAL_LENGTH_MIN, INTRINSICS_LIMIT], principal point
 #: |cx|, |cy| <= INTRINSICS_LIMIT (a pixel's frustum slopes (u - cx) / fx then stay far from overflow).
 FOCAL_LENGTH_MIN = 1e-3
