@@ -52,7 +52,7 @@ setup() {
   want=$(cat pyproject.toml lab/pyproject.toml | sha256sum | cut -d' ' -f1)
   if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
     echo "dev.sh: installing depthguard and depthguard-lab with their dependencies into .venv (log: .venv/pip.log)"
-    if ! { .venv/bin/python -m pip install --upgrade pip && .venv/bin/python -m pip install -e '.[test]' -e ./lab; } \
+    if ! { .venv/bin/python -m pip install --upgrade pip && .venv/bin/python -m pip install -e '.[test,live]' -e ./lab; } \
         > .venv/pip.log 2>&1; then
       tail -n 30 .venv/pip.log >&2
       echo "dev.sh: pip install failed (full log: .venv/pip.log)" >&2

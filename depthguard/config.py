@@ -220,6 +220,10 @@ DEFAULT_MAX_AGE = 0.1
 #: Live input and replay (design §12b). A set of frames waits at most FRAME_SET_WAIT seconds (stamp clock) after its
 #: first new frame for the other cameras' frames; with no new frame, an answer still comes every max_age seconds.
 FRAME_SET_WAIT = 0.02
+#: Live: the host's clock drives the loop LIVE_TRANSPORT seconds behind, so that a frame that took that long from its
+#: stamp to the node (driver, network, decoding) still joins its set as in replay; waits and idle answers come that
+#: much later.
+LIVE_TRANSPORT = 0.05
 #: Joints at a frame's stamp: interpolated between two joint states at most JOINT_GAP seconds apart around it, or
 #: the last state held when the stamp is at most JOINT_HOLD seconds after it (the joints then err by at most the
 #: robot's joint speed times JOINT_HOLD: 5 mrad at 1 rad/s, inside the self-filter's padding). Otherwise the camera

@@ -45,6 +45,7 @@ COMMANDS = {
     "collide": "depthguard.cli.collide",
     "plan": "depthguard.cli.plan",
     "warmup": "depthguard.cli.warmup",
+    "live": "depthguard.cli.live",
 }
 
 

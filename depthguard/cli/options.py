@@ -58,6 +58,7 @@ METRES = real_option(config.RHO_MIN, config.RHO_MAX, "metres")
 GRID_METRES = real_option(0.0, config.COORDINATE_LIMIT, "metres", above_minimum=True)
 #: A speed: metres/second in (0, config.COORDINATE_LIMIT].
 SPEED = real_option(0.0, config.COORDINATE_LIMIT, "metres/second", above_minimum=True)
+SECONDS = real_option(0.0, config.MAX_AGE_LIMIT, "seconds", above_minimum=True)
 
 
 #: Options whose values may start with a minus sign (joint values, coordinates): "--current -0.3,0.2" is read as
@@ -125,10 +126,32 @@ def robot_and_joints(args):
     return robot, robot.joint_vector(parse_joints(args.joints))
 
 
-def add_monitor_options(parser) -> None:
-    """The monitor's settings a command passes on: ``--rho``, ``--aggregate``, ``--invalid``."""
+def add_monitor_options(parser, memory: bool = False) -> None:
+    """The monitor's settings a command passes on: ``--rho``, ``--aggregate``, ``--invalid``; with ``memory``
+    (``replay``, ``live``) also ``--max-age`` and ``--v-max`` / ``--no-memory``. :func:`monitor_options` reads them
+    back as :class:`~depthguard.DistanceMonitor`'s keyword arguments."""
     parser.add_argument("--rho", type=METRES, default=config.DEFAULT_RHO,
                         help=f"surveillance radius, metres, in [{config.RHO_MIN:g}, {config.RHO_MAX:g}]")
     parser.add_argument("--aggregate", choices=config.AGGREGATES, default=config.DEFAULT_AGGREGATE)
     parser.add_argument("--invalid", choices=config.INVALID_POLICIES, default=config.DEFAULT_INVALID,
                         help="pixels without a measurement: occupied (fail-safe), neighbors, free")
+    if not memory:
+        return
+    parser.add_argument("--max-age", type=SECONDS, default=config.DEFAULT_MAX_AGE,
+                        help="a camera whose frame is older than this many seconds at an answer sees nothing "
+                             f"(stale, flagged; default {config.DEFAULT_MAX_AGE:g})")
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--v-max", type=SPEED, default=config.FREESPACE_V_MAX,
+                       help="the free-space memory's fastest person, metres/second (default "
+                            f"{config.FREESPACE_V_MAX:g}, ISO 13855's hand speed; docs/design.md §8a); the memory "
+                            "needs a workspace in the rig")
+    group.add_argument("--no-memory", action="store_true",
+                       help="do not remember free space: only what the cameras see now clears space")
+
+
+def monitor_options(args) -> dict:
+    """:class:`~depthguard.DistanceMonitor`'s keyword arguments from :func:`add_monitor_options`' options."""
+    options = dict(rho=args.rho, aggregate=args.aggregate, invalid=args.invalid)
+    if hasattr(args, "max_age"):
+        options.update(max_age=args.max_age, memory=not args.no_memory, v_max=args.v_max)
+    return options

@@ -6,8 +6,7 @@ import json
 import math
 import sys
 
-from depthguard import config
-from depthguard.cli.options import SPEED, add_monitor_options, load_robot
+from depthguard.cli.options import add_monitor_options, load_robot, monitor_options
 
 HELP = ('run a recording (folder or ROS 2 bag, docs/design.md §12a) through the monitor in capture-time '
         'order, one answer per set of frames')
@@ -24,16 +23,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--points", metavar="POINTS",
                         help="fixed control points (CSV x,y,z or JSON, world frame, metres), named p0, p1, ... "
                              "(default: the robot's control points, moving with the recorded joints)")
-    add_monitor_options(parser)
+    add_monitor_options(parser, memory=True)
     parser.add_argument("--rig", metavar="RIG.yaml",
                         help="the rig (default: rig.yaml in the recording, the bag folder or beside the .mcap file)")
-    memory = parser.add_mutually_exclusive_group()
-    memory.add_argument("--v-max", type=SPEED, default=config.FREESPACE_V_MAX,
-                        help="the free-space memory's fastest person, metres/second (default "
-                             f"{config.FREESPACE_V_MAX:g}, ISO 13855's hand speed; docs/design.md §8a); the memory "
-                             "needs a workspace in the rig")
-    memory.add_argument("--no-memory", action="store_true",
-                        help="do not remember free space: only what the cameras see now clears space")
     parser.add_argument("--json", action="store_true", help="also print a JSON summary to standard output")
 
 
@@ -72,8 +64,7 @@ def run(args) -> int:
     else:
         fixed = None
         point_names = list(robot.control_point_names)
-    monitor = DistanceMonitor(recording.rig, rho=args.rho, aggregate=args.aggregate, invalid=args.invalid,
-                              robot=robot, memory=not args.no_memory, v_max=args.v_max)
+    monitor = DistanceMonitor(recording.rig, robot=robot, **monitor_options(args))
     distances, flagged, answered = [], 0, 0
     with atomic_write(out, newline="") as f:  # --out appears once every set is answered
         writer = csv.writer(f)

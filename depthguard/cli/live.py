@@ -1,0 +1,112 @@
+"""``depthguard live``: depth frames and joint states from ROS 2 topics through zenoh, distances and status back
+(design §12b). Needs the ``live`` extra (``eclipse-zenoh``); nothing comes from ROS."""
+
+from __future__ import annotations
+
+import re
+import sys
+import time
+
+from depthguard.cli.options import add_monitor_options, load_robot, monitor_options
+
+HELP = ("listen to ROS 2 depth cameras and joint states through zenoh (rmw_zenoh or zenoh-bridge-ros2dds) and "
+        "publish distances and status (docs/design.md §12b)")
+
+_CAMERA = re.compile(r"(?P<name>[^=]+)=(?P<image>[^:]+)(?::(?P<info>.+))?")
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--rig", required=True, metavar="RIG.yaml", help="the cameras (docs/design.md §2)")
+    parser.add_argument("--robot", default="iiwa", metavar="URDF",
+                        help="the robot: a URDF file, or 'iiwa' / 'panda' (pybullet_data's models; default iiwa)")
+    parser.add_argument("--camera", action="append", default=[], metavar="NAME=IMAGE_TOPIC[:INFO_TOPIC]",
+                        help="a camera of the rig and its topics (default for every camera: /NAME/depth/image_raw "
+                             "and its sibling camera_info)")
+    parser.add_argument("--joint-states", default="/joint_states", metavar="TOPIC",
+                        help="sensor_msgs/msg/JointState (default /joint_states); joints other than the robot's "
+                             "are ignored")
+    parser.add_argument("--connect", action="append", metavar="ENDPOINT",
+                        help="the zenoh router (or listening peer) to connect to, as client (default "
+                             "tcp/127.0.0.1:7447, rmw_zenoh's router); never listens")
+    parser.add_argument("--layout", choices=("rmw_zenoh", "bridge"), default="rmw_zenoh",
+                        help="rmw_zenoh's keys, hashes and attachments, or zenoh-bridge-ros2dds' bare topic names")
+    parser.add_argument("--domain", type=int, default=0, help="ROS domain id (rmw_zenoh layout; default 0)")
+    add_monitor_options(parser, memory=True)
+    parser.add_argument("--out", metavar="RESULTS.csv",
+                        help="also write one row per point per answer: replay's columns, cameras, latency_ms")
+    parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: run until ^C)")
+    parser.add_argument("--dry-run", action="store_true",
+                        help="check the topics, each CameraInfo against the rig and the joint names, then exit: 0 "
+                             "when all agree, 2 with the reason")
+    parser.add_argument("--dry-run-wait", type=float, default=5.0, metavar="S",
+                        help="how long --dry-run waits for every topic (default 5 s)")
+
+
+def topics_of(args, rig):
+    """The :class:`~depthguard.live.Topics` from ``--camera`` and ``--joint-states``."""
+    from depthguard.errors import InputError
+    from depthguard.live import Topics
+
+    cameras = {name: (Topics.default_image(name), Topics.info_of(Topics.default_image(name))) for name in rig.cameras}
+    for text in args.camera:
+        match = _CAMERA.fullmatch(text)
+        if match is None:
+            raise InputError(f"--camera {text!r}: give NAME=IMAGE_TOPIC[:INFO_TOPIC]", field="camera")
+        name = match["name"]
+        if name not in rig.cameras:
+            raise InputError(f"--camera {text!r}: the rig has no camera {name!r} (cameras: "
+                             f"{', '.join(rig.cameras)})", camera=name, field="camera")
+        image = match["image"]
+        cameras[name] = (image, match["info"] or Topics.info_of(image))
+    return Topics(cameras, args.joint_states)
+
+
+def run(args) -> int:
+    from depthguard.cameras import load_rig
+    from depthguard.errors import InputError
+
+    try:
+        import zenoh  # noqa: F401 - the live extra
+    except ImportError:
+        raise InputError("depthguard live needs the live extra: pip install 'depthguard[live]' (eclipse-zenoh)") \
+            from None
+    from depthguard.live import wire
+    from depthguard.live import LiveNode, LiveOptions
+
+    rig = load_rig(args.rig)
+    robot = load_robot(args.robot)
+    topics = topics_of(args, rig)
+    for image, info in topics.cameras.values():
+        wire.data_key(image, "sensor_msgs/msg/Image", args.layout, args.domain)  # names checked before connecting
+        wire.data_key(info, "sensor_msgs/msg/CameraInfo", args.layout, args.domain)
+    options = LiveOptions(layout=args.layout, domain=args.domain, connect=args.connect or ["tcp/127.0.0.1:7447"])
+    node = LiveNode(rig, robot, topics, options, monitor_options(args), out=None if args.dry_run else args.out)
+    try:
+        if args.dry_run:
+            deadline = time.monotonic() + args.dry_run_wait
+            problem = node.ready()
+            while problem is not None and time.monotonic() < deadline:
+                time.sleep(0.05)
+                problem = node.ready()
+            if problem is not None:
+                print(f"depthguard live: dry run: {problem}", file=sys.stderr)
+                return 2
+            print(f"depthguard live: dry run: {len(topics.cameras)} cameras and {topics.joints} agree with the rig "
+                  f"and {robot.name}")
+            return 0
+        node.start()
+        print(f"depthguard live: listening ({args.layout}, {', '.join(options.connect)}) for "
+              f"{', '.join(rig.cameras)}; publishing /depthguard/distances and /depthguard/status", file=sys.stderr,
+              flush=True)
+        start = time.monotonic()
+        try:
+            while args.duration is None or time.monotonic() - start < args.duration:
+                time.sleep(0.05)
+        except KeyboardInterrupt:
+            pass
+    finally:
+        node.close()
+    print(f"depthguard live: {node.answers} answers, {node.dropped} sets dropped, {node.deadline_misses} deadline "
+          f"misses; frames received " + ", ".join(f"{n} {c.received} (missed {c.missed})"
+                                                    for n, c in node.counts.items()), file=sys.stderr)
+    return 0

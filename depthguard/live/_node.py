@@ -1,0 +1,402 @@
+"""The live node (design §12b): ROS 2 topics in through zenoh, answers out, as ``depthguard live`` runs it.
+
+Threads:
+
+- zenoh's own threads run the callbacks: each decodes its message (:mod:`depthguard.io.ros_messages`) and swaps
+  it in: the newest frame per camera (a frame replaced before the worker took it counts as ``missed``), joint
+  states into a bounded queue. A callback never waits on computing and never raises.
+- one worker feeds the frame-set loop (:class:`~depthguard.live.FrameSetLoop`) on the host's clock, prepares each
+  set with its :class:`~depthguard.DistanceMonitor` (made on that thread: its OpenGL context lives there), queries
+  the robot's control points and publishes. When computing falls behind, the frames that came meanwhile are the
+  newest: older ones are dropped and counted, never queued.
+
+Every output goes out as rmw_zenoh sends it (the type hash in the key, an attachment, a liveliness token per
+publisher), or at the bare topic name for the bridge layout: ``/depthguard/distances``
+(``std_msgs/msg/Float64MultiArray``, one value per control point in the robot's order, ``inf`` for nothing within
+rho) and ``/depthguard/status`` (``diagnostic_msgs/msg/DiagnosticArray``: one status per control point, its flags,
+and one per camera, its age and counts; ERROR while a camera is stale or missing, WARN for other flags), back to
+back, the status stamped with the answer's time.
+"""
+
+from __future__ import annotations
+
+import collections
+import csv
+import json
+import logging
+import math
+import os
+import threading
+import time as clock
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from depthguard import config
+from depthguard.depth import depth_image
+from depthguard.errors import DepthguardError, InputError
+from depthguard.io.ros_messages import (CAMERA_INFO, IMAGE, JOINT_STATE, check_camera_info, header_seconds,
+                                        image_array, joint_state, ros_header)
+from depthguard.live import wire
+from depthguard.live._sets import FrameSetLoop
+
+_LOG = logging.getLogger("depthguard")
+
+DISTANCES_TOPIC = "/depthguard/distances"
+STATUS_TOPIC = "/depthguard/status"
+DISTANCES_TYPE = "std_msgs/msg/Float64MultiArray"
+STATUS_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
+#: Diagnostic levels (diagnostic_msgs/msg/DiagnosticStatus).
+OK, WARN, ERROR = 0, 1, 2
+NODE_NAME = "depthguard"
+CSV_HEADER = ["time", "frame", "control_point", "x", "y", "z", "distance", "blind_distance", "flags", "cameras",
+              "latency_ms"]
+
+
+@dataclass
+class Topics:
+    """Where the node listens. cameras: camera -> (image topic, camera_info topic); joints: the JointState topic."""
+
+    cameras: dict
+    joints: str = "/joint_states"
+
+    @staticmethod
+    def default_image(camera: str) -> str:
+        return f"/{camera}/depth/image_raw"
+
+    @staticmethod
+    def info_of(image_topic: str) -> str:
+        """The camera_info topic beside an image topic (its sibling)."""
+        return image_topic.rsplit("/", 1)[0] + "/camera_info"
+
+
+@dataclass
+class CameraCounts:
+    received: int = 0
+    missed: int = 0  # replaced before the worker took it
+    errors: int = 0
+    last_error: str = ""
+    info_error: str = ""  # the CameraInfo disagrees with the rig: the camera is left out
+    info_seen: bool = False
+    hash_warned: bool = False
+
+
+def session_config(connect: list[str]):
+    """A zenoh client configuration: it connects to ``connect`` (a router, or a peer that listens) and never
+    listens or scouts."""
+    import zenoh
+
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps("client"))
+    conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    conf.insert_json5("listen/endpoints", json.dumps([]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return conf
+
+
+class _Publisher:
+    """One output topic: its zenoh publisher, rmw_zenoh's attachment and liveliness token (rmw_zenoh layout)."""
+
+    def __init__(self, session, topic: str, msgtype: str, layout: str, domain: int, entity: int, gid_seed: bytes):
+        self.msgtype = msgtype
+        self.layout = layout
+        self.key = wire.data_key(topic, msgtype, layout, domain)
+        self.publisher = session.declare_publisher(self.key)
+        self.sequence = 0
+        self.gid = (gid_seed + entity.to_bytes(4, "little"))[-16:].rjust(16, b"\x00")
+        self.token = None
+        if layout == "rmw_zenoh":
+            zid = str(session.info.zid())
+            self.token = session.liveliness().declare_token(
+                wire.liveliness_key(zid, entity, "MP", NODE_NAME, topic, msgtype, domain=domain))
+
+    def put(self, message) -> None:
+        payload = wire.serialize(message, self.msgtype)
+        self.sequence += 1
+        if self.layout == "rmw_zenoh":
+            self.publisher.put(payload, attachment=wire.attachment_bytes(self.sequence, clock.time_ns(), self.gid))
+        else:
+            self.publisher.put(payload)
+
+
+@dataclass
+class LiveOptions:
+    layout: str = "rmw_zenoh"
+    domain: int = 0
+    connect: list = field(default_factory=lambda: ["tcp/127.0.0.1:7447"])
+    wait: float = config.FRAME_SET_WAIT
+    #: seconds the host's clock is held back when it drives the loop: a frame reaches the node this much after its
+    #: stamp (driver, transport, decoding) and still joins its set, as it does in replay
+    transport: float = config.LIVE_TRANSPORT
+
+
+class LiveNode:
+    """Listens to ``topics``, answers each set of frames with ``monitor_options`` (as :class:`DistanceMonitor`
+    takes them) for the robot's control points, and publishes the answers (see the module docstring).
+
+    ``out``: a CSV file to write one row per point per answer (replay's columns, plus ``cameras``, those counted as
+    seen, and ``latency_ms``, from the set's newest stamp to the answer). Start with :meth:`start`, stop with
+    :meth:`close`; ``answers``, ``dropped``, ``deadline_misses`` and per-camera ``counts`` say how it went."""
+
+    def __init__(self, rig, robot, topics: Topics, options: LiveOptions, monitor_options: dict, out=None):
+        import zenoh
+
+        self.rig = rig
+        self.robot = robot
+        self.topics = topics
+        self.options = options
+        self.monitor_options = dict(monitor_options)
+        self.max_age = self.monitor_options.get("max_age", config.DEFAULT_MAX_AGE)
+        if not isinstance(self.max_age, (int, float)):
+            self.max_age = config.DEFAULT_MAX_AGE
+        self.counts = {name: CameraCounts() for name in rig.cameras}
+        self.answers = 0
+        self.joint_states = 0  # joint states received
+        self.dropped = 0
+        self.deadline_misses = 0
+        self.last = None  # (time, why, cameras seen) of the last answer
+        self.recent: collections.deque = collections.deque(maxlen=1000)  # the last answers' (time, why, seen)
+        self.errors: collections.deque = collections.deque(maxlen=100)  # the last errors, one line each
+        self._warned: set = set()
+        self._lock = threading.Lock()
+        self._frames: dict = {}
+        self._joints: collections.deque = collections.deque(maxlen=config.JOINT_HISTORY)
+        self._joint_order = None
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._out_path = out
+        self.session = zenoh.open(session_config(options.connect))
+        self._subscribers = []
+        for name, (image_topic, info_topic) in topics.cameras.items():
+            self._subscribe(image_topic, IMAGE, lambda s, n=name: self._on_image(n, s))
+            self._subscribe(info_topic, CAMERA_INFO, lambda s, n=name: self._on_info(n, s))
+        self._subscribe(topics.joints, JOINT_STATE, self._on_joints)
+        seed = os.urandom(12)
+        self._distances = _Publisher(self.session, DISTANCES_TOPIC, DISTANCES_TYPE, options.layout, options.domain, 1,
+                                     seed)
+        self._status = _Publisher(self.session, STATUS_TOPIC, STATUS_TYPE, options.layout, options.domain, 2, seed)
+        self._node_token = None
+        if options.layout == "rmw_zenoh":
+            self._node_token = self.session.liveliness().declare_token(
+                wire.liveliness_key(str(self.session.info.zid()), 0, "NN", NODE_NAME, domain=options.domain))
+        self._worker = threading.Thread(target=self._run, name="depthguard-live-node", daemon=True)
+        self._ready = threading.Event()
+
+    # ------------------------------------------------------------------------------------------------ receiving
+
+    def _subscribe(self, topic: str, msgtype: str, callback) -> None:
+        key = wire.subscription_key(topic, msgtype, self.options.layout, self.options.domain)
+        expected = wire.type_hash(msgtype)
+
+        def on_sample(sample):
+            try:
+                found = wire.key_type_hash(str(sample.key_expr))
+                if found is not None and found != expected and topic not in self._warned:
+                    self._warned.add(topic)
+                    _LOG.warning("depthguard live: %s carries %s with type hash %s, expected %s", topic, msgtype,
+                                 found, expected)
+                callback(sample)
+            except Exception as exc:  # noqa: BLE001 - a callback must never raise into zenoh
+                self.errors.append(f"{topic}: {exc}")
+
+        self._subscribers.append(self.session.declare_subscriber(key, on_sample))
+
+    def _on_image(self, camera: str, sample) -> None:
+        counts = self.counts[camera]
+        source = self.topics.cameras[camera][0]
+        try:
+            message = wire.deserialize(sample.payload.to_bytes(), IMAGE)
+            stamp = header_seconds(message, source, camera, counts.received)
+            data = image_array(message, self.rig.cameras[camera], source, counts.received)
+            image = depth_image(data, self.rig.cameras[camera], timestamp=stamp)
+        except DepthguardError as exc:
+            counts.errors += 1
+            counts.last_error = str(exc)
+            return
+        with self._lock:
+            counts.received += 1
+            if camera in self._frames:
+                counts.missed += 1
+            self._frames[camera] = image
+        self._wake.set()
+
+    def _on_info(self, camera: str, sample) -> None:
+        counts = self.counts[camera]
+        source = self.topics.cameras[camera][1]
+        try:
+            message = wire.deserialize(sample.payload.to_bytes(), CAMERA_INFO)
+            check_camera_info(message, self.rig.cameras[camera], source)
+            counts.info_error = ""
+        except DepthguardError as exc:
+            counts.info_error = str(exc)
+        counts.info_seen = True
+
+    def _on_joints(self, sample) -> None:
+        source = self.topics.joints
+        try:
+            message = wire.deserialize(sample.payload.to_bytes(), JOINT_STATE)
+            stamp = header_seconds(message, source, None, 0, what="joint state")
+            names, values = joint_state(message, source, 0)
+            positions = values[self._order_of(names)]
+        except (DepthguardError, KeyError) as exc:
+            self.errors.append(f"{source}: {exc}")
+            return
+        self._joints.append((stamp, positions))
+        self.joint_states += 1
+        self._wake.set()
+
+    def ready(self) -> str | None:
+        """None when every camera's image and camera_info and a joint state have come and agree with the rig and
+        the robot; else what is still missing or wrong (``--dry-run``)."""
+        for name, counts in self.counts.items():
+            image, info = self.topics.cameras[name]
+            if counts.info_error:
+                return counts.info_error
+            if counts.errors and not counts.received:
+                return counts.last_error
+            if not counts.received:
+                return f"no image on {image} (camera {name})"
+            if not counts.info_seen:
+                return f"no camera_info on {info} (camera {name})"
+        if self._joint_order is None:
+            return next((e for e in self.errors if e.startswith(self.topics.joints)),
+                        f"no joint state on {self.topics.joints}")
+        return None
+
+    def _order_of(self, names) -> np.ndarray:
+        """Indices of the robot's joints among a message's names (extra joints, a gripper's, are ignored)."""
+        names = tuple(names)
+        if self._joint_order is None or self._joint_order[0] != names:
+            missing = [n for n in self.robot.joint_names if n not in names]
+            if missing:
+                raise InputError(f"the joint state lacks the robot's joints {', '.join(missing)}",
+                                 source=self.topics.joints, field="name")
+            self._joint_order = (names, np.array([names.index(n) for n in self.robot.joint_names]))
+        return self._joint_order[1]
+
+    # ------------------------------------------------------------------------------------------------ the worker
+
+    def start(self) -> None:
+        self._worker.start()
+        self._ready.wait()
+        if self._startup_error is not None:
+            raise self._startup_error
+
+    _startup_error = None
+
+    def close(self) -> None:
+        self._stop.set()
+        self._wake.set()
+        if self._worker.is_alive():
+            self._worker.join()
+        for entity in [*self._subscribers, self._distances.publisher, self._status.publisher]:
+            entity.undeclare()
+        for token in (self._distances.token, self._status.token, self._node_token):
+            if token is not None:
+                token.undeclare()
+        self.session.close()
+
+    def _run(self) -> None:
+        from depthguard import DistanceMonitor
+
+        try:
+            monitor = DistanceMonitor(self.rig, robot=self.robot, **self.monitor_options)
+        except BaseException as exc:  # reported to start()'s caller
+            self._startup_error = exc
+            self._ready.set()
+            return
+        loop = FrameSetLoop(tuple(self.rig.cameras), wait=self.options.wait, idle=self.max_age)
+        self._ready.set()
+        out_file = open(self._out_path, "w", newline="") if self._out_path is not None else None  # noqa: SIM115
+        writer = csv.writer(out_file) if out_file is not None else None
+        if writer is not None:
+            writer.writerow(CSV_HEADER)
+        try:
+            while not self._stop.is_set():
+                self._wake.wait(0.005)
+                self._wake.clear()
+                while self._joints:
+                    loop.add_joints(*self._joints.popleft())
+                with self._lock:
+                    frames, self._frames = self._frames, {}
+                sets = []
+                for name, image in sorted(frames.items(), key=lambda item: item[1].timestamp):
+                    if self.counts[name].info_error:
+                        continue  # its CameraInfo disagrees with the rig: left out, named in the status
+                    sets += loop.add_frame(image)
+                sets += loop.tick(clock.time() - self.options.transport)
+                if len(sets) > 1:
+                    self.dropped += len(sets) - 1
+                if sets:
+                    self._answer(monitor, loop, sets[-1], writer)
+                    if out_file is not None:
+                        out_file.flush()
+        finally:
+            if out_file is not None:
+                out_file.close()
+
+    def _answer(self, monitor, loop, frame_set, writer) -> None:
+        q = loop.joints.at(frame_set.time)
+        if q is None:
+            q = next(reversed(frame_set.joints.values()), None) if frame_set.joints else None
+        if q is None:  # no joints at all: the robot's points are unknown; nothing to answer
+            return
+        points = self.robot.control_point_positions(q)
+        try:
+            result = monitor.query(frame_set.images, points, camera_joints=frame_set.joints, now=frame_set.time)
+        except DepthguardError as exc:
+            self.errors.append(str(exc))
+            return
+        seen = [n for n in self.rig.cameras if n in frame_set.images
+                and not monitor.is_stale(frame_set.images[n].timestamp, frame_set.time)]
+        named = []
+        for name in self.rig.cameras:
+            if name in seen:
+                continue
+            state = loop.camera(name)
+            named.append(f"missing_camera:{name}" if state.frame is None else f"stale_camera:{name}")
+        newest = max((image.timestamp for image in frame_set.images.values()), default=frame_set.time)
+        latency = clock.time() - newest
+        if latency > self.max_age:
+            self.deadline_misses += 1
+        self.answers += 1
+        self.last = (frame_set.time, frame_set.why, tuple(seen))
+        self.recent.append(self.last)
+        self._publish(frame_set, result, seen, named)
+        if writer is not None:
+            for k, name in enumerate(self.robot.control_point_names):
+                flags = list(result.flags[k].names) + named
+                writer.writerow([repr(float(frame_set.time)), loop.sets, name, *(repr(float(c)) for c in points[k]),
+                                 repr(float(result.distance[k])), repr(float(result.blind_distance[k])),
+                                 ";".join(flags), ";".join(seen), f"{latency * 1e3:.3f}"])
+
+    def _publish(self, frame_set, result, seen, named) -> None:
+        store = wire.type_store()
+        types = store.types
+        dims = [types["std_msgs/msg/MultiArrayDimension"](label="control_points", size=len(result.distance),
+                                                          stride=len(result.distance))]
+        layout = types["std_msgs/msg/MultiArrayLayout"](dim=dims, data_offset=0)
+        self._distances.put(types[DISTANCES_TYPE](layout=layout, data=np.asarray(result.distance,
+                                                                                  dtype=np.float64)))
+        status = types["diagnostic_msgs/msg/DiagnosticStatus"]
+        value = types["diagnostic_msgs/msg/KeyValue"]
+        statuses = []
+        for k, name in enumerate(self.robot.control_point_names):
+            flags = list(result.flags[k].names) + named
+            level = ERROR if named else (WARN if flags else OK)
+            statuses.append(status(level=level, name=f"depthguard: {name}",
+                                   message=";".join(flags) or "ok", hardware_id="",
+                                   values=[value(key="distance", value=repr(float(result.distance[k])))]))
+        for name in self.rig.cameras:
+            counts = self.counts[name]
+            image = frame_set.images.get(name)
+            age = frame_set.time - image.timestamp if image is not None else math.inf
+            state = "fresh" if name in seen else ("missing" if image is None else "stale")
+            message = state if not counts.info_error else f"{state}; camera_info: {counts.info_error}"
+            statuses.append(status(level=OK if name in seen else ERROR, name=f"depthguard: camera {name}",
+                                   message=message, hardware_id=name,
+                                   values=[value(key="age_ms", value=f"{age * 1e3:.3f}"),
+                                           value(key="received", value=str(counts.received)),
+                                           value(key="missed", value=str(counts.missed))]))
+        ns = max(0, int(round(frame_set.time * 1e9)))
+        self._status.put(types[STATUS_TYPE](header=ros_header(store, ns, ""), status=statuses))

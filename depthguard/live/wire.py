@@ -1,0 +1,187 @@
+"""ROS 2 topics on zenoh as rmw_zenoh and zenoh-bridge-ros2dds lay them out (design §12b): keys, type hashes,
+payloads, attachments and liveliness tokens. Pure functions of strings and bytes: no zenoh in here.
+
+**rmw_zenoh** (ROS 2's zenoh middleware, Jazzy on; ``rmw_zenoh_cpp``'s ``liveliness_utils.cpp``,
+``attachment_helpers.cpp`` and ``docs/design.md``):
+
+- data key: ``<domain>/<topic without its leading and trailing slash>/<pkg>::msg::dds_::<Name>_/RIHS01_<64 hex>``,
+  e.g. ``0/cam/depth/image_raw/sensor_msgs::msg::dds_::Image_/RIHS01_d31d41a9...``;
+- payload: the CDR encapsulation header ``00 01 00 00`` (little-endian CDR) and the message's CDR body;
+- attachment, 33 bytes, mandatory (a subscriber drops a sample without one): the sequence number (int64, little
+  endian, from 1), the source time (int64 nanoseconds since the epoch), 16 (one byte, the gid's length) and the
+  publisher's 16-byte gid;
+- liveliness token per entity: ``@ros2_lv/<domain>/<zenoh id>/<node id>/<entity id>/<MP|MS|NN>/<enclave>/
+  <namespace>/<node>/<topic>/<type>/<hash>/<qos>``, each name with ``/`` written ``%``; the QoS as
+  ``reliability:durability:history,depth:deadline:lifespan:liveliness``, a field left empty where it is rmw_zenoh's
+  default (reliable, volatile, keep last, depth 42).
+
+**zenoh-bridge-ros2dds** (ROS 2 on DDS, bridged): the key is the topic without its leading slash, the payload the
+same CDR bytes, and no attachment.
+
+Type hashes come from ``rosbags``' type store (ROS 2 Jazzy's definitions; Humble's give the same hashes for the
+types used here), which also serialises the messages.
+"""
+
+from __future__ import annotations
+
+import re
+import struct
+from dataclasses import dataclass
+
+from depthguard.errors import InputError
+
+__all__ = ["LAYOUTS", "Attachment", "type_store", "type_name", "type_hash", "data_key", "subscription_key",
+           "key_type_hash", "attachment_bytes", "parse_attachment", "liveliness_key", "serialize", "deserialize",
+           "CDR_HEADER"]
+
+LAYOUTS = ("rmw_zenoh", "bridge")
+#: Little-endian plain CDR (encapsulation kind 0x0001, options 0).
+CDR_HEADER = b"\x00\x01\x00\x00"
+_GID_SIZE = 16
+_ATTACHMENT = struct.Struct("<qqB")
+_TOPIC = re.compile(r"/?(?:[A-Za-z_~{][A-Za-z0-9_{}]*)(?:/[A-Za-z_][A-Za-z0-9_]*)*/?")
+#: rmw_zenoh's QoS of a topic we publish: reliable, volatile, keep last 10 (the fields that differ from its
+#: defaults).
+DEFAULT_QOS = "::,10:,:,:,,"
+
+_STORE = None
+
+
+def type_store():
+    """rosbags' type store of ROS 2 Jazzy, with control_msgs/msg/SpeedScalingFactor registered (made once)."""
+    global _STORE
+    if _STORE is None:
+        from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+        store = get_typestore(Stores.ROS2_JAZZY)
+        if "control_msgs/msg/SpeedScalingFactor" not in store.types:
+            # control_msgs (ros2_control): the speed scaling joint_trajectory_controller takes, 0 to 1.
+            store.register(get_types_from_msg("float64 factor\n", "control_msgs/msg/SpeedScalingFactor"))
+        _STORE = store
+    return _STORE
+
+
+def type_name(msgtype: str) -> str:
+    """The DDS type name rmw_zenoh keys a topic with: ``std_msgs/msg/Float64MultiArray`` ->
+    ``std_msgs::msg::dds_::Float64MultiArray_``."""
+    package, kind, name = _parts(msgtype)
+    return f"{package}::{kind}::dds_::{name}_"
+
+
+def type_hash(msgtype: str) -> str:
+    """``RIHS01_<64 lowercase hex>``: the ROS 2 type hash of ``msgtype`` (``pkg/msg/Name``)."""
+    _parts(msgtype)
+    store = type_store()
+    if msgtype not in store.types:
+        raise InputError(f"unknown message type {msgtype!r}", field="type")
+    return store.hash_rihs01(msgtype)
+
+
+def _parts(msgtype: str) -> tuple[str, str, str]:
+    parts = msgtype.split("/") if isinstance(msgtype, str) else []
+    if len(parts) != 3 or not all(re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", p) for p in parts):
+        raise InputError(f"a message type is pkg/msg/Name, got {msgtype!r}", field="type")
+    return parts[0], parts[1], parts[2]
+
+
+def _check_topic(topic: str) -> str:
+    if not isinstance(topic, str) or not _TOPIC.fullmatch(topic) or "//" in topic:
+        raise InputError(f"not a ROS 2 topic name: {topic!r}", field="topic")
+    return topic.strip("/")
+
+
+def data_key(topic: str, msgtype: str, layout: str = "rmw_zenoh", domain: int = 0) -> str:
+    """The zenoh key a message of ``msgtype`` on ``topic`` is published at, in ``layout``."""
+    name = _check_topic(topic)
+    if layout == "bridge":
+        return name
+    _check_layout(layout)
+    return f"{_check_domain(domain)}/{name}/{type_name(msgtype)}/{type_hash(msgtype)}"
+
+
+def subscription_key(topic: str, msgtype: str, layout: str = "rmw_zenoh", domain: int = 0) -> str:
+    """The key expression a subscriber of ``topic`` declares: rmw_zenoh's with any hash (``*``), so that a
+    publisher of another version of the type is heard, and warned about (:func:`key_type_hash`)."""
+    name = _check_topic(topic)
+    if layout == "bridge":
+        return name
+    _check_layout(layout)
+    return f"{_check_domain(domain)}/{name}/{type_name(msgtype)}/*"
+
+
+def key_type_hash(key: str) -> str | None:
+    """The type hash a sample's rmw_zenoh key carries (its last chunk), None when it holds none."""
+    last = str(key).rsplit("/", 1)[-1]
+    return last if last.startswith("RIHS") else None
+
+
+def _check_layout(layout: str) -> None:
+    if layout not in LAYOUTS:
+        raise InputError(f"layout must be one of {', '.join(LAYOUTS)}, got {layout!r}", field="layout")
+
+
+def _check_domain(domain) -> int:
+    if isinstance(domain, bool) or not isinstance(domain, int) or not 0 <= domain <= 232:
+        raise InputError(f"a ROS domain id is a whole number in [0, 232], got {domain!r}", field="domain")
+    return domain
+
+
+@dataclass(frozen=True)
+class Attachment:
+    """rmw_zenoh's attachment of one sample: sequence number (from 1), source time (nanoseconds since the epoch)
+    and the publisher's 16-byte gid."""
+
+    sequence: int
+    source_ns: int
+    gid: bytes
+
+
+def attachment_bytes(sequence: int, source_ns: int, gid: bytes) -> bytes:
+    """The 33 bytes of rmw_zenoh's attachment."""
+    if len(gid) != _GID_SIZE:
+        raise InputError(f"a publisher gid is {_GID_SIZE} bytes, got {len(gid)}", field="gid")
+    return _ATTACHMENT.pack(sequence, source_ns, _GID_SIZE) + bytes(gid)
+
+
+def parse_attachment(data: bytes | None) -> Attachment | None:
+    """The attachment of an rmw_zenoh sample, None when it has none or it is not one (a bridge's sample)."""
+    if data is None or len(data) != _ATTACHMENT.size + _GID_SIZE:
+        return None
+    sequence, source_ns, size = _ATTACHMENT.unpack_from(data)
+    if size != _GID_SIZE:
+        return None
+    return Attachment(sequence, source_ns, bytes(data[_ATTACHMENT.size:]))
+
+
+def _mangle(name: str) -> str:
+    return name.replace("/", "%")
+
+
+def liveliness_key(zid: str, entity: int, kind: str, node: str, topic: str | None = None, msgtype: str | None = None,
+                   domain: int = 0, namespace: str = "/", qos: str = DEFAULT_QOS, node_id: int = 0,
+                   enclave: str = "/") -> str:
+    """rmw_zenoh's liveliness token of a node (``kind`` ``"NN"``), a publisher (``"MP"``) or a subscriber
+    (``"MS"``) of ``topic`` carrying ``msgtype``; ``zid``: the zenoh session's id (hex)."""
+    if kind not in ("NN", "MP", "MS"):
+        raise InputError(f"an entity kind is NN, MP or MS, got {kind!r}", field="kind")
+    head = [ "@ros2_lv", str(_check_domain(domain)), zid, str(node_id), str(entity), kind, _mangle(enclave),
+            _mangle(namespace), node]
+    if kind == "NN":
+        return "/".join(head)
+    _check_topic(topic)
+    return "/".join(head + [_mangle(topic), type_name(msgtype), type_hash(msgtype), qos])
+
+
+def serialize(message, msgtype: str) -> bytes:
+    """The CDR bytes (with the encapsulation header) of a rosbags message object."""
+    return bytes(type_store().serialize_cdr(message, msgtype))
+
+
+def deserialize(data: bytes, msgtype: str):
+    """A rosbags message object from CDR bytes; :class:`InputError` naming the type when they are not one."""
+    if len(data) < 4 or data[:2] not in (b"\x00\x01", b"\x00\x00"):
+        raise InputError(f"not a CDR {msgtype} (encapsulation {bytes(data[:4]).hex() or 'none'})", field="payload")
+    try:
+        return type_store().deserialize_cdr(bytes(data), msgtype)
+    except Exception as exc:  # noqa: BLE001 - rosbags' errors for truncated or garbled bytes
+        raise InputError(f"not a CDR {msgtype} ({type(exc).__name__}: {str(exc)[:120]})", field="payload") from None

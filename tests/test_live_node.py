@@ -1,0 +1,197 @@
+"""``depthguard live`` (design §12b) with the ROS side played by the test's own zenoh publisher (tests/ros_publisher.py)
+on 127.0.0.1: the node's answers equal a DistanceMonitor's on the same frames, joints and stamps, bit for bit, in
+both layouts; images big-endian or with padded rows read the same; a CameraInfo that disagrees leaves its camera out
+and names the field; a wrong type hash is heard and warned about; --dry-run says what is missing or wrong."""
+
+from __future__ import annotations
+
+import csv
+import logging
+import time
+
+import numpy as np
+import pytest
+
+import depthguard as dg
+from cli_support import run_cli
+from depthguard.io.recordings import open_recording
+from depthguard.live import LiveNode, LiveOptions, Topics
+from depthguard.robots import RobotModel
+from depthguard_lab.simulation import default_workcell, write_episode
+from ros_publisher import RosPublisher
+
+OPTIONS = dict(rho=0.4, aggregate="hybrid", invalid="occupied")
+FRAMES = 3
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    workcell = default_workcell().scaled(0.25)  # two 160x120 cameras
+    folder = write_episode(workcell, tmp_path_factory.mktemp("live") / "episode", seed=0, progress=False,
+                           frames=range(FRAMES))
+    return open_recording(folder)
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return RobotModel.default()
+
+
+def topics(rig):
+    return Topics({n: (Topics.default_image(n), Topics.info_of(Topics.default_image(n))) for n in rig.cameras})
+
+
+def wait_for(condition, timeout=30.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if condition():
+            return True
+        time.sleep(0.01)
+    return False
+
+
+def play(recording, robot, tmp_path, layout="rmw_zenoh", odd_images=False, info=None, type_hash=None):
+    """Publish the recording's sets one by one, each restamped now, waiting for the node's answer to it. Returns
+    (the node's CSV rows, [(stamp, {camera: data}, joints)] as published, the publisher's answers, the node)."""
+    rig = recording.rig
+    publisher = RosPublisher(rig, recording.joint_names, layout=layout, type_hash=type_hash)
+    node = LiveNode(rig, robot, topics(rig), LiveOptions(layout=layout, connect=[publisher.endpoint], transport=1.0), OPTIONS,
+                    out=tmp_path / "live.csv")
+    # The host's clock held back 1 s (LiveOptions.transport): a frame delayed by this busy machine still joins its
+    # set, so that the sets are those of the stamps alone.
+    published = []
+    try:
+        node.start()
+        time.sleep(0.3)  # the client's subscriptions reach the peer
+        for i, frame_set in enumerate(recording.frame_sets()):
+            ns = time.time_ns()
+            q = recording.joints_at(frame_set.time)
+            publisher.publish_joints(ns, q)
+            # zenoh orders samples per key, not across keys: the joint state is in before the frames go.
+            assert wait_for(lambda: node.joint_states > i)
+            data = {}
+            for camera, image in frame_set.images.items():
+                odd = odd_images and i == 1
+                publisher.publish_frame(camera, ns, image.data, big_endian=odd, padding=6 if odd else 0,
+                                        info=info(camera) if info else None)
+                data[camera] = image.data
+            published.append((ns, data, q))
+            assert wait_for(lambda: any(t >= ns / 1e9 and why != "idle" for t, why, _ in list(node.recent))), (i, ns, list(node.errors), list(node.recent)[:5], node.counts)
+    finally:
+        node.close()
+        publisher.close()
+    with open(tmp_path / "live.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    return rows, published, publisher.answers, node
+
+
+def expected(recording, robot, published, cameras=None):
+    """{stamp: (distances as repr strings, flags)} from a DistanceMonitor given the same frames, joints, stamps."""
+    rig = recording.rig
+    monitor = dg.DistanceMonitor(rig, robot=robot, **OPTIONS)
+    out = {}
+    for ns, data, q in published:
+        t = ns / 1e9
+        frames = {n: dg.depth_image(d, rig.cameras[n], timestamp=t) for n, d in data.items()
+                  if cameras is None or n in cameras}
+        result = monitor.query(frames, robot.control_point_positions(q), camera_joints={n: q for n in frames}, now=t)
+        out[repr(t)] = ([repr(float(d)) for d in result.distance], [";".join(f.names) for f in result.flags])
+    return out
+
+
+@pytest.mark.parametrize("layout", ["rmw_zenoh", "bridge"])
+def test_live_answers_equal_the_monitor_on_the_same_frames(recording, robot, tmp_path, layout):
+    rows, published, answers, node = play(recording, robot, tmp_path, layout=layout, odd_images=True)
+    truth = expected(recording, robot, published)
+    answered = {}
+    for row in rows:
+        if row["time"] in truth and row["cameras"] == "principal;second":
+            answered.setdefault(row["time"], []).append(row)
+    assert set(answered) == set(truth)  # every published set answered with both cameras seen
+    for t, (distances, flags) in truth.items():
+        assert [r["distance"] for r in answered[t]] == distances
+        assert [r["flags"] for r in answered[t]] == flags
+        assert [r["control_point"] for r in answered[t]] == list(robot.control_point_names)
+    finite = [float(d) for d, _ in [(x, 0) for v in truth.values() for x in v[0]]]
+    assert any(d < 0.4 for d in finite)  # answers of something, not of empty space
+    # What ros2 topic echo would read: one Float64MultiArray per answer at the layout's key.
+    keys = {key for key, _, _ in answers}
+    if layout == "rmw_zenoh":
+        assert keys == {"0/depthguard/distances/std_msgs::msg::dds_::Float64MultiArray_/RIHS01_1025ddc6b9552d191f89"
+                        "ef1a8d2f60f3d373e28b283d8891ddcc974e8c55397f"}
+        assert all(has for _, has, _ in answers)
+    else:
+        assert keys == {"depthguard/distances"} and not any(has for _, has, _ in answers)
+    assert all(len(data) == 9 for _, _, data in answers)
+    assert node.counts["principal"].received == FRAMES and node.counts["principal"].errors == 0
+
+
+def test_a_camera_info_that_disagrees_leaves_the_camera_out_and_named(recording, robot, tmp_path):
+    rig = recording.rig
+    store_info = {}
+
+    def info(camera):
+        from depthguard.io.ros_messages import depth_messages
+        from depthguard.live.wire import type_store
+
+        message, _ = depth_messages(type_store(), 0, rig.cameras[camera], np.zeros((1, 1), np.uint16))
+        if camera == "second":
+            k = message.k.copy()
+            k[0] += 5.0
+            message = type(message)(**{**{f: getattr(message, f) for f in message.__dataclass_fields__}, "k": k})
+        store_info[camera] = message
+        return message
+
+    rows, published, _, node = play(recording, robot, tmp_path, info=info)
+    assert "fx" in node.counts["second"].info_error
+    assert node.counts["principal"].info_error == ""
+    # Each set waited for the second camera (config.FRAME_SET_WAIT) and went on without it.
+    now = published[-1][0] / 1e9 + dg.config.FRAME_SET_WAIT
+    last = [r for r in rows if r["time"] == repr(now)]
+    assert len(last) == 9 and all(r["cameras"] == "principal" for r in last)
+    assert all("missing_camera:second" in r["flags"] for r in last), [r["flags"] for r in last]
+    monitor = dg.DistanceMonitor(rig, robot=robot, **OPTIONS)
+    for ns, data, q in published:
+        frames = {"principal": dg.depth_image(data["principal"], rig.cameras["principal"], timestamp=ns / 1e9)}
+        result = monitor.query(frames, robot.control_point_positions(q), camera_joints={"principal": q},
+                               now=ns / 1e9 + dg.config.FRAME_SET_WAIT)
+    assert [r["distance"] for r in last] == [repr(float(d)) for d in result.distance]
+
+
+def test_a_wrong_type_hash_is_heard_and_named(recording, robot, tmp_path, caplog):
+    with caplog.at_level(logging.WARNING, logger="depthguard"):
+        rows, published, _, node = play(recording, robot, tmp_path, type_hash="RIHS01_" + "0" * 64)
+    warnings = [r.getMessage() for r in caplog.records if "type hash" in r.getMessage()]
+    assert any("/principal/depth/image_raw" in w and "RIHS01_" + "0" * 64 in w for w in warnings)
+    assert node.counts["principal"].received == FRAMES
+
+
+def test_dry_run_says_what_is_missing(recording, tmp_path, capsys):
+    rig_file = tmp_path / "rig.yaml"
+    dg.save_rig(recording.rig, rig_file)
+    publisher = RosPublisher(recording.rig, recording.joint_names)
+    try:
+        status, out, err = run_cli(["live", "--rig", rig_file, "--connect", publisher.endpoint, "--dry-run",
+                                    "--dry-run-wait", "0.5"], capsys)
+        assert status == 2 and "no image on /principal/depth/image_raw" in err
+        stop = time.monotonic() + 3.0
+
+        def keep_publishing():
+            frame_set = next(recording.frame_sets())
+            while time.monotonic() < stop:
+                ns = time.time_ns()
+                publisher.publish_joints(ns, recording.joints_at(frame_set.time))
+                for camera, image in frame_set.images.items():
+                    publisher.publish_frame(camera, ns, image.data)
+                time.sleep(0.05)
+
+        import threading
+
+        thread = threading.Thread(target=keep_publishing)
+        thread.start()
+        status, out, err = run_cli(["live", "--rig", rig_file, "--connect", publisher.endpoint, "--dry-run",
+                                    "--dry-run-wait", "2.5"], capsys)
+        thread.join()
+        assert status == 0 and "agree" in out, err
+    finally:
+        publisher.close()

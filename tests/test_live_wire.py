@@ -1,0 +1,69 @@
+"""rmw_zenoh's and the bridge's wire format (depthguard.live.wire), pinned by golden strings and bytes taken from
+rmw_zenoh's sources and design document and from ROS 2's published type hashes."""
+
+import numpy as np
+import pytest
+
+from depthguard.errors import InputError
+from depthguard.live import wire
+
+IMAGE_HASH = "RIHS01_d31d41a9a4c4bc8eae9be757b0beed306564f7526c88ea6a4588fb9582527d47"
+FLOAT64_ARRAY_HASH = "RIHS01_1025ddc6b9552d191f89ef1a8d2f60f3d373e28b283d8891ddcc974e8c55397f"
+STRING_HASH = "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"  # rmw_zenoh's design.md
+
+
+def test_type_hashes_are_ros_2s():
+    assert wire.type_hash("sensor_msgs/msg/Image") == IMAGE_HASH
+    assert wire.type_hash("std_msgs/msg/Float64MultiArray") == FLOAT64_ARRAY_HASH
+    assert wire.type_hash("std_msgs/msg/String") == STRING_HASH
+
+
+def test_keys_in_each_layout():
+    assert wire.data_key("/cam/depth/image_raw", "sensor_msgs/msg/Image") == \
+        f"0/cam/depth/image_raw/sensor_msgs::msg::dds_::Image_/{IMAGE_HASH}"
+    assert wire.data_key("/depthguard/distances", "std_msgs/msg/Float64MultiArray", domain=7) == \
+        f"7/depthguard/distances/std_msgs::msg::dds_::Float64MultiArray_/{FLOAT64_ARRAY_HASH}"
+    assert wire.subscription_key("/joint_states", "sensor_msgs/msg/JointState") == \
+        "0/joint_states/sensor_msgs::msg::dds_::JointState_/*"
+    assert wire.data_key("/cam/depth/image_raw", "sensor_msgs/msg/Image", layout="bridge") == "cam/depth/image_raw"
+    assert wire.key_type_hash(wire.data_key("/a", "sensor_msgs/msg/Image")) == IMAGE_HASH
+    assert wire.key_type_hash("a/b") is None
+
+
+@pytest.mark.parametrize("bad", ["", "/", "a//b", "/a b", "/1a"])
+def test_bad_topic_names_are_refused(bad):
+    with pytest.raises(InputError, match="topic"):
+        wire.data_key(bad, "sensor_msgs/msg/Image")
+
+
+def test_attachment_bytes():
+    data = wire.attachment_bytes(1, 0x0102030405060708, bytes(range(16)))
+    assert data.hex() == "0100000000000000" "0807060504030201" "10" + bytes(range(16)).hex()
+    parsed = wire.parse_attachment(data)
+    assert (parsed.sequence, parsed.source_ns, parsed.gid) == (1, 0x0102030405060708, bytes(range(16)))
+    assert wire.parse_attachment(None) is None and wire.parse_attachment(data[:-1]) is None
+
+
+def test_liveliness_tokens():
+    assert wire.liveliness_key("abc", 0, "NN", "depthguard") == "@ros2_lv/0/abc/0/0/NN/%/%/depthguard"
+    assert wire.liveliness_key("abc", 3, "MP", "depthguard", "/depthguard/distances",
+                               "std_msgs/msg/Float64MultiArray") == (
+        "@ros2_lv/0/abc/0/3/MP/%/%/depthguard/%depthguard%distances/std_msgs::msg::dds_::Float64MultiArray_/"
+        f"{FLOAT64_ARRAY_HASH}/::,10:,:,:,,")
+
+
+def test_cdr_of_a_distances_message():
+    types = wire.type_store().types
+    layout = types["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
+    message = types["std_msgs/msg/Float64MultiArray"](layout=layout, data=np.array([0.5, np.inf]))
+    data = wire.serialize(message, "std_msgs/msg/Float64MultiArray")
+    # header; layout.dim (empty), layout.data_offset; data's length 2, 4 bytes of padding (float64 is 8-aligned from
+    # the body's start), 0.5 and inf little endian
+    assert data.hex() == ("00010000" "00000000" "00000000" "02000000" "00000000" "000000000000e03f"
+                          "000000000000f07f")
+    back = wire.deserialize(data, "std_msgs/msg/Float64MultiArray")
+    assert list(back.data) == [0.5, np.inf]
+    with pytest.raises(InputError, match="CDR"):
+        wire.deserialize(b"\x07\x07", "std_msgs/msg/Float64MultiArray")
+    with pytest.raises(InputError, match="CDR"):
+        wire.deserialize(data[:-3], "std_msgs/msg/Float64MultiArray")
