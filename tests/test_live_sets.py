@@ -97,13 +97,29 @@ def test_a_frame_without_joints_near_its_stamp_is_left_out_and_named():
     loop = FrameSetLoop(("a", "b"), wait=0.02, idle=0.1)
     loop.add_joints(1.0, [0.0])
     loop.add_frame(frame("a", 1.001))  # held: 1 ms after the last joint state
-    (s,) = loop.add_frame(frame("b", 1.015))  # 15 ms after it: no joints
-    assert s.why == "complete" and list(s.images) == ["a"] and s.no_joints == ("b",)
+    assert loop.add_frame(frame("b", 1.015)) == []  # 15 ms after it: the next joint state may still bracket it
+    (s,) = loop.tick(1.021)  # it did not come within the wait
+    assert s.why == "waited" and list(s.images) == ["a"] and s.no_joints == ("b",)
     loop.add_joints(1.01, [1.0])
     loop.add_joints(1.02, [2.0])
     (s,) = loop.tick(1.2)  # the joints came later: b's frame is in the next set
     assert s.why == "idle" and list(s.images) == ["a", "b"] and s.no_joints == ()
     np.testing.assert_allclose(s.joints["b"], [1.5])
+    # A frame 0.2 s after the last joint state: no state can come near enough, so the set does not wait for one.
+    loop.add_frame(frame("a", 1.4))
+    (s,) = loop.add_frame(frame("b", 1.4))
+    assert s.why == "complete" and s.no_joints == ("a", "b")
+
+
+def test_a_complete_set_waits_for_the_joint_state_after_its_stamps():
+    loop = FrameSetLoop(("a", "b"), wait=0.02, idle=0.1)
+    loop.add_joints(1.000, [0.0])
+    loop.add_frame(frame("a", 1.003))
+    assert loop.add_frame(frame("b", 1.008)) == []  # b's joints: after the last state by more than JOINT_HOLD
+    (s,) = loop.add_joints(1.010, [1.0])
+    assert (s.why, s.time, s.no_joints) == ("complete", 1.008, ())
+    np.testing.assert_allclose(s.joints["a"], [0.3])
+    np.testing.assert_allclose(s.joints["b"], [0.8])
 
 
 def test_a_stamp_that_goes_back_resets_the_camera():

@@ -256,6 +256,12 @@ def test_replay_gives_each_camera_its_own_joints(episode, tmp_path, capsys):
     times.update({("second", 0): 0.01, ("second", 1): 0.043333, ("second", 2): float(f"{2 / 30:.6f}")})
     rows = "".join(f"{camera},{i},{t!r}\n" for (camera, i), t in times.items())
     (folder / "frames.csv").write_text("camera,frame,time\n" + rows)
+    # Joint states at 500 Hz, as a robot publishes them: each frame's joints are interpolated between the two
+    # states around its stamp (the frame-set loop, design §12b, asks for states within JOINT_GAP).
+    workcell = default_workcell()
+    names = RobotModel.default().joint_names
+    lines = [f"{k * 0.002!r}," + ",".join(repr(float(v)) for v in workcell.joints_at(k * 0.002)) for k in range(40)]
+    (folder / "joint_states.csv").write_text("time," + ",".join(names) + "\n" + "\n".join(lines) + "\n")
     status, _, err = run_cli(["replay", folder, "--out", tmp_path / "r.csv"], capsys)
     assert status == 0, err
     rows = read_csv(tmp_path / "r.csv")[1:]

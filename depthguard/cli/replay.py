@@ -8,8 +8,8 @@ import sys
 
 from depthguard.cli.options import add_monitor_options, load_robot, monitor_options
 
-HELP = ('run a recording (folder or ROS 2 bag, docs/design.md §12a) through the monitor in capture-time '
-        'order, one answer per set of frames')
+HELP = ('run a recording (folder or ROS 2 bag, docs/design.md §12a) through the monitor as the live node would '
+        '(§12b): frames grouped by stamp, one answer per set of frames')
 
 
 def add_arguments(parser) -> None:
@@ -39,20 +39,18 @@ def run(args) -> int:
     from depthguard.errors import InputError
     from depthguard.io.files import atomic_write
     from depthguard.io.recordings import open_recording
+    from depthguard.live import RESULT_COLUMNS, FrameSetLoop, answer_set
 
     out = Path(args.out)
     if out.exists() and not out.is_file():  # a folder, a FIFO, a device: never written to
         raise InputError(f"--out {args.out}: exists and is not a regular file")
-    recording = open_recording(args.recording, rig=args.rig)
+    recording = open_recording(args.recording, rig=args.rig, replay=True)
     robot = load_robot(args.robot)
     names = recording.joint_names
-    if set(names) != set(robot.joint_names) or len(names) != len(robot.joint_names):
-        missing = [n for n in robot.joint_names if n not in names]
-        unknown = [n for n in names if n not in robot.joint_names]
-        raise InputError(f"the recording's joints are not the robot's ({robot.name}): "
-                         + "; ".join(part for part in (f"missing {', '.join(missing)}" if missing else "",
-                                                       f"not the robot's {', '.join(unknown)}" if unknown else "")
-                                     if part), source=str(recording.path), field="joints")
+    missing = [n for n in robot.joint_names if n not in names]
+    if missing:  # joints beyond the robot's (a gripper's) are ignored
+        raise InputError(f"the recording's joints lack the robot's ({robot.name}) {', '.join(missing)}",
+                         source=str(recording.path), field="joints")
     order = [names.index(n) for n in robot.joint_names]  # recording's joint order -> the robot's
     if args.points is not None:
         from depthguard.io.points import load_points
@@ -64,25 +62,39 @@ def run(args) -> int:
     else:
         fixed = None
         point_names = list(robot.control_point_names)
+    for camera, why in recording.left_out.items():
+        print(f"depthguard replay: camera {camera} left out: {why}", file=sys.stderr)
     monitor = DistanceMonitor(recording.rig, robot=robot, **monitor_options(args))
+    # The live node's loop (design §12b), driven by the recording's stamps: the same sets, joints and answers.
+    loop = FrameSetLoop(tuple(recording.rig.cameras), idle=args.max_age)
     distances, flagged, answered = [], 0, 0
     with atomic_write(out, newline="") as f:  # --out appears once every set is answered
         writer = csv.writer(f)
-        writer.writerow(["time", "frame", "control_point", "x", "y", "z", "distance", "blind_distance", "flags"])
-        print(f"replaying {len(recording)} frame sets ...", file=sys.stderr, flush=True)
-        for frame_set in recording.frame_sets():
-            points = fixed if fixed is not None else \
-                robot.control_point_positions(recording.joints_at(frame_set.time)[order])
-            camera_joints = {camera: q[order] for camera, q in frame_set.joints.items()}
-            result = monitor.query(frame_set.images, points, camera_joints=camera_joints, now=frame_set.time)
-            for i, name in enumerate(point_names):
-                flags = result.flags[i].names
-                writer.writerow([repr(float(frame_set.time)), frame_set.frame, name,
-                                 *(repr(float(c)) for c in points[i]), repr(float(result.distance[i])),
-                                 repr(float(result.blind_distance[i])), ";".join(flags)])
-                flagged += bool(flags)
-            distances.append(np.asarray(result.distance, dtype=np.float64))
-            answered += 1
+        writer.writerow(RESULT_COLUMNS)
+        print(f"replaying {len(recording.frames)} frames ...", file=sys.stderr, flush=True)
+
+        def answer(sets):
+            nonlocal flagged, answered
+            for frame_set in sets:
+                result = answer_set(monitor, loop, frame_set, robot=robot, points=fixed)
+                if result is None:
+                    continue
+                rows = result.rows(point_names)
+                writer.writerows(rows)
+                flagged += sum(1 for row in rows if row[-1])
+                distances.append(np.asarray(result.result.distance, dtype=np.float64))
+                answered += 1
+
+        last = None
+        for kind, time, payload in recording.messages():
+            answer(loop.tick(time))
+            if kind == "joints":
+                answer(loop.add_joints(time, payload[order]))
+            elif payload.camera not in recording.left_out:
+                answer(loop.add_frame(payload))
+            last = time
+        if last is not None:
+            answer(loop.tick(last + loop.wait))  # a set still waiting for a camera at the end
     if args.json:
         values = np.concatenate(distances) if distances else np.zeros(0)
         finite = lambda x: None if not math.isfinite(x) else float(x)  # noqa: E731 - inf: nothing within rho

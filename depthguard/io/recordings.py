@@ -134,7 +134,7 @@ class Recording:
     """
 
     def __init__(self, path: Path, kind: str, rig: Rig, joint_names, joint_times, joint_positions, frames,
-                 joints_source: str, reader):
+                 joints_source: str, reader, replay: bool = False, left_out: dict | None = None):
         self.path = path
         self.kind = kind
         self.rig = rig
@@ -147,8 +147,11 @@ class Recording:
         self._joints_source = joints_source
         # The layout's image reader: reader(sets) yields (frame, time, records, {camera: DepthImage}) per set.
         self._reader = reader
-        for record in self.frames:  # every capture time inside the joints' span, checked before any replay
-            self._check_time(record.time, camera=record.camera, frame=record.frame)
+        #: camera -> why it is left out (replay=True: its camera_info disagrees with the rig), naming the field
+        self.left_out = dict(left_out or {})
+        if not replay:
+            for record in self.frames:  # every capture time inside the joints' span, checked before any replay
+                self._check_time(record.time, camera=record.camera, frame=record.frame)
         self._sets = _schedule(self.frames, list(rig.cameras))
 
     def __repr__(self) -> str:
@@ -203,7 +206,29 @@ class Recording:
             yield FrameSet(frame=frame, time=time, images=images, joints=joints)
 
 
-def open_recording(path, rig=None) -> Recording:
+    def messages(self) -> Iterator[tuple]:
+        """Every joint state and depth image in time order, as the live node receives them (design §12b):
+        ``("joints", time, (n,) float64 in joint_names order)`` and ``("frame", time, DepthImage)``; a joint state
+        comes before a frame of the same time. Images are read as they are reached."""
+        buffered: dict[tuple[str, int], DepthImage] = {}
+        sets = self._reader(self._sets)
+        j = 0
+        times = self.joint_times
+        for record in self.frames:
+            while j < len(times) and times[j] <= record.time:
+                yield "joints", float(times[j]), self.joint_positions[j]
+                j += 1
+            key = (record.camera, record.frame)
+            while key not in buffered:
+                _, _, records, images = next(sets)
+                buffered.update({(r.camera, r.frame): images[r.camera] for r in records})
+            yield "frame", record.time, buffered.pop(key)
+        while j < len(times):
+            yield "joints", float(times[j]), self.joint_positions[j]
+            j += 1
+
+
+def open_recording(path, rig=None, *, replay: bool = False) -> Recording:
     """Open a recording: a recording folder (with ``frames.csv``), a rosbag2 folder (with ``metadata.yaml``) or a
     bare ``.mcap`` file (see the module docstring for the layouts).
 
@@ -211,6 +236,10 @@ def open_recording(path, rig=None) -> Recording:
         path: the folder or file.
         rig: the rig, as a :class:`~depthguard.Rig` or a rig file; default: ``rig.yaml`` in the recording folder,
             in the bag folder, or beside the ``.mcap`` file.
+        replay: open it for :meth:`Recording.messages` (``depthguard replay``, design §12b), as the live node
+            takes its input: a camera whose camera_info disagrees with the rig is left out (``left_out`` names the
+            field) rather than refused, and capture times outside the joint states are not refused (the frame-set
+            loop counts a frame without joints near its stamp as blind).
 
     Raises :class:`InputError` (or :class:`~depthguard.RigError` for the rig file) naming the file, the camera and
     the field at fault.
@@ -218,14 +247,14 @@ def open_recording(path, rig=None) -> Recording:
     path = check_path(path, "recording")
     if path.is_dir():
         if (path / "metadata.yaml").exists():
-            return _open_bag(path, rig, folder=True)
+            return _open_bag(path, rig, folder=True, replay=replay)
         if (path / "frames.csv").exists():
-            return _open_folder(path, rig)
+            return _open_folder(path, rig, replay=replay)
         raise InputError("is neither a recording folder (no frames.csv) nor a rosbag2 folder (no metadata.yaml)",
                          source=str(path))
     if path.suffix.lower() == ".mcap":
         check_regular_file(path, what="MCAP bag", max_bytes=MAX_BAG_FILE_BYTES)
-        return _open_bag(path, rig, folder=False)
+        return _open_bag(path, rig, folder=False, replay=replay)
     if not path.exists():
         raise InputError("no such recording (a recording folder, a rosbag2 folder or an .mcap file)",
                          source=str(path))
@@ -285,7 +314,7 @@ def _check_cameras_present(rig: Rig, frames: list, source: str, where: str) -> N
 # ------------------------------------------------------------------------------------------ recording folders
 
 
-def _open_folder(path: Path, rig) -> Recording:
+def _open_folder(path: Path, rig, replay: bool = False) -> Recording:
     rig = _rig_of(rig, path / "rig.yaml")
     frames_path = path / "frames.csv"
     frames = _read_frames_csv(frames_path, rig)
@@ -310,7 +339,7 @@ def _open_folder(path: Path, rig) -> Recording:
                     for r in records}
             yield frame, time, records, data
 
-    return Recording(path, "folder", rig, names, times, positions, frames, str(joints_path), read)
+    return Recording(path, "folder", rig, names, times, positions, frames, str(joints_path), read, replay=replay)
 
 
 def _csv_rows(text: str, source: Path):
@@ -479,7 +508,7 @@ def _check_bag_files(path: Path) -> None:
         check_regular_file(path / Path(name).name, what="bag storage file", max_bytes=MAX_BAG_FILE_BYTES)
 
 
-def _open_bag(path: Path, rig, folder: bool) -> Recording:
+def _open_bag(path: Path, rig, folder: bool, replay: bool = False) -> Recording:
     if folder:
         _check_bag_files(path)
     rig = _rig_of(rig, (path if folder else path.parent) / "rig.yaml")
@@ -513,6 +542,7 @@ def _open_bag(path: Path, rig, folder: bool) -> Recording:
         info_cameras = {topics[name]["camera_info"].id: name for name in rig.cameras}
         wanted = [joints_connection] + [topics[n][k] for n in rig.cameras for k in ("image_raw", "camera_info")]
         frames: list[FrameRecord] = []
+        left_out: dict[str, str] = {}  # replay: camera -> why its camera_info leaves it out
         counts = {name: 0 for name in rig.cameras}
         joint_names, joint_times, joint_rows = None, [], []
         for connection, _, raw in bag.messages(wanted):
@@ -524,7 +554,13 @@ def _open_bag(path: Path, rig, folder: bool) -> Recording:
                 frames.append(FrameRecord(camera, counts[camera], header_seconds(message, source, camera, counts[camera])))
                 counts[camera] += 1
             elif connection.id in info_cameras:
-                check_camera_info(message, rig.cameras[info_cameras[connection.id]], source)
+                camera = info_cameras[connection.id]
+                try:
+                    check_camera_info(message, rig.cameras[camera], source)
+                except InputError as exc:
+                    if not replay:
+                        raise
+                    left_out.setdefault(camera, str(exc))
             else:
                 index = len(joint_times)
                 names, values = joint_state(message, source, index)
@@ -580,7 +616,7 @@ def _open_bag(path: Path, rig, folder: bool) -> Recording:
             raise InputError(f"the bag changed while it was read: frame {current[0]} is incomplete", source=source)
 
     return Recording(path, "bag", rig, joint_names, joint_times, np.array(joint_rows), frames,
-                     f"{source} {JOINT_STATES_TOPIC}", read)
+                     f"{source} {JOINT_STATES_TOPIC}", read, replay=replay, left_out=left_out)
 
 
 def _check_type(connection, msgtype: str, source: str) -> None:

@@ -12,6 +12,7 @@ The middleware (``eclipse-zenoh``) is an optional extra, ``pip install 'depthgua
 
 from depthguard.live import wire
 from depthguard.live._node import LiveNode, LiveOptions, Topics
-from depthguard.live._sets import FrameSet, FrameSetLoop, JointHistory
+from depthguard.live._sets import RESULT_COLUMNS, FrameSet, FrameSetLoop, JointHistory, SetAnswer, answer_set
 
-__all__ = ["FrameSet", "FrameSetLoop", "JointHistory", "LiveNode", "LiveOptions", "Topics", "wire"]
+__all__ = ["RESULT_COLUMNS", "FrameSet", "FrameSetLoop", "JointHistory", "LiveNode", "LiveOptions", "SetAnswer", "Topics",
+           "answer_set", "wire"]

@@ -38,7 +38,7 @@ from depthguard.errors import DepthguardError, InputError
 from depthguard.io.ros_messages import (CAMERA_INFO, IMAGE, JOINT_STATE, check_camera_info, header_seconds,
                                         image_array, joint_state, ros_header)
 from depthguard.live import wire
-from depthguard.live._sets import FrameSetLoop
+from depthguard.live._sets import RESULT_COLUMNS, FrameSetLoop, answer_set
 
 _LOG = logging.getLogger("depthguard")
 
@@ -49,8 +49,7 @@ STATUS_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 #: Diagnostic levels (diagnostic_msgs/msg/DiagnosticStatus).
 OK, WARN, ERROR = 0, 1, 2
 NODE_NAME = "depthguard"
-CSV_HEADER = ["time", "frame", "control_point", "x", "y", "z", "distance", "blind_distance", "flags", "cameras",
-              "latency_ms"]
+CSV_HEADER = RESULT_COLUMNS + ["cameras", "latency_ms"]
 
 
 @dataclass
@@ -315,11 +314,11 @@ class LiveNode:
             while not self._stop.is_set():
                 self._wake.wait(0.005)
                 self._wake.clear()
+                sets = []
                 while self._joints:
-                    loop.add_joints(*self._joints.popleft())
+                    sets += loop.add_joints(*self._joints.popleft())
                 with self._lock:
                     frames, self._frames = self._frames, {}
-                sets = []
                 for name, image in sorted(frames.items(), key=lambda item: item[1].timestamp):
                     if self.counts[name].info_error:
                         continue  # its CameraInfo disagrees with the rig: left out, named in the status
@@ -328,7 +327,11 @@ class LiveNode:
                 if len(sets) > 1:
                     self.dropped += len(sets) - 1
                 if sets:
-                    self._answer(monitor, loop, sets[-1], writer)
+                    try:
+                        self._answer(monitor, loop, sets[-1], writer)
+                    except Exception as exc:  # noqa: BLE001 - the loop must keep answering; the fault is kept
+                        self.errors.append(f"answering the set at {sets[-1].time!r} s: {type(exc).__name__}: {exc}")
+                        _LOG.exception("depthguard live: a set could not be answered")
                     if out_file is not None:
                         out_file.flush()
         finally:
@@ -336,41 +339,27 @@ class LiveNode:
                 out_file.close()
 
     def _answer(self, monitor, loop, frame_set, writer) -> None:
-        q = loop.joints.at(frame_set.time)
-        if q is None:
-            q = next(reversed(frame_set.joints.values()), None) if frame_set.joints else None
-        if q is None:  # no joints at all: the robot's points are unknown; nothing to answer
-            return
-        points = self.robot.control_point_positions(q)
         try:
-            result = monitor.query(frame_set.images, points, camera_joints=frame_set.joints, now=frame_set.time)
+            answer = answer_set(monitor, loop, frame_set, robot=self.robot)
         except DepthguardError as exc:
             self.errors.append(str(exc))
             return
-        seen = [n for n in self.rig.cameras if n in frame_set.images
-                and not monitor.is_stale(frame_set.images[n].timestamp, frame_set.time)]
-        named = []
-        for name in self.rig.cameras:
-            if name in seen:
-                continue
-            state = loop.camera(name)
-            named.append(f"missing_camera:{name}" if state.frame is None else f"stale_camera:{name}")
+        if answer is None:  # no joints at all yet: the robot's points are unknown
+            return
         newest = max((image.timestamp for image in frame_set.images.values()), default=frame_set.time)
         latency = clock.time() - newest
         if latency > self.max_age:
             self.deadline_misses += 1
         self.answers += 1
-        self.last = (frame_set.time, frame_set.why, tuple(seen))
+        self.last = (frame_set.time, frame_set.why, answer.seen)
         self.recent.append(self.last)
-        self._publish(frame_set, result, seen, named)
+        self._publish(answer)
         if writer is not None:
-            for k, name in enumerate(self.robot.control_point_names):
-                flags = list(result.flags[k].names) + named
-                writer.writerow([repr(float(frame_set.time)), loop.sets, name, *(repr(float(c)) for c in points[k]),
-                                 repr(float(result.distance[k])), repr(float(result.blind_distance[k])),
-                                 ";".join(flags), ";".join(seen), f"{latency * 1e3:.3f}"])
+            for row in answer.rows(self.robot.control_point_names):
+                writer.writerow(row + [";".join(answer.seen), f"{latency * 1e3:.3f}"])
 
-    def _publish(self, frame_set, result, seen, named) -> None:
+    def _publish(self, answer) -> None:
+        frame_set, result, seen, named = answer.frame_set, answer.result, answer.seen, answer.named
         store = wire.type_store()
         types = store.types
         dims = [types["std_msgs/msg/MultiArrayDimension"](label="control_points", size=len(result.distance),
@@ -382,7 +371,7 @@ class LiveNode:
         value = types["diagnostic_msgs/msg/KeyValue"]
         statuses = []
         for k, name in enumerate(self.robot.control_point_names):
-            flags = list(result.flags[k].names) + named
+            flags = answer.flags(k)
             level = ERROR if named else (WARN if flags else OK)
             statuses.append(status(level=level, name=f"depthguard: {name}",
                                    message=";".join(flags) or "ok", hardware_id="",

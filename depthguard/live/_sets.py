@@ -8,7 +8,8 @@ same sets whichever drives it, as long as every frame arrives within the wait.
 
 - **Grouping by stamp.** Each camera's newest frame is kept and carried forward into later sets, where it ages (the
   monitor counts it stale past ``max_age``). A set is formed as soon as every camera has a frame newer than the last
-  set (``complete``), or ``wait`` seconds after the first such frame's stamp (``waited``: a camera is late or quiet),
+  set and each new frame's joints are settled (``complete``; with the robot's joint states at their usual rate the
+  next one after a stamp settles it), or ``wait`` seconds after the first such frame's stamp (``waited``: a camera is late or quiet),
   or ``idle`` seconds after the last set when no new frame came at all (``idle``: answers keep coming, and the
   cameras' frames age in them). A set's ``time``, its clock for ages, is its newest stamp (complete), the wait's end
   (waited) or the idle deadline (idle): a function of the stamps alone.
@@ -30,7 +31,7 @@ from depthguard.depth import DepthImage
 from depthguard.errors import InputError
 from depthguard.validation import check_real
 
-__all__ = ["JointHistory", "FrameSet", "FrameSetLoop"]
+__all__ = ["JointHistory", "FrameSet", "FrameSetLoop", "SetAnswer", "answer_set", "RESULT_COLUMNS"]
 
 
 class JointHistory:
@@ -105,6 +106,7 @@ class FrameSet:
     """One set of frames from :class:`FrameSetLoop`.
 
     Attributes:
+        index: the set's number, 0, 1, ... in the order the loop formed them.
         time: the set's clock, seconds (stamp clock): its newest stamp, or the deadline that formed it.
         why: ``"complete"``, ``"waited"`` or ``"idle"`` (see the module docstring).
         images: camera -> :class:`DepthImage` (its newest frame, new or carried forward), rig order; cameras
@@ -114,6 +116,7 @@ class FrameSet:
         no_joints: cameras with a frame but no joint state near its stamp (left out: they count as blind).
     """
 
+    index: int
     time: float
     why: str
     images: dict[str, DepthImage]
@@ -165,9 +168,29 @@ class FrameSetLoop:
     def camera(self, name: str) -> _Camera:
         return self._state[name]
 
-    def add_joints(self, time: float, positions) -> bool:
-        """A joint state (the robot's order) stamped ``time``; False when the history refused it."""
-        return self.joints.add(time, positions)
+    def add_joints(self, time: float, positions) -> list[FrameSet]:
+        """A joint state (the robot's order) stamped ``time``: the set it completes (none or one: every camera had
+        a new frame, and this state was the one a frame's joints waited for)."""
+        self.joints.add(time, positions)
+        return self._complete()
+
+    def _joints_ready(self, state: _Camera) -> bool:
+        """Whether a new frame's joints are settled: a state at or after its stamp came (they are interpolated),
+        or none can come near enough. While the last state is before the stamp and within JOINT_GAP of it, the next
+        one will bracket it: the set waits for it (within ``wait``; after the wait the last state is held, up to
+        JOINT_HOLD)."""
+        if not self.robot or state.frame is None:
+            return True
+        stamp = state.frame.timestamp
+        last = self.joints.last_time
+        return last is None or last >= stamp or stamp - last > self.joints.gap
+
+    def _complete(self) -> list[FrameSet]:
+        states = [self._state[name] for name in self.cameras]
+        if self._first_new is None or not all(s.new for s in states) or \
+                not all(self._joints_ready(s) for s in states if s.new):
+            return []
+        return [self._form(max(s.frame.timestamp for s in states), "complete")]
 
     def add_frame(self, image: DepthImage) -> list[FrameSet]:
         """A camera's new frame (a :class:`DepthImage` named for a camera of the loop, with its stamp): the sets it
@@ -187,9 +210,7 @@ class FrameSetLoop:
         state.received += 1
         if self._first_new is None:
             self._first_new = stamp
-        if all(self._state[name].new for name in self.cameras):
-            out.append(self._form(max(s.frame.timestamp for s in self._state.values()), "complete"))
-        return out
+        return out + self._complete()
 
     def tick(self, now: float) -> list[FrameSet]:
         """Advance the loop's clock to ``now`` (seconds, stamp clock; it never goes back): the set a wait or the idle
@@ -226,4 +247,68 @@ class FrameSetLoop:
         self._first_new = None
         self._last_set = time
         self.sets += 1
-        return FrameSet(time=time, why=why, images=images, joints=joints, new=tuple(new), no_joints=tuple(no_joints))
+        return FrameSet(index=self.sets - 1, time=time, why=why, images=images, joints=joints, new=tuple(new), no_joints=tuple(no_joints))
+
+
+#: The columns of ``replay``'s RESULTS.csv (``live --out`` adds ``cameras`` and ``latency_ms``).
+RESULT_COLUMNS = ["time", "frame", "control_point", "x", "y", "z", "distance", "blind_distance", "flags"]
+
+
+@dataclass(frozen=True, eq=False)
+class SetAnswer:
+    """One set of frames answered (:func:`answer_set`).
+
+    Attributes:
+        frame_set: the set.
+        index: the set's number (0, 1, ... in the loop's order).
+        points: (n, 3) float64, metres, world frame: the control points asked about.
+        result: the monitor's :class:`~depthguard.DistanceResult` for them.
+        seen: the cameras counted as seen (in the set and not stale at its time), rig order.
+        named: one flag per other camera of the rig: ``missing_camera:<name>`` (no frame yet, or left out) or
+            ``stale_camera:<name>`` (a frame too old at the set's time, or without joints near its stamp).
+    """
+
+    frame_set: FrameSet
+    index: int
+    points: np.ndarray
+    result: object
+    seen: tuple
+    named: tuple
+
+    def flags(self, k: int) -> list[str]:
+        """Point k's flags: the result's, then the cameras'."""
+        return list(self.result.flags[k].names) + list(self.named)
+
+    def rows(self, point_names) -> list[list[str]]:
+        """RESULT_COLUMNS rows, one per point (numbers as repr: they read back as the same floats)."""
+        t = repr(float(self.frame_set.time))
+        return [[t, str(self.index), name, *(repr(float(c)) for c in self.points[k]),
+                 repr(float(self.result.distance[k])), repr(float(self.result.blind_distance[k])),
+                 ";".join(self.flags(k))] for k, name in enumerate(point_names)]
+
+
+def answer_set(monitor, loop: FrameSetLoop, frame_set: FrameSet, robot=None, points=None) -> SetAnswer | None:
+    """Ask ``monitor`` (a :class:`~depthguard.DistanceMonitor`) about ``points`` ((n, 3) world, metres), or the
+    ``robot``'s control points at its joints at the set's time (the joint history's, else those of the set's newest
+    frame), on ``frame_set`` at its time: the one answering step of ``live`` and ``replay``. None when the robot's
+    joints are not known at all (no answer can name its points)."""
+    if points is None:
+        q = loop.joints.at(frame_set.time)
+        if q is None and frame_set.joints:
+            newest = max(frame_set.joints, key=lambda name: frame_set.images[name].timestamp)
+            q = frame_set.joints[newest]
+        if q is None:
+            return None
+        points = robot.control_point_positions(q)
+    camera_joints = frame_set.joints if robot is not None else None
+    result = monitor.query(frame_set.images, points, camera_joints=camera_joints or None, now=frame_set.time)
+    seen, named = [], []
+    for name in loop.cameras:
+        image = frame_set.images.get(name)
+        if image is not None and not monitor.is_stale(image.timestamp, frame_set.time):
+            seen.append(name)
+        elif image is None and loop.camera(name).frame is None:
+            named.append(f"missing_camera:{name}")
+        else:
+            named.append(f"stale_camera:{name}")
+    return SetAnswer(frame_set, frame_set.index, np.asarray(points), result, tuple(seen), tuple(named))
