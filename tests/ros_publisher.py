@@ -40,7 +40,7 @@ class RosPublisher:
         conf.insert_json5("scouting/multicast/enabled", "false")
         self.session = zenoh.open(conf)
         self.store = wire.type_store()
-        self.sequence = 0
+        self.sequences: dict[str, int] = {}  # rmw_zenoh numbers each publisher's messages from 1
         self.type_hash = type_hash  # a wrong hash in the image keys, when given
         self._publishers = {}
         self.answers = []
@@ -76,9 +76,9 @@ class RosPublisher:
     def put(self, topic: str, msgtype: str, message, raw: bytes | None = None) -> None:
         publisher = self._publisher(topic, msgtype)
         payload = raw if raw is not None else wire.serialize(message, msgtype)
-        self.sequence += 1
+        sequence = self.sequences[topic] = self.sequences.get(topic, 0) + 1
         if self.layout == "rmw_zenoh":
-            publisher.put(payload, attachment=wire.attachment_bytes(self.sequence, time.time_ns(), b"p" * 16))
+            publisher.put(payload, attachment=wire.attachment_bytes(sequence, time.time_ns(), b"p" * 16))
         else:
             publisher.put(payload)
 

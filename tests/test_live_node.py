@@ -50,13 +50,13 @@ def wait_for(condition, timeout=30.0):
     return False
 
 
-def play(recording, robot, tmp_path, layout="rmw_zenoh", odd_images=False, info=None, type_hash=None):
+def play(recording, robot, tmp_path, layout="rmw_zenoh", odd_images=False, info=None, type_hash=None, record=None):
     """Publish the recording's sets one by one, each restamped now, waiting for the node's answer to it. Returns
     (the node's CSV rows, [(stamp, {camera: data}, joints)] as published, the publisher's answers, the node)."""
     rig = recording.rig
     publisher = RosPublisher(rig, recording.joint_names, layout=layout, type_hash=type_hash)
     node = LiveNode(rig, robot, topics(rig), LiveOptions(layout=layout, connect=[publisher.endpoint], transport=1.0), OPTIONS,
-                    out=tmp_path / "live.csv")
+                    out=tmp_path / "live.csv", record=record)
     # The host's clock held back 1 s (LiveOptions.transport): a frame delayed by this busy machine still joins its
     # set, so that the sets are those of the stamps alone.
     published = []
@@ -124,6 +124,23 @@ def test_live_answers_equal_the_monitor_on_the_same_frames(recording, robot, tmp
         assert keys == {"depthguard/distances"} and not any(has for _, has, _ in answers)
     assert all(len(data) == 9 for _, _, data in answers)
     assert node.counts["principal"].received == FRAMES and node.counts["principal"].errors == 0
+
+
+def test_replay_of_what_live_recorded_gives_live_s_answers(recording, robot, tmp_path, capsys):
+    rows, published, _, node = play(recording, robot, tmp_path, record=tmp_path / "recorded")
+    status, _, err = run_cli(["replay", tmp_path / "recorded", "--out", tmp_path / "replayed.csv", "--rho", "0.4",
+                              "--aggregate", "hybrid", "--invalid", "occupied"], capsys)
+    assert status == 0, err
+    with open(tmp_path / "replayed.csv", newline="") as f:
+        replayed = list(csv.DictReader(f))
+    stamps = {repr(ns / 1e9) for ns, _, _ in published}
+    columns = ("time", "control_point", "x", "y", "z", "distance", "blind_distance", "flags")
+
+    def complete(table):
+        return [tuple(r[c] for c in columns) for r in table if r["time"] in stamps]
+
+    assert len(complete(rows)) == FRAMES * 9
+    assert complete(replayed) == complete(rows)
 
 
 def test_a_camera_info_that_disagrees_leaves_the_camera_out_and_named(recording, robot, tmp_path):
@@ -195,3 +212,56 @@ def test_dry_run_says_what_is_missing(recording, tmp_path, capsys):
         assert status == 0 and "agree" in out, err
     finally:
         publisher.close()
+
+
+def test_a_camera_that_stops_loses_messages_restarts_or_steps_back_is_named(recording, robot, tmp_path):
+    rig = recording.rig
+    publisher = RosPublisher(rig, recording.joint_names)
+    node = LiveNode(rig, robot, topics(rig), LiveOptions(connect=[publisher.endpoint], transport=1.0), OPTIONS,
+                    out=tmp_path / "live.csv")
+    frame_set = next(recording.frame_sets())
+    q = recording.joints_at(frame_set.time)
+    data = {name: image.data for name, image in frame_set.images.items()}
+
+    def send(cameras, ns=None):
+        ns = time.time_ns() if ns is None else ns
+        publisher.publish_joints(ns, q)
+        assert wait_for(lambda: node.joints_received(ns))
+        for camera in cameras:
+            publisher.publish_frame(camera, ns, data[camera])
+        return ns
+
+    try:
+        node.start()
+        time.sleep(0.3)
+        first = send(["principal", "second"])
+        assert wait_for(lambda: any(t == first / 1e9 for t, _, _ in list(node.recent))), (
+            first, list(node.recent)[:4], node.counts, list(node.errors), node.dropped)
+        # The second camera stops: the principal's sets wait for it, then go on; once its frame is older than
+        # max_age the answers name it stale and count it out.
+        for _ in range(5):
+            ns = send(["principal"])
+            assert wait_for(lambda: any(t >= ns / 1e9 and why == "waited" for t, why, _ in list(node.recent)))
+            time.sleep(0.04)
+        assert node.last[2] == ("principal",)
+        # Its publisher loses 4 messages (rmw_zenoh's sequence numbers jump), then starts again (they go back).
+        publisher.sequences["/second/depth/image_raw"] += 4
+        ns = send(["principal", "second"])
+        assert wait_for(lambda: node.counts["second"].missed >= 4)
+        publisher.sequences["/second/depth/image_raw"] = 0
+        send(["principal", "second"])
+        assert wait_for(lambda: node.counts["second"].restarts == 1)
+        # A stamp that goes back (a clock stepped back): the camera starts again, named once.
+        send(["second"], ns=ns - 10**9)
+        assert wait_for(lambda: any("reset_camera:second" in r for r in open(tmp_path / "live.csv").read().split())), (
+            list(node.recent)[-6:], list(node.errors), node.dropped, node.counts["second"])
+    finally:
+        node.close()
+        publisher.close()
+    with open(tmp_path / "live.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    stale = [r for r in rows if "stale_camera:second" in r["flags"]]
+    assert stale and all("second" not in r["cameras"].split(";") for r in stale)
+    assert any(r["cameras"] == "principal" for r in stale)  # the principal goes on alone
+    assert all(float(r["time"]) - first / 1e9 > dg.config.DEFAULT_MAX_AGE for r in stale)  # only once too old
+    assert node.counts["second"].missed >= 4 and node.counts["second"].restarts == 1

@@ -128,6 +128,11 @@ def test_a_stamp_that_goes_back_resets_the_camera():
     loop.add_frame(frame("b", 2.0))
     loop.add_frame(frame("a", 1.5))
     assert loop.camera("a").resets == 1 and loop.camera("a").frame.timestamp == 1.5
+    (s,) = loop.add_frame(frame("b", 2.01))
+    assert s.reset == ("a",)
+    loop.add_frame(frame("a", 2.03))
+    (s,) = loop.add_frame(frame("b", 2.04))
+    assert s.reset == ()  # named once, in the set after the reset
 
 
 def test_frames_of_unknown_cameras_or_without_stamps_are_refused_by_name():

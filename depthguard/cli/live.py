@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 import sys
 import time
+from pathlib import Path
 
 from depthguard.cli.options import add_monitor_options, load_robot, monitor_options
 
@@ -34,6 +35,9 @@ def add_arguments(parser) -> None:
     add_monitor_options(parser, memory=True)
     parser.add_argument("--out", metavar="RESULTS.csv",
                         help="also write one row per point per answer: replay's columns, cameras, latency_ms")
+    parser.add_argument("--record", metavar="DIR",
+                        help="also write the messages received, unchanged, and the outputs into a new ROS 2 bag "
+                             "folder DIR (MCAP, with rig.yaml), which replay reads back to the same answers")
     parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: run until ^C)")
     parser.add_argument("--dry-run", action="store_true",
                         help="check the topics, each CameraInfo against the rig and the joint names, then exit: 0 "
@@ -80,7 +84,11 @@ def run(args) -> int:
         wire.data_key(image, "sensor_msgs/msg/Image", args.layout, args.domain)  # names checked before connecting
         wire.data_key(info, "sensor_msgs/msg/CameraInfo", args.layout, args.domain)
     options = LiveOptions(layout=args.layout, domain=args.domain, connect=args.connect or ["tcp/127.0.0.1:7447"])
-    node = LiveNode(rig, robot, topics, options, monitor_options(args), out=None if args.dry_run else args.out)
+    if args.record is not None and Path(args.record).exists():
+        raise InputError(f"--record {args.record}: exists already; a recording is written into a new folder",
+                         field="record")
+    node = LiveNode(rig, robot, topics, options, monitor_options(args), out=None if args.dry_run else args.out,
+                    record=None if args.dry_run else args.record)
     try:
         if args.dry_run:
             deadline = time.monotonic() + args.dry_run_wait

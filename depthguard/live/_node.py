@@ -21,6 +21,7 @@ back, the status stamped with the answer's time.
 from __future__ import annotations
 
 import collections
+import dataclasses
 import csv
 import json
 import logging
@@ -77,7 +78,8 @@ class CameraCounts:
     last_error: str = ""
     info_error: str = ""  # the CameraInfo disagrees with the rig: the camera is left out
     info_seen: bool = False
-    hash_warned: bool = False
+    sequence: int | None = None  # the last image's rmw_zenoh sequence number
+    restarts: int = 0  # the publisher started again (its sequence number went back)
 
 
 def session_config(connect: list[str]):
@@ -96,7 +98,10 @@ def session_config(connect: list[str]):
 class _Publisher:
     """One output topic: its zenoh publisher, rmw_zenoh's attachment and liveliness token (rmw_zenoh layout)."""
 
-    def __init__(self, session, topic: str, msgtype: str, layout: str, domain: int, entity: int, gid_seed: bytes):
+    def __init__(self, session, topic: str, msgtype: str, layout: str, domain: int, entity: int, gid_seed: bytes,
+                 recorder=None):
+        self.topic = topic
+        self.recorder = recorder
         self.msgtype = msgtype
         self.layout = layout
         self.key = wire.data_key(topic, msgtype, layout, domain)
@@ -111,11 +116,75 @@ class _Publisher:
 
     def put(self, message) -> None:
         payload = wire.serialize(message, self.msgtype)
+        if self.recorder is not None:
+            self.recorder.put(self.topic, self.msgtype, clock.time_ns(), payload)
         self.sequence += 1
         if self.layout == "rmw_zenoh":
             self.publisher.put(payload, attachment=wire.attachment_bytes(self.sequence, clock.time_ns(), self.gid))
         else:
             self.publisher.put(payload)
+
+
+class _Recorder:
+    """``--record DIR``: the messages received, unchanged (their CDR bytes), and the outputs, into a new ROS 2 bag
+    folder (MCAP) with the rig as ``rig.yaml``, which ``replay`` reads back (design §12a). Frames and camera_info go
+    under ``/<camera>/depth/...`` whatever topic they came on. A thread of its own writes; the callbacks only queue
+    (bounded: what does not fit is dropped and counted). The folder appears whole when the node closes."""
+
+    def __init__(self, folder, rig):
+        from rosbags.rosbag2 import Writer
+        from rosbags.rosbag2.enums import StoragePlugin
+
+        from depthguard.cameras import save_rig
+        from depthguard.io.files import atomic_folder
+        from depthguard.io.ros_messages import ros_typestore
+
+        self._atomic = atomic_folder(folder)
+        path = self._atomic.__enter__()
+        try:
+            self._writer = Writer(path, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP)
+            self._writer.open()
+            save_rig(rig, path / "rig.yaml")
+        except BaseException:
+            self._atomic.__exit__(*__import__("sys").exc_info())
+            raise
+        self._store = ros_typestore()
+        self._connections: dict = {}
+        self._queue: collections.deque = collections.deque()
+        self._limit = 4096
+        self.dropped = 0
+        self._wake = threading.Event()
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, name="depthguard-live-record", daemon=True)
+        self._thread.start()
+
+    def put(self, topic: str, msgtype: str, ns: int, payload: bytes) -> None:
+        if len(self._queue) >= self._limit:
+            self.dropped += 1
+            return
+        self._queue.append((topic, msgtype, ns, payload))
+        self._wake.set()
+
+    def _run(self) -> None:
+        while True:
+            self._wake.wait(0.05)
+            self._wake.clear()
+            while self._queue:
+                topic, msgtype, ns, payload = self._queue.popleft()
+                connection = self._connections.get(topic)
+                if connection is None:
+                    connection = self._connections[topic] = self._writer.add_connection(topic, msgtype,
+                                                                                        typestore=self._store)
+                self._writer.write(connection, ns, payload)
+            if self._closed:
+                return
+
+    def close(self) -> None:
+        self._closed = True
+        self._wake.set()
+        self._thread.join()
+        self._writer.close()
+        self._atomic.__exit__(None, None, None)
 
 
 @dataclass
@@ -137,7 +206,8 @@ class LiveNode:
     seen, and ``latency_ms``, from the set's newest stamp to the answer). Start with :meth:`start`, stop with
     :meth:`close`; ``answers``, ``dropped``, ``deadline_misses`` and per-camera ``counts`` say how it went."""
 
-    def __init__(self, rig, robot, topics: Topics, options: LiveOptions, monitor_options: dict, out=None):
+    def __init__(self, rig, robot, topics: Topics, options: LiveOptions, monitor_options: dict, out=None,
+                 record=None):
         import zenoh
 
         self.rig = rig
@@ -151,6 +221,7 @@ class LiveNode:
         self.counts = {name: CameraCounts() for name in rig.cameras}
         self.answers = 0
         self.joint_states = 0  # joint states received
+        self._joint_seen = -math.inf  # the newest joint state's stamp
         self.dropped = 0
         self.deadline_misses = 0
         self.last = None  # (time, why, cameras seen) of the last answer
@@ -164,6 +235,7 @@ class LiveNode:
         self._stop = threading.Event()
         self._wake = threading.Event()
         self._out_path = out
+        self._recorder = _Recorder(record, rig) if record is not None else None
         self.session = zenoh.open(session_config(options.connect))
         self._subscribers = []
         for name, (image_topic, info_topic) in topics.cameras.items():
@@ -172,8 +244,9 @@ class LiveNode:
         self._subscribe(topics.joints, JOINT_STATE, self._on_joints)
         seed = os.urandom(12)
         self._distances = _Publisher(self.session, DISTANCES_TOPIC, DISTANCES_TYPE, options.layout, options.domain, 1,
-                                     seed)
-        self._status = _Publisher(self.session, STATUS_TOPIC, STATUS_TYPE, options.layout, options.domain, 2, seed)
+                                     seed, self._recorder)
+        self._status = _Publisher(self.session, STATUS_TOPIC, STATUS_TYPE, options.layout, options.domain, 2, seed,
+                                  self._recorder)
         self._node_token = None
         if options.layout == "rmw_zenoh":
             self._node_token = self.session.liveliness().declare_token(
@@ -212,7 +285,16 @@ class LiveNode:
             counts.errors += 1
             counts.last_error = str(exc)
             return
+        if self._recorder is not None:
+            self._recorder.put(f"/{camera}/depth/image_raw", IMAGE, clock.time_ns(), sample.payload.to_bytes())
+        attachment = wire.parse_attachment(sample.attachment.to_bytes() if sample.attachment is not None else None)
         with self._lock:
+            if attachment is not None:  # rmw_zenoh numbers a publisher's messages 1, 2, ...: a gap is a loss
+                if counts.sequence is not None and attachment.sequence > counts.sequence + 1:
+                    counts.missed += attachment.sequence - counts.sequence - 1
+                elif counts.sequence is not None and attachment.sequence <= counts.sequence:
+                    counts.restarts += 1
+                counts.sequence = attachment.sequence
             counts.received += 1
             if camera in self._frames:
                 counts.missed += 1
@@ -223,7 +305,10 @@ class LiveNode:
         counts = self.counts[camera]
         source = self.topics.cameras[camera][1]
         try:
-            message = wire.deserialize(sample.payload.to_bytes(), CAMERA_INFO)
+            payload = sample.payload.to_bytes()
+            message = wire.deserialize(payload, CAMERA_INFO)
+            if self._recorder is not None:
+                self._recorder.put(f"/{camera}/depth/camera_info", CAMERA_INFO, clock.time_ns(), payload)
             check_camera_info(message, self.rig.cameras[camera], source)
             counts.info_error = ""
         except DepthguardError as exc:
@@ -233,16 +318,24 @@ class LiveNode:
     def _on_joints(self, sample) -> None:
         source = self.topics.joints
         try:
-            message = wire.deserialize(sample.payload.to_bytes(), JOINT_STATE)
+            payload = sample.payload.to_bytes()
+            message = wire.deserialize(payload, JOINT_STATE)
             stamp = header_seconds(message, source, None, 0, what="joint state")
+            if self._recorder is not None:
+                self._recorder.put("/joint_states", JOINT_STATE, clock.time_ns(), payload)
             names, values = joint_state(message, source, 0)
             positions = values[self._order_of(names)]
         except (DepthguardError, KeyError) as exc:
             self.errors.append(f"{source}: {exc}")
             return
         self._joints.append((stamp, positions))
+        self._joint_seen = max(self._joint_seen, stamp)
         self.joint_states += 1
         self._wake.set()
+
+    def joints_received(self, ns: int) -> bool:
+        """Whether a joint state stamped ``ns`` nanoseconds has been received (tests, tools)."""
+        return any(abs(t - ns / 1e9) == 0.0 for t, _ in list(self._joints)) or self._joint_seen >= ns / 1e9
 
     def ready(self) -> str | None:
         """None when every camera's image and camera_info and a joint state have come and agree with the rig and
@@ -294,6 +387,8 @@ class LiveNode:
             if token is not None:
                 token.undeclare()
         self.session.close()
+        if self._recorder is not None:
+            self._recorder.close()
 
     def _run(self) -> None:
         from depthguard import DistanceMonitor
@@ -324,8 +419,10 @@ class LiveNode:
                         continue  # its CameraInfo disagrees with the rig: left out, named in the status
                     sets += loop.add_frame(image)
                 sets += loop.tick(clock.time() - self.options.transport)
-                if len(sets) > 1:
+                if len(sets) > 1:  # computing fell behind: the newest set only, with the resets of those dropped
                     self.dropped += len(sets) - 1
+                    reset = tuple(n for n in self.rig.cameras if any(n in fs.reset for fs in sets))
+                    sets = [dataclasses.replace(sets[-1], reset=reset)]
                 if sets:
                     try:
                         self._answer(monitor, loop, sets[-1], writer)
@@ -353,12 +450,12 @@ class LiveNode:
         self.answers += 1
         self.last = (frame_set.time, frame_set.why, answer.seen)
         self.recent.append(self.last)
-        self._publish(answer)
+        self._publish(answer, loop)
         if writer is not None:
             for row in answer.rows(self.robot.control_point_names):
                 writer.writerow(row + [";".join(answer.seen), f"{latency * 1e3:.3f}"])
 
-    def _publish(self, answer) -> None:
+    def _publish(self, answer, loop) -> None:
         frame_set, result, seen, named = answer.frame_set, answer.result, answer.seen, answer.named
         store = wire.type_store()
         types = store.types
@@ -386,6 +483,7 @@ class LiveNode:
                                    message=message, hardware_id=name,
                                    values=[value(key="age_ms", value=f"{age * 1e3:.3f}"),
                                            value(key="received", value=str(counts.received)),
-                                           value(key="missed", value=str(counts.missed))]))
+                                           value(key="missed", value=str(counts.missed)),
+                                           value(key="resets", value=str(loop.camera(name).resets))]))
         ns = max(0, int(round(frame_set.time * 1e9)))
         self._status.put(types[STATUS_TYPE](header=ros_header(store, ns, ""), status=statuses))

@@ -114,6 +114,7 @@ class FrameSet:
         joints: camera -> (n,) float64 joints at that frame's stamp, the robot's order (empty without a robot).
         new: the cameras whose frame is new in this set.
         no_joints: cameras with a frame but no joint state near its stamp (left out: they count as blind).
+        reset: cameras whose stamps went back since the last set (started again).
     """
 
     index: int
@@ -123,6 +124,7 @@ class FrameSet:
     joints: dict[str, np.ndarray]
     new: tuple[str, ...]
     no_joints: tuple[str, ...] = ()
+    reset: tuple[str, ...] = ()
 
 
 @dataclass
@@ -132,6 +134,7 @@ class _Camera:
     new: bool = False
     received: int = 0
     resets: int = 0
+    reset_since_set: bool = False
 
 
 @dataclass
@@ -206,6 +209,7 @@ class FrameSetLoop:
         previous = state.frame
         if previous is not None and stamp <= previous.timestamp:
             state.resets += 1  # a stamp that went back: the camera starts again
+            state.reset_since_set = True
         state.frame, state.joints, state.new = image, None, True
         state.received += 1
         if self._first_new is None:
@@ -229,8 +233,10 @@ class FrameSetLoop:
 
     def _form(self, time: float, why: str) -> FrameSet:
         images, joints, new, no_joints = {}, {}, [], []
+        reset = tuple(name for name in self.cameras if self._state[name].reset_since_set)
         for name in self.cameras:
             state = self._state[name]
+            state.reset_since_set = False
             if state.frame is None:
                 continue
             if state.new:
@@ -247,7 +253,7 @@ class FrameSetLoop:
         self._first_new = None
         self._last_set = time
         self.sets += 1
-        return FrameSet(index=self.sets - 1, time=time, why=why, images=images, joints=joints, new=tuple(new), no_joints=tuple(no_joints))
+        return FrameSet(index=self.sets - 1, time=time, why=why, images=images, joints=joints, new=tuple(new), no_joints=tuple(no_joints), reset=reset)
 
 
 #: The columns of ``replay``'s RESULTS.csv (``live --out`` adds ``cameras`` and ``latency_ms``).
@@ -265,7 +271,8 @@ class SetAnswer:
         result: the monitor's :class:`~depthguard.DistanceResult` for them.
         seen: the cameras counted as seen (in the set and not stale at its time), rig order.
         named: one flag per other camera of the rig: ``missing_camera:<name>`` (no frame yet, or left out) or
-            ``stale_camera:<name>`` (a frame too old at the set's time, or without joints near its stamp).
+            ``stale_camera:<name>`` (a frame too old at the set's time, or without joints near its stamp); and
+            ``reset_camera:<name>`` for a camera whose stamps went back since the last set.
     """
 
     frame_set: FrameSet
@@ -311,4 +318,5 @@ def answer_set(monitor, loop: FrameSetLoop, frame_set: FrameSet, robot=None, poi
             named.append(f"missing_camera:{name}")
         else:
             named.append(f"stale_camera:{name}")
+    named += [f"reset_camera:{name}" for name in frame_set.reset]
     return SetAnswer(frame_set, frame_set.index, np.asarray(points), result, tuple(seen), tuple(named))
