@@ -224,6 +224,9 @@ FRAME_SET_WAIT = 0.02
 #: stamp to the node (driver, network, decoding) still joins its set as in replay; waits and idle answers come that
 #: much later.
 LIVE_TRANSPORT = 0.05
+#: Live: a camera whose frames arrive more than LIVE_CLOCK_OFFSET seconds after their stamps (or stamped in the
+#: future) has a clock that disagrees with the host's: reported in /diagnostics and the status (ERROR).
+LIVE_CLOCK_OFFSET = 1.0
 #: Joints at a frame's stamp: interpolated between two joint states at most JOINT_GAP seconds apart around it, or
 #: the last state held when the stamp is at most JOINT_HOLD seconds after it (the joints then err by at most the
 #: robot's joint speed times JOINT_HOLD: 5 mrad at 1 rad/s, inside the self-filter's padding). Otherwise the camera

@@ -47,6 +47,11 @@ class RosPublisher:
         self._answered = threading.Condition()
         key = wire.subscription_key("/depthguard/distances", "std_msgs/msg/Float64MultiArray", layout)
         self._sub = self.session.declare_subscriber(key, self._on_answer)
+        self.diagnostics = []  # diagnostic_msgs/DiagnosticArray messages on /diagnostics
+        self._diag = self.session.declare_subscriber(
+            wire.subscription_key("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", layout),
+            lambda sample: self.diagnostics.append(wire.deserialize(sample.payload.to_bytes(),
+                                                                    "diagnostic_msgs/msg/DiagnosticArray")))
         # Every publisher declared up front: a put right after its declaration can go before the route to the
         # node's subscriber is known.
         for name in rig.cameras:
@@ -99,6 +104,7 @@ class RosPublisher:
 
     def close(self):
         self._sub.undeclare()
+        self._diag.undeclare()
         for publisher in self._publishers.values():
             publisher.undeclare()
         self.session.close()

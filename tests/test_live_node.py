@@ -265,3 +265,39 @@ def test_a_camera_that_stops_loses_messages_restarts_or_steps_back_is_named(reco
     assert any(r["cameras"] == "principal" for r in stale)  # the principal goes on alone
     assert all(float(r["time"]) - first / 1e9 > dg.config.DEFAULT_MAX_AGE for r in stale)  # only once too old
     assert node.counts["second"].missed >= 4 and node.counts["second"].restarts == 1
+
+
+def test_diagnostics_each_second_and_a_clock_that_disagrees(recording, robot, tmp_path):
+    """/diagnostics comes once a second with each camera's counts; a camera stamping 5 s behind the host is
+    reported there (ERROR, naming the clocks) and its frames never count as seen."""
+    rig = recording.rig
+    publisher = RosPublisher(rig, recording.joint_names)
+    node = LiveNode(rig, robot, topics(rig), LiveOptions(connect=[publisher.endpoint]), OPTIONS,
+                    out=tmp_path / "live.csv")
+    frame_set = next(recording.frame_sets())
+    q = recording.joints_at(frame_set.time)
+    try:
+        node.start()
+        time.sleep(0.3)
+        for _ in range(3):
+            ns = time.time_ns() - 5 * 10**9
+            publisher.publish_joints(ns, q)
+            assert wait_for(lambda: node.joints_received(ns))
+            for camera, image in frame_set.images.items():
+                publisher.publish_frame(camera, ns, image.data)
+            time.sleep(0.1)
+        assert wait_for(lambda: len(publisher.diagnostics) >= 2 and any(
+            s.name == "depthguard: camera principal" and s.level == 2 and "clocks disagree" in s.message
+            for s in publisher.diagnostics[-1].status), timeout=10)
+    finally:
+        node.close()
+        publisher.close()
+    last = publisher.diagnostics[-1]
+    values = {s.name: {v.key: v.value for v in s.values} for s in last.status}
+    assert int(values["depthguard: camera second"]["received"]) == 3
+    assert float(values["depthguard: camera second"]["clock_offset_ms"]) > 4000
+    assert "sets_dropped" in values["depthguard: node"]
+    with open(tmp_path / "live.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert rows and all(r["cameras"] == "" and "stale_camera:principal" in r["flags"] for r in rows)
+    assert all(float(r["distance"]) == 0.0 for r in rows)  # blind: 0, flagged, never optimistic

@@ -47,6 +47,7 @@ DISTANCES_TOPIC = "/depthguard/distances"
 STATUS_TOPIC = "/depthguard/status"
 DISTANCES_TYPE = "std_msgs/msg/Float64MultiArray"
 STATUS_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
+DIAGNOSTICS_TOPIC = "/diagnostics"
 #: Diagnostic levels (diagnostic_msgs/msg/DiagnosticStatus).
 OK, WARN, ERROR = 0, 1, 2
 NODE_NAME = "depthguard"
@@ -78,6 +79,7 @@ class CameraCounts:
     last_error: str = ""
     info_error: str = ""  # the CameraInfo disagrees with the rig: the camera is left out
     info_seen: bool = False
+    offset: float = math.nan  # the last image's arrival (host clock) minus its stamp, seconds
     sequence: int | None = None  # the last image's rmw_zenoh sequence number
     restarts: int = 0  # the publisher started again (its sequence number went back)
 
@@ -247,6 +249,9 @@ class LiveNode:
                                      seed, self._recorder)
         self._status = _Publisher(self.session, STATUS_TOPIC, STATUS_TYPE, options.layout, options.domain, 2, seed,
                                   self._recorder)
+        self._diagnostics = _Publisher(self.session, DIAGNOSTICS_TOPIC, STATUS_TYPE, options.layout, options.domain, 3,
+                                       seed, self._recorder)
+        self._next_diagnostics = 0.0
         self._node_token = None
         if options.layout == "rmw_zenoh":
             self._node_token = self.session.liveliness().declare_token(
@@ -296,6 +301,7 @@ class LiveNode:
                     counts.restarts += 1
                 counts.sequence = attachment.sequence
             counts.received += 1
+            counts.offset = clock.time() - image.timestamp
             if camera in self._frames:
                 counts.missed += 1
             self._frames[camera] = image
@@ -381,9 +387,10 @@ class LiveNode:
         self._wake.set()
         if self._worker.is_alive():
             self._worker.join()
-        for entity in [*self._subscribers, self._distances.publisher, self._status.publisher]:
+        for entity in [*self._subscribers, self._distances.publisher, self._status.publisher,
+                       self._diagnostics.publisher]:
             entity.undeclare()
-        for token in (self._distances.token, self._status.token, self._node_token):
+        for token in (self._distances.token, self._status.token, self._diagnostics.token, self._node_token):
             if token is not None:
                 token.undeclare()
         self.session.close()
@@ -419,6 +426,9 @@ class LiveNode:
                         continue  # its CameraInfo disagrees with the rig: left out, named in the status
                     sets += loop.add_frame(image)
                 sets += loop.tick(clock.time() - self.options.transport)
+                if clock.time() >= self._next_diagnostics:
+                    self._next_diagnostics = clock.time() + 1.0
+                    self._publish_diagnostics(loop)
                 if len(sets) > 1:  # computing fell behind: the newest set only, with the resets of those dropped
                     self.dropped += len(sets) - 1
                     reset = tuple(n for n in self.rig.cameras if any(n in fs.reset for fs in sets))
@@ -437,7 +447,10 @@ class LiveNode:
 
     def _answer(self, monitor, loop, frame_set, writer) -> None:
         try:
-            answer = answer_set(monitor, loop, frame_set, robot=self.robot)
+            # Frames age on the host's clock, less the allowance for their way here (LIVE_TRANSPORT): while the
+            # node keeps up that is the set's own time, as in replay; a frame that came late is as old as it is.
+            answer = answer_set(monitor, loop, frame_set, robot=self.robot,
+                                now=clock.time() - self.options.transport)
         except DepthguardError as exc:
             self.errors.append(str(exc))
             return
@@ -454,6 +467,46 @@ class LiveNode:
         if writer is not None:
             for row in answer.rows(self.robot.control_point_names):
                 writer.writerow(row + [";".join(answer.seen), f"{latency * 1e3:.3f}"])
+
+    def clock_problem(self, name: str) -> str:
+        """Why camera ``name``'s clock and the host's disagree, "" when they agree (within
+        ``config.LIVE_CLOCK_OFFSET``): its frames arrive with stamps older than that, or from the future."""
+        offset = self.counts[name].offset
+        if math.isnan(offset) or -config.CLOCK_SKEW_TOLERANCE <= offset <= config.LIVE_CLOCK_OFFSET:
+            return ""
+        return (f"frames arrive {offset:+.3f} s after their stamps: the camera's and the host's clocks disagree; "
+                "its frames count as stale or from the future (blind, flagged) until they are synchronised (PTP, "
+                "NTP or the driver's host-time stamping)")
+
+    def _publish_diagnostics(self, loop) -> None:
+        """``/diagnostics``, once a second: each camera's age, counts and clock offset, and the node's sets
+        dropped and deadline misses."""
+        store = wire.type_store()
+        types = store.types
+        status, value = types["diagnostic_msgs/msg/DiagnosticStatus"], types["diagnostic_msgs/msg/KeyValue"]
+        statuses = []
+        now = clock.time()
+        for name in self.rig.cameras:
+            counts = self.counts[name]
+            frame = loop.camera(name).frame
+            age = now - frame.timestamp if frame is not None else math.inf
+            problem = counts.info_error or self.clock_problem(name)
+            fresh = age <= self.max_age
+            level = ERROR if (problem or not fresh) else OK
+            message = problem or ("fresh" if fresh else ("no frame yet" if frame is None else "stale"))
+            statuses.append(status(level=level, name=f"depthguard: camera {name}", message=message,
+                                   hardware_id=name, values=[
+                                       value(key="age_ms", value=f"{age * 1e3:.1f}"),
+                                       value(key="received", value=str(counts.received)),
+                                       value(key="missed", value=str(counts.missed)),
+                                       value(key="restarts", value=str(counts.restarts)),
+                                       value(key="clock_offset_ms", value=f"{counts.offset * 1e3:.1f}")]))
+        statuses.append(status(level=WARN if self.deadline_misses else OK, name="depthguard: node",
+                               message=f"{self.answers} answers", hardware_id="", values=[
+                                   value(key="answers", value=str(self.answers)),
+                                   value(key="sets_dropped", value=str(self.dropped)),
+                                   value(key="deadline_misses", value=str(self.deadline_misses))]))
+        self._diagnostics.put(types[STATUS_TYPE](header=ros_header(store, clock.time_ns(), ""), status=statuses))
 
     def _publish(self, answer, loop) -> None:
         frame_set, result, seen, named = answer.frame_set, answer.result, answer.seen, answer.named
@@ -478,7 +531,8 @@ class LiveNode:
             image = frame_set.images.get(name)
             age = frame_set.time - image.timestamp if image is not None else math.inf
             state = "fresh" if name in seen else ("missing" if image is None else "stale")
-            message = state if not counts.info_error else f"{state}; camera_info: {counts.info_error}"
+            problem = counts.info_error or self.clock_problem(name)
+            message = state if not problem else f"{state}; {problem}"
             statuses.append(status(level=OK if name in seen else ERROR, name=f"depthguard: camera {name}",
                                    message=message, hardware_id=name,
                                    values=[value(key="age_ms", value=f"{age * 1e3:.3f}"),

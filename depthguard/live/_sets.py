@@ -294,11 +294,14 @@ class SetAnswer:
                  ";".join(self.flags(k))] for k, name in enumerate(point_names)]
 
 
-def answer_set(monitor, loop: FrameSetLoop, frame_set: FrameSet, robot=None, points=None) -> SetAnswer | None:
+def answer_set(monitor, loop: FrameSetLoop, frame_set: FrameSet, robot=None, points=None,
+               now: float | None = None) -> SetAnswer | None:
     """Ask ``monitor`` (a :class:`~depthguard.DistanceMonitor`) about ``points`` ((n, 3) world, metres), or the
     ``robot``'s control points at its joints at the set's time (the joint history's, else those of the set's newest
-    frame), on ``frame_set`` at its time: the one answering step of ``live`` and ``replay``. None when the robot's
-    joints are not known at all (no answer can name its points)."""
+    frame), on ``frame_set`` at ``now`` (default: the set's time; live passes its host clock less the transport
+    allowance when that is later): the one answering step of ``live`` and ``replay``. None when the robot's joints
+    are not known at all (no answer can name its points)."""
+    now = frame_set.time if now is None else max(now, frame_set.time)
     if points is None:
         q = loop.joints.at(frame_set.time)
         if q is None and frame_set.joints:
@@ -308,11 +311,11 @@ def answer_set(monitor, loop: FrameSetLoop, frame_set: FrameSet, robot=None, poi
             return None
         points = robot.control_point_positions(q)
     camera_joints = frame_set.joints if robot is not None else None
-    result = monitor.query(frame_set.images, points, camera_joints=camera_joints or None, now=frame_set.time)
+    result = monitor.query(frame_set.images, points, camera_joints=camera_joints or None, now=now)
     seen, named = [], []
     for name in loop.cameras:
         image = frame_set.images.get(name)
-        if image is not None and not monitor.is_stale(image.timestamp, frame_set.time):
+        if image is not None and not monitor.is_stale(image.timestamp, now):
             seen.append(name)
         elif image is None and loop.camera(name).frame is None:
             named.append(f"missing_camera:{name}")
