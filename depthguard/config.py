@@ -227,12 +227,14 @@ LIVE_TRANSPORT = 0.05
 #: Live: a camera whose frames arrive more than LIVE_CLOCK_OFFSET seconds after their stamps (or stamped in the
 #: future) has a clock that disagrees with the host's: reported in /diagnostics and the status (ERROR).
 LIVE_CLOCK_OFFSET = 1.0
-#: Joints at a frame's stamp: interpolated between two joint states at most JOINT_GAP seconds apart around it, or
-#: the last state held when the stamp is at most JOINT_HOLD seconds after it (the joints then err by at most the
-#: robot's joint speed times JOINT_HOLD: 5 mrad at 1 rad/s, inside the self-filter's padding). Otherwise the camera
-#: has no joints for that frame and counts as stale for the set. JOINT_HISTORY states are kept (8 s at 500 Hz).
+#: Joints at a frame's stamp: interpolated between two joint states at most JOINT_GAP seconds apart around it.
+#: JOINT_HOLD: how long after the last state a stamp may take that state as it is, when no later state came within
+#: the set's wait; 0 (the default): never, since held joints would offset the self-filtered shell by the robot's joint
+#: speed times the hold (5 mrad at 1 rad/s for 5 ms, about 6 mm at the iiwa's reach), a concession without a flag.
+#: Otherwise the camera has no joints for that frame and counts as stale for the set (blind, named). JOINT_HISTORY
+#: states are kept (8 s at 500 Hz).
 JOINT_GAP = 0.05
-JOINT_HOLD = 0.005
+JOINT_HOLD = 0.0
 JOINT_HISTORY = 4096
 
 #: Camera intrinsics, pixels: focal lengths fx, fy in [FOCAL_LENGTH_MIN, INTRINSICS_LIMIT], principal point

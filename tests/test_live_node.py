@@ -299,5 +299,9 @@ def test_diagnostics_each_second_and_a_clock_that_disagrees(recording, robot, tm
     assert "sets_dropped" in values["depthguard: node"]
     with open(tmp_path / "live.csv", newline="") as f:
         rows = list(csv.DictReader(f))
-    assert rows and all(r["cameras"] == "" and "stale_camera:principal" in r["flags"] for r in rows)
+    # Every answer blind: no camera seen, each named (stale, or missing when a set went out before its frame came).
+    assert rows and all(r["cameras"] == "" for r in rows)
+    assert all(any(f in r["flags"].split(";") for f in ("stale_camera:principal", "missing_camera:principal"))
+               for r in rows)
+    assert any("stale_camera:principal" in r["flags"] for r in rows)
     assert all(float(r["distance"]) == 0.0 for r in rows)  # blind: 0, flagged, never optimistic

@@ -94,7 +94,7 @@ def test_answers_keep_coming_when_no_frame_does():
 
 
 def test_a_frame_without_joints_near_its_stamp_is_left_out_and_named():
-    loop = FrameSetLoop(("a", "b"), wait=0.02, idle=0.1)
+    loop = FrameSetLoop(("a", "b"), wait=0.02, idle=0.1, joints=JointHistory(hold=0.005))
     loop.add_joints(1.0, [0.0])
     loop.add_frame(frame("a", 1.001))  # held: 1 ms after the last joint state
     assert loop.add_frame(frame("b", 1.015)) == []  # 15 ms after it: the next joint state may still bracket it
@@ -109,6 +109,16 @@ def test_a_frame_without_joints_near_its_stamp_is_left_out_and_named():
     loop.add_frame(frame("a", 1.4))
     (s,) = loop.add_frame(frame("b", 1.4))
     assert s.why == "complete" and s.no_joints == ("a", "b")
+
+
+def test_by_default_no_joint_state_is_held_past_its_time():
+    loop = FrameSetLoop(("a",), wait=0.02, idle=0.1)
+    loop.add_joints(1.0, [0.0])
+    assert loop.add_frame(frame("a", 1.0000003)) == []  # 0.3 us after the last state: waits for the next
+    (s,) = loop.tick(1.03)
+    assert s.why == "waited" and s.no_joints == ("a",) and s.images == {}  # none came: blind, named
+    (s,) = loop.add_frame(frame("a", 1.0))  # exactly at a state's stamp: its joints (a stamp that went back)
+    assert s.why == "complete" and s.reset == ("a",) and list(s.images) == ["a"]
 
 
 def test_a_complete_set_waits_for_the_joint_state_after_its_stamps():

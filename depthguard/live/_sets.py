@@ -13,8 +13,9 @@ same sets whichever drives it, as long as every frame arrives within the wait.
   or ``idle`` seconds after the last set when no new frame came at all (``idle``: answers keep coming, and the
   cameras' frames age in them). A set's ``time``, its clock for ages, is its newest stamp (complete), the wait's end
   (waited) or the idle deadline (idle): a function of the stamps alone.
-- **Joints.** One :class:`JointHistory`. A frame without joint states around its stamp (``config.JOINT_GAP``,
-  ``config.JOINT_HOLD``) is left out of the set and named in ``no_joints``: its camera counts as blind.
+- **Joints.** One :class:`JointHistory`. A frame without joint states around its stamp (``config.JOINT_GAP``;
+  ``config.JOINT_HOLD``, 0 by default: no state is held past its time) is left out of the set and named in
+  ``no_joints``: its camera counts as blind.
 - **A stamp that goes backwards** (a camera or its driver restarted, a clock stepped back) resets that camera: its
   carried frame is dropped (``resets`` counts it) and its new frame starts again.
 """
