@@ -69,10 +69,11 @@ class _Tee(io.TextIOBase):
 
 
 @contextlib.contextmanager
-def report(script: str):
+def report(script: str, name: str | None = None):
     """Run a benchmark's ``main()`` inside this: what it prints goes to the terminal as before and, when it ends
     without an exception, to ``docs/figures/<script's name>.md`` (written whole), headed by the command, the date,
-    the machine (CPU, cores, numba threads) and the commit. A failed run leaves the last report as it was."""
+    the machine (CPU, cores, numba threads) and the commit (``name``: another file name than the script's, for a
+    benchmark whose options make different tables). A failed run leaves the last report as it was."""
     import datetime
     import os
     import platform
@@ -86,7 +87,7 @@ def report(script: str):
     tee = _Tee(sys.stdout)
     with contextlib.redirect_stdout(tee):
         yield
-    name = Path(script).stem
+    name = name or Path(script).stem
     try:
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                                 cwd=FIGURES.parent.parent, timeout=10).stdout.strip() or "unknown"

@@ -227,5 +227,6 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    with report(__file__):
+    cameras = 4 if "--cameras" in sys.argv and sys.argv[sys.argv.index("--cameras") + 1:][:1] == ["4"] else 2
+    with report(__file__, name=f"soak_live_{cameras}_cameras"):  # docs/figures/soak_live_<n>_cameras.md
         main()

@@ -610,3 +610,14 @@ def test_corrupt_bags(episode, tmp_path):
         open_recording(broken)
     with pytest.raises(InputError, match="exists already"):
         write_bag(open_recording(episode), broken)
+
+
+def test_replay_places_the_robot_at_base(episode, replayed, tmp_path, capsys):
+    """--base X,Y,Z[,YAW] (shared with live and collide): the control points move with the robot's base."""
+    status, _, err = run_cli(["replay", episode, "--out", tmp_path / "r.csv", "--base", "0.25,0,0"], capsys)
+    assert status == 0, err
+    moved = read_csv(tmp_path / "r.csv")[1:]
+    original = read_csv(replayed)[1:]
+    assert [float(r[3]) for r in moved] == pytest.approx([float(r[3]) + 0.25 for r in original], abs=1e-9)
+    assert [r[4:6] for r in moved] == [r[4:6] for r in original]
+    assert_refused(["replay", episode, "--out", tmp_path / "s.csv", "--base", "1,2"], capsys, "--base")

@@ -117,20 +117,12 @@ def _numbers(text: str, count: int, option: str) -> list[float]:
 
 
 def _robot(args):
+    from depthguard.cli.options import parse_base
     from depthguard.robots import RobotModel
 
     kwargs = {}
     if args.base is not None:
-        try:
-            values = [float(x) for x in args.base.split(",")] if args.base.count(",") in (2, 3) else []
-        except ValueError:
-            values = []
-        if len(values) not in (3, 4) or not all(math.isfinite(v) and abs(v) <= config.COORDINATE_LIMIT
-                                                for v in values):
-            raise InputError(f"--base: expected X,Y,Z or X,Y,Z,YAW (finite metres, radians), got {args.base!r}")
-        from depthguard.transforms import yaw_pose
-
-        kwargs["T_world_base"] = yaw_pose(values[:3], values[3] if len(values) == 4 else 0.0)
+        kwargs["T_world_base"] = parse_base(args.base)
     if args.robot in ("iiwa", "panda", "xarm6"):
         robot = RobotModel.builtin(args.robot)
         return robot.with_base(kwargs["T_world_base"]) if kwargs else robot

@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from depthguard.cli.options import add_monitor_options, load_robot, monitor_options
+from depthguard.cli.options import add_base_option, add_monitor_options, load_robot, monitor_options
 
 HELP = ("listen to ROS 2 depth cameras and joint states through zenoh (rmw_zenoh or zenoh-bridge-ros2dds) and "
         "publish distances and status (docs/design.md §12b)")
@@ -32,6 +32,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--layout", choices=("rmw_zenoh", "bridge"), default="rmw_zenoh",
                         help="rmw_zenoh's keys, hashes and attachments, or zenoh-bridge-ros2dds' bare topic names")
     parser.add_argument("--domain", type=int, default=0, help="ROS domain id (rmw_zenoh layout; default 0)")
+    add_base_option(parser)
     add_monitor_options(parser, memory=True)
     parser.add_argument("--out", metavar="RESULTS.csv",
                         help="also write one row per point per answer: replay's columns, cameras, latency_ms")
@@ -78,7 +79,7 @@ def run(args) -> int:
     from depthguard.live import LiveNode, LiveOptions
 
     rig = load_rig(args.rig)
-    robot = load_robot(args.robot)
+    robot = load_robot(args.robot, args.base)
     topics = topics_of(args, rig)
     for image, info in topics.cameras.values():
         wire.data_key(image, "sensor_msgs/msg/Image", args.layout, args.domain)  # names checked before connecting

@@ -106,12 +106,34 @@ def parse_joints(text: str, option: str = "--joints"):
     return dict(zip(names, values))
 
 
-def load_robot(name: str):
-    """``--robot``: 'iiwa' or 'panda' (the models shipped with pybullet_data) or a URDF file."""
+def load_robot(name: str, base: str | None = None):
+    """``--robot``: 'iiwa' or 'panda' (the models shipped with pybullet_data) or a URDF file; ``base``: ``--base``
+    (:func:`parse_base`), where the robot's base stands in the world."""
     from depthguard.robots import RobotModel
 
     model = {"iiwa": RobotModel.default, "panda": RobotModel.panda}.get(name)
-    return model() if model is not None else RobotModel.from_urdf(name)
+    robot = model() if model is not None else RobotModel.from_urdf(name)
+    return robot if base is None else robot.with_base(parse_base(base))
+
+
+def add_base_option(parser) -> None:
+    """``--base X,Y,Z[,YAW]``: the robot base's pose in the world."""
+    parser.add_argument("--base", metavar="X,Y,Z[,YAW]", default=None,
+                        help="the robot base's position in the world, metres, and yaw about z, radians (default: "
+                             "the world origin)")
+
+
+def parse_base(text: str):
+    """``--base``: "X,Y,Z" or "X,Y,Z,YAW" (finite metres, radians) -> the (4, 4) pose of the base in the world."""
+    from depthguard.transforms import yaw_pose
+
+    try:
+        values = [float(x) for x in text.split(",")] if text.count(",") in (2, 3) else []
+    except ValueError:
+        values = []
+    if len(values) not in (3, 4) or not all(math.isfinite(v) and abs(v) <= config.COORDINATE_LIMIT for v in values):
+        raise InputError(f"--base: expected X,Y,Z or X,Y,Z,YAW (finite metres, radians), got {text!r}")
+    return yaw_pose(values[:3], values[3] if len(values) == 4 else 0.0)
 
 
 def robot_and_joints(args):

@@ -6,7 +6,7 @@ import json
 import math
 import sys
 
-from depthguard.cli.options import add_monitor_options, load_robot, monitor_options
+from depthguard.cli.options import add_base_option, add_monitor_options, load_robot, monitor_options
 
 HELP = ('run a recording (folder or ROS 2 bag, docs/design.md §12a) through the monitor as the live node would '
         '(§12b): frames grouped by stamp, one answer per set of frames')
@@ -23,6 +23,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--points", metavar="POINTS",
                         help="fixed control points (CSV x,y,z or JSON, world frame, metres), named p0, p1, ... "
                              "(default: the robot's control points, moving with the recorded joints)")
+    add_base_option(parser)
     add_monitor_options(parser, memory=True)
     parser.add_argument("--rig", metavar="RIG.yaml",
                         help="the rig (default: rig.yaml in the recording, the bag folder or beside the .mcap file)")
@@ -45,7 +46,7 @@ def run(args) -> int:
     if out.exists() and not out.is_file():  # a folder, a FIFO, a device: never written to
         raise InputError(f"--out {args.out}: exists and is not a regular file")
     recording = open_recording(args.recording, rig=args.rig, replay=True)
-    robot = load_robot(args.robot)
+    robot = load_robot(args.robot, args.base)
     names = recording.joint_names
     missing = [n for n in robot.joint_names if n not in names]
     if missing:  # joints beyond the robot's (a gripper's) are ignored
