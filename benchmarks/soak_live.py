@@ -198,6 +198,8 @@ def main(argv=None) -> None:
     fresh = [r for r in answers if r["cameras"] == ";".join(workcell.rig.cameras)]
     misses = int((latency > config.DEFAULT_MAX_AGE * 1e3).sum())
     summary = [line for line in err.splitlines() if "answers" in line]
+    # What else the node said (a kernel compiled at run time stalls it for seconds; a warning names its cause).
+    said = [line for line in err.splitlines() if line not in summary and "listening" not in line]
     print(f"\n{len(workcell.rig.cameras)} cameras x {RATE:g} Hz, joint states {JOINT_RATE:g} Hz, {args.minutes:g} min; "
           f"node: depthguard live (rmw_zenoh layout, max_age {config.DEFAULT_MAX_AGE:g} s)")
     print(f"  frames published per camera: {', '.join(f'{n} {c}' for n, c in publisher.published.items())}")
@@ -214,6 +216,8 @@ def main(argv=None) -> None:
               f"{'met' if np.percentile(latency, 99) <= 33 else 'NOT met'})")
         print(f"  deadline misses (latency > max_age): {misses} of {len(latency)} ({100 * misses / len(latency):.2f} "
               f"%; goal <= 0.1 %: {'met' if misses <= 0.001 * len(latency) else 'NOT met'})")
+    if said:
+        print(f"  the node also said ({len(said)} lines): " + " | ".join(line[:160] for line in said[:5]))
     if len(samples) >= 3:
         s = np.array(samples)
         cpu = (s[-1, 1] - s[0, 1]) / (s[-1, 0] - s[0, 0]) * 100
