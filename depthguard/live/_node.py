@@ -422,8 +422,13 @@ class LiveNode:
                 with self._lock:
                     frames, self._frames = self._frames, {}
                 for name, image in sorted(frames.items(), key=lambda item: item[1].timestamp):
-                    if self.counts[name].info_error:
+                    counts = self.counts[name]
+                    if counts.info_error:
                         continue  # its CameraInfo disagrees with the rig: left out, named in the status
+                    if not counts.info_seen:  # its first CameraInfo is still on its way: the frame waits for it
+                        with self._lock:
+                            self._frames.setdefault(name, image)
+                        continue
                     sets += loop.add_frame(image)
                 sets += loop.tick(clock.time() - self.options.transport)
                 if clock.time() >= self._next_diagnostics:
