@@ -307,3 +307,16 @@ def test_diagnostics_each_second_and_a_clock_that_disagrees(recording, robot, tm
                for r in rows)
     assert any("stale_camera:principal" in r["flags"] for r in rows)
     assert all(float(r["distance"]) == 0.0 for r in rows)  # blind: 0, flagged, never optimistic
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--duration", "nan"], ["--duration"]), (["--duration", "-1"], ["--duration"]),
+    (["--dry-run-wait", "inf", "--dry-run"], ["--dry-run-wait"]),
+    (["--connect", "not an endpoint", "--dry-run"], ["connect", "not an endpoint"]), (["--domain", "999", "--dry-run"], ["domain"]),
+    (["--camera", "nosuch=/a/b"], ["nosuch"]), (["--camera", "/a/b"], ["--camera"])])
+def test_bad_live_options_are_named(recording, tmp_path, capsys, argv, words):
+    from cli_support import assert_refused
+
+    rig_file = tmp_path / "rig.yaml"
+    dg.save_rig(recording.rig, rig_file)
+    assert_refused(["live", "--rig", rig_file, *argv], capsys, *words)

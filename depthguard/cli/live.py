@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from depthguard.cli.options import add_base_option, add_monitor_options, load_robot, monitor_options
+from depthguard.cli.options import SECONDS, add_base_option, add_monitor_options, load_robot, monitor_options
 
 HELP = ("listen to ROS 2 depth cameras and joint states through zenoh (rmw_zenoh or zenoh-bridge-ros2dds) and "
         "publish distances and status (docs/design.md §12b)")
@@ -39,11 +39,11 @@ def add_arguments(parser) -> None:
     parser.add_argument("--record", metavar="DIR",
                         help="also write the messages received, unchanged, and the outputs into a new ROS 2 bag "
                              "folder DIR (MCAP, with rig.yaml), which replay reads back to the same answers")
-    parser.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: run until ^C)")
+    parser.add_argument("--duration", type=SECONDS, metavar="S", help="stop after S seconds (default: run until ^C)")
     parser.add_argument("--dry-run", action="store_true",
                         help="check the topics, each CameraInfo against the rig and the joint names, then exit: 0 "
                              "when all agree, 2 with the reason")
-    parser.add_argument("--dry-run-wait", type=float, default=5.0, metavar="S",
+    parser.add_argument("--dry-run-wait", type=SECONDS, default=5.0, metavar="S",
                         help="how long --dry-run waits for every topic (default 5 s)")
 
 

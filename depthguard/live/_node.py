@@ -238,7 +238,12 @@ class LiveNode:
         self._wake = threading.Event()
         self._out_path = out
         self._recorder = _Recorder(record, rig) if record is not None else None
-        self.session = zenoh.open(session_config(options.connect))
+        try:
+            self.session = zenoh.open(session_config(options.connect))
+        except zenoh.ZError as exc:  # a malformed endpoint, or a configuration zenoh refuses
+            reason = str(exc).split(" at /")[0][:200]  # zenoh's message, without its source location
+            raise InputError(f"zenoh cannot open a client session to {', '.join(options.connect)}: {reason}",
+                             field="connect") from None
         self._subscribers = []
         for name, (image_topic, info_topic) in topics.cameras.items():
             self._subscribe(image_topic, IMAGE, lambda s, n=name: self._on_image(n, s))
