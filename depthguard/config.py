@@ -367,6 +367,11 @@ SSM_DETECTION_CAPABILITY = 0.04
 #: The loop's SSM asks the monitor again for a control point's distance on the same frames only once it has moved
 #: this many metres since it was asked (meanwhile: the distance then minus how far it moved, a lower bound).
 SSM_REQUERY = 0.005
+#: Speed scaling (``depthguard live --ssm``, design §12b): a controller applies a speed factor at most SSM_HOLD
+#: seconds with no newer one (its watchdog; then it stops), and runs every SSM_CONTROL_PERIOD seconds. Both count in
+#: the reaction time T_r.
+SSM_HOLD = 0.1
+SSM_CONTROL_PERIOD = 0.002
 #: ISO 13855's intrusion distance C for a detection capability d: C = 8 (d - 14 mm) for 14 mm < d <= 40 mm, 0 for
 #: d <= 14 mm (a finger cannot reach in unseen), 850 mm (an arm's reach) for 40 mm < d <= 70 mm. ISO 13855 gives C for
 #: no coarser d (a sensor that misses a 70 mm arm sees only the trunk, and needs another formula): d above

@@ -47,6 +47,11 @@ class RosPublisher:
         self._answered = threading.Condition()
         key = wire.subscription_key("/depthguard/distances", "std_msgs/msg/Float64MultiArray", layout)
         self._sub = self.session.declare_subscriber(key, self._on_answer)
+        self.scaling = []  # (key, has an attachment, factor) of /depthguard/speed_scaling (live --ssm)
+        self._scale = self.session.declare_subscriber(
+            wire.subscription_key("/depthguard/speed_scaling", "control_msgs/msg/SpeedScalingFactor", layout),
+            lambda sample: self.scaling.append((str(sample.key_expr), sample.attachment is not None, wire.deserialize(
+                sample.payload.to_bytes(), "control_msgs/msg/SpeedScalingFactor").factor)))
         self.diagnostics = []  # diagnostic_msgs/DiagnosticArray messages on /diagnostics
         self._diag = self.session.declare_subscriber(
             wire.subscription_key("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", layout),
@@ -120,6 +125,7 @@ class RosPublisher:
     def close(self):
         self._sub.undeclare()
         self._diag.undeclare()
+        self._scale.undeclare()
         for publisher in self._publishers.values():
             publisher.undeclare()
         self.session.close()

@@ -50,13 +50,14 @@ def wait_for(condition, timeout=30.0):
     return False
 
 
-def play(recording, robot, tmp_path, layout="rmw_zenoh", odd_images=False, info=None, type_hash=None, record=None):
+def play(recording, robot, tmp_path, layout="rmw_zenoh", odd_images=False, info=None, type_hash=None, record=None,
+         options=OPTIONS, ssm=None):
     """Publish the recording's sets one by one, each restamped now, waiting for the node's answer to it. Returns
     (the node's CSV rows, [(stamp, {camera: data}, joints)] as published, the publisher's answers, the node)."""
     rig = recording.rig
     publisher = RosPublisher(rig, recording.joint_names, layout=layout, type_hash=type_hash)
-    node = LiveNode(rig, robot, topics(rig), LiveOptions(layout=layout, connect=[publisher.endpoint], transport=1.0), OPTIONS,
-                    out=tmp_path / "live.csv", record=record)
+    node = LiveNode(rig, robot, topics(rig), LiveOptions(layout=layout, connect=[publisher.endpoint], transport=1.0), options,
+                    out=tmp_path / "live.csv", record=record, ssm=ssm)
     # The host's clock held back 1 s (LiveOptions.transport): a frame delayed by this busy machine still joins its
     # set, so that the sets are those of the stamps alone.
     published = []
@@ -77,6 +78,10 @@ def play(recording, robot, tmp_path, layout="rmw_zenoh", odd_images=False, info=
                 data[camera] = image.data
             published.append((ns, data, q))
             assert wait_for(lambda: any(t >= ns / 1e9 and why != "idle" for t, why, _ in list(node.recent))), (i, ns, list(node.errors), list(node.recent)[:5], node.counts)
+        if ssm is not None:  # every factor published so far heard (node.heard_scaling: (key, attachment, factor))
+            answered = node.answers
+            assert wait_for(lambda: len([f for f in publisher.scaling]) >= answered)
+            node.heard_scaling = list(publisher.scaling)
     finally:
         node.close()
         publisher.close()
@@ -320,3 +325,61 @@ def test_bad_live_options_are_named(recording, tmp_path, capsys, argv, words):
     rig_file = tmp_path / "rig.yaml"
     dg.save_rig(recording.rig, rig_file)
     assert_refused(["live", "--rig", rig_file, *argv], capsys, *words)
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--ssm", "--rho", "0.4"], ["rho", "protective separation"]),
+    (["--ssm", "--rho", "1.0", "--ssm-joint-speed", "1,2"], ["--ssm-joint-speed"]),
+    (["--ssm", "--rho", "1.0", "--ssm-braking", "0"], ["--ssm-braking"]),
+    (["--ssm", "--detection-capability", "0.08"], ["--detection-capability"]),
+    (["--ssm", "--ssm-hold", "nan"], ["--ssm-hold"]),
+    (["--detection-capability", "0.04"], ["needs --ssm"])])
+def test_bad_speed_scaling_options_are_named(recording, tmp_path, capsys, argv, words):
+    from cli_support import assert_refused
+
+    rig_file = tmp_path / "rig.yaml"
+    dg.save_rig(recording.rig, rig_file)
+    assert_refused(["live", "--rig", rig_file, *argv], capsys, *words)
+
+
+def test_speed_scaling_is_published_after_each_answer_as_ros2_control_takes_it(recording, robot, tmp_path):
+    """--ssm: one control_msgs/msg/SpeedScalingFactor per answer at rmw_zenoh's key for its hash, each the factor
+    of SSM's bound (speed_factor_within) on the detectable distances of the robot's surface on those same frames,
+    with the reaction time the node counted (which holds the hold, the transport and the clock's skew)."""
+    from depthguard.avoidance import SpeedScaling
+
+    options = dict(OPTIONS, rho=1.0, detection_capability=0.04)
+    ssm = dict(joint_speed=0.3, hold=0.1)
+    rows, published, answers, node = play(recording, robot, tmp_path, options=options, ssm=ssm)
+    scaling = SpeedScaling(dg.DistanceMonitor(recording.rig, robot=robot, **options), **ssm)
+    monitor = dg.DistanceMonitor(recording.rig, robot=robot, **options)
+    stamps = {repr(ns / 1e9): (ns, data, q) for ns, data, q in published}
+    checked = 0
+    for row in rows:
+        if row["control_point"] != robot.control_point_names[0] or row["time"] not in stamps:
+            continue
+        ns, data, q = stamps[row["time"]]
+        t = ns / 1e9
+        frames = {n: dg.depth_image(d, recording.rig.cameras[n], timestamp=t) for n, d in data.items()}
+        prepared = monitor.prepare_set(frames, camera_joints={n: q for n in frames}, now=t)
+        reaction = float(row["reaction_ms"]) / 1e3
+        assert reaction >= scaling.extra_time + scaling.control_period
+        points, jacobians = scaling.surface.control_point_kinematics(q)
+        distance = prepared.detectable_distances(points, limit=1.0, check=False).distance
+        surface = np.where(distance >= 1.0, np.inf, np.maximum(distance - scaling.radii, 0.0))
+        want = scaling.ssm.speed_factor_within(surface, jacobians, scaling.joint_speed, reaction,
+                                               radii=scaling.radii).factor
+        assert float(row["speed_factor"]) == pytest.approx(want, abs=1e-4)
+        checked += 1
+    assert checked == FRAMES
+    # What a controller subscribed to the topic reads: the factors of the CSV, in order, at the hashed key.
+    factors = [float(r["speed_factor"]) for r in rows if r["control_point"] == robot.control_point_names[0]]
+    heard = node.heard_scaling
+    assert {key for key, _, _ in heard} == {
+        "0/depthguard/speed_scaling/control_msgs::msg::dds_::SpeedScalingFactor_/" + dg.live.wire.type_hash(
+            "control_msgs/msg/SpeedScalingFactor")}
+    assert all(has for _, has, _ in heard)
+    heard = [f for _, _, f in heard]
+    start = next(i for i in range(len(heard)) if heard[i:i + len(factors)] == factors)  # one per answer, in order
+    assert all(f == 0.0 for f in heard[:start])  # before the joints came: no answer, 0
+    assert all(0.0 <= f <= 1.0 for f in factors)

@@ -11,6 +11,7 @@ from depthguard.avoidance._controller import (
     sns,
 )
 from depthguard.avoidance._limits import JointLimits, reachable
+from depthguard.avoidance._scaling import ScalingAnswer, SpeedScaling
 from depthguard.avoidance._ssm import (
     SpeedSeparationMonitor,
     SSMParams,
@@ -29,6 +30,8 @@ __all__ = [
     "JointLimits",
     "SSMParams",
     "SSMVerdict",
+    "ScalingAnswer",
+    "SpeedScaling",
     "SpeedSeparationMonitor",
     "allowed_approach_speed",
     "brake_along_path",

@@ -444,6 +444,72 @@ class SpeedSeparationMonitor:
                           stopping_time=t_s)
 
 
+    def speed_factor_within(self, distances, jacobians, joint_speed, reaction_time: float, *, radii=None,
+                            check: bool = True) -> SSMVerdict:
+        """The factor k in [0, 1] that keeps SSM's condition for EVERY command k dq with |dq_i| <= joint_speed_i,
+        whatever its direction: for a controller that scales a trajectory it does not tell (ros2_control's speed
+        scaling, which runs the trajectory at k times its speed), known only to stay within ``joint_speed``.
+
+        Each control point i is a sphere of radius ``radii[i]`` moving with its link; ``distances`` count from the
+        spheres' surfaces. Every point of sphere i moves at most s_i = min(V, sum_j joint_speed_j (|J_i[:, j]| +
+        radii_i)) (translation plus rotation; V = ``reaches`` . joint_speed, the bound of any point of the robot,
+        without ``reaches`` the sum alone), towards anything (no direction is trusted), and the robot stops within
+        T_s = max_j joint_speed_j / braking_j (``params.stopping_time`` without ``braking``). :meth:`speed_factor`
+        with an unknown direction needs k (|v| T_r + V T_s / 2) <= room(D) for the command's own |v| <= s_i, V and
+        T_s <= these bounds, and room(D) = max(D - S_p at rest - rounding, 0) falls as T_s grows: so k_i = room /
+        (s_i T_r + V T_s / 2) holds for every such command (``tests/test_speed_scaling.py`` checks it against
+        :meth:`speed_factor` for random commands in the box). Returns :class:`SSMVerdict` with
+        ``approach_speed`` = s_i.
+
+        Args:
+            distances: (m,) float64 metres from the spheres' surfaces, >= 0, inf when nothing is within rho
+                (counted as rho).
+            jacobians: (m, 3, n) float64, the spheres' centres' positional Jacobians, world frame.
+            joint_speed: (n,) float64 > 0, rad/s (m/s prismatic): the most each joint of the scaled trajectory moves
+                at factor 1.
+            reaction_time: T_r, seconds, >= 0.
+            radii: (m,) float64 metres >= 0 (default 0: points).
+            check: False skips the validation.
+        """
+        params = self.params
+        if check:
+            reaction_time = _reaction_time(reaction_time)
+            distances = _array(distances, "distances", shape=(None,), allow_inf=True, nonnegative=True)
+            m = len(distances)
+            jacobians = _array(jacobians, "jacobians", shape=(m, 3, None))
+            joint_speed = _array(joint_speed, "joint_speed", shape=(jacobians.shape[2],))
+            if not np.all(joint_speed > 0.0):
+                raise InputError("joint_speed must be > 0 for every joint (rad/s or m/s)", field="joint_speed")
+            radii = np.zeros(m) if radii is None else _array(radii, "radii", shape=(m,), nonnegative=True)
+        elif radii is None:
+            radii = np.zeros(len(distances))
+        if self.braking is not None and joint_speed.shape != self.braking.shape:
+            raise InputError(f"joint_speed has {joint_speed.shape[0]} joints, braking {self.braking.shape[0]}",
+                             field="joint_speed")
+        distances = np.where(np.isfinite(distances), distances, self.rho)
+        columns = np.linalg.norm(jacobians, axis=1)  # (m, n) each joint's speed of each centre per rad/s
+        speed = (columns + radii[:, None]) @ joint_speed
+        whole = None if self.reaches is None else float(self.reaches @ joint_speed)
+        if whole is not None:
+            speed = np.minimum(speed, whole)
+        t_s = self.stopping_time(joint_speed)
+        whole = speed if whole is None else np.full(len(speed), whole)
+        allowed = _allowed(params, distances, reaction_time, t_s)
+        slope = _speed_slope(params, reaction_time, t_s)
+        room = np.where(np.isfinite(allowed), allowed * slope, np.inf)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            need = speed * reaction_time + whole * 0.5 * t_s
+            ratio = np.where(np.isfinite(room), np.where(need > 0.0, room / np.where(need > 0.0, need, 1.0),
+                                                         np.inf), np.inf)
+        limiting = int(np.argmin(ratio)) if len(ratio) and ratio.min() < 1.0 else -1
+        factor = float(max(ratio[limiting], 0.0)) if limiting >= 0 else 1.0
+        protective = _protective(params, factor * speed, reaction_time, distances, t_s) + \
+            factor * (whole - speed) * 0.5 * t_s
+        return SSMVerdict(factor=factor, approach_speed=speed, allowed_speed=allowed,
+                          protective_distance=protective, limiting=limiting,
+                          certified=np.zeros(len(speed), dtype=bool), stopping_time=t_s)
+
+
 def check_capability(params: SSMParams, result: DetectableResult) -> None:
     """Refuse detectable distances whose effective detection capability (the monitor's d plus the band its
     concessions can hide, :attr:`DetectableResult.effective_capability`) is not SSM's ``detection_capability``: C

@@ -8,10 +8,15 @@ import sys
 import time
 from pathlib import Path
 
-from depthguard.cli.options import SECONDS, add_base_option, add_monitor_options, load_robot, monitor_options
+from depthguard import config
+from depthguard.cli.options import (SECONDS, add_base_option, add_monitor_options, load_robot, monitor_options,
+                                    real_option)
 
 HELP = ("listen to ROS 2 depth cameras and joint states through zenoh (rmw_zenoh or zenoh-bridge-ros2dds) and "
         "publish distances and status (docs/design.md §12b)")
+
+CAPABILITY = real_option(0.0, config.SSM_INTRUSION_LIMIT, "metres", above_minimum=True)
+HOLD = real_option(0.0, 10.0, "seconds")
 
 _CAMERA = re.compile(r"(?P<name>[^=]+)=(?P<image>[^:]+)(?::(?P<info>.+))?")
 
@@ -34,6 +39,22 @@ def add_arguments(parser) -> None:
     parser.add_argument("--domain", type=int, default=0, help="ROS domain id (rmw_zenoh layout; default 0)")
     add_base_option(parser)
     add_monitor_options(parser, memory=True)
+    ssm = parser.add_argument_group("speed scaling (--ssm; docs/design.md §9, §12b)")
+    ssm.add_argument("--ssm", action="store_true",
+                     help="also publish /depthguard/speed_scaling (control_msgs/msg/SpeedScalingFactor): speed and "
+                          "separation monitoring's factor for a controller that scales its trajectory")
+    ssm.add_argument("--detection-capability", type=CAPABILITY, metavar="D",
+                     help="metres: with --ssm, SSM's distances leave out what is thinner than D (ISO 13855's C is "
+                          f"taken for it; default {config.SSM_DETECTION_CAPABILITY:g})")
+    ssm.add_argument("--ssm-joint-speed", metavar="RAD_S[,...]",
+                     help="the most each joint of the trajectory moves at factor 1, rad/s: one number or one per "
+                          "joint (default: the URDF's velocity limits)")
+    ssm.add_argument("--ssm-braking", metavar="RAD_S2[,...]",
+                     help="the deceleration each joint is sure of, rad/s^2: one number or one per joint (default "
+                          f"{config.JOINT_ACCELERATION:g})")
+    ssm.add_argument("--ssm-hold", type=HOLD, default=config.SSM_HOLD, metavar="S",
+                     help="seconds the controller applies a factor with no newer one before it stops (its "
+                          f"watchdog; counted in the reaction time; default {config.SSM_HOLD:g})")
     parser.add_argument("--out", metavar="RESULTS.csv",
                         help="also write one row per point per answer: replay's columns, cameras, latency_ms")
     parser.add_argument("--record", metavar="DIR",
@@ -66,6 +87,38 @@ def topics_of(args, rig):
     return Topics(cameras, args.joint_states)
 
 
+def per_joint(text: str | None, option: str, robot):
+    """``--ssm-joint-speed`` / ``--ssm-braking``: None, one number for every joint, or one per joint of ``robot``;
+    each finite and > 0. InputError naming the option otherwise."""
+    import math
+
+    from depthguard.errors import InputError
+
+    if text is None:
+        return None
+    try:
+        values = [float(x) for x in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) not in (1, robot.n_joints) or not all(math.isfinite(v) and v > 0.0 for v in values):
+        raise InputError(f"{option}: expected one number > 0 or {robot.n_joints} of them (one per joint of "
+                         f"{robot.name}), got {text!r}", field=option.lstrip("-").replace("-", "_"))
+    return values[0] if len(values) == 1 else values
+
+
+def ssm_options(args, robot) -> dict | None:
+    """:class:`~depthguard.live.LiveNode`'s ``ssm`` from the --ssm options (None without --ssm)."""
+    from depthguard.errors import InputError
+
+    if not args.ssm:
+        for name in ("detection_capability", "ssm_joint_speed", "ssm_braking"):
+            if getattr(args, name) is not None:
+                raise InputError(f"--{name.replace('_', '-')} needs --ssm", field=name)
+        return None
+    return dict(joint_speed=per_joint(args.ssm_joint_speed, "--ssm-joint-speed", robot),
+                braking=per_joint(args.ssm_braking, "--ssm-braking", robot), hold=args.ssm_hold)
+
+
 def run(args) -> int:
     from depthguard.cameras import load_rig
     from depthguard.errors import InputError
@@ -88,8 +141,18 @@ def run(args) -> int:
     if args.record is not None and Path(args.record).exists():
         raise InputError(f"--record {args.record}: exists already; a recording is written into a new folder",
                          field="record")
-    node = LiveNode(rig, robot, topics, options, monitor_options(args), out=None if args.dry_run else args.out,
-                    record=None if args.dry_run else args.record)
+    ssm = ssm_options(args, robot)
+    monitored = monitor_options(args)
+    scaling = None
+    if ssm is not None:  # SSM's distances: the detectable space of that capability (design §9)
+        from depthguard import DistanceMonitor
+        from depthguard.avoidance import SpeedScaling
+
+        monitored["detection_capability"] = args.detection_capability or config.SSM_DETECTION_CAPABILITY
+        # Checked here, before connecting (the node makes its own on its thread): C, rho against S_p at rest.
+        scaling = SpeedScaling(DistanceMonitor(rig, robot=robot, **monitored), **ssm)
+    node = LiveNode(rig, robot, topics, options, monitored, out=None if args.dry_run else args.out,
+                    record=None if args.dry_run else args.record, ssm=ssm)
     try:
         if args.dry_run:
             deadline = time.monotonic() + args.dry_run_wait
@@ -104,9 +167,15 @@ def run(args) -> int:
                   f"and {robot.name}")
             return 0
         node.start()
+        outputs = "/depthguard/distances and /depthguard/status" + (", /depthguard/speed_scaling" if ssm else "")
         print(f"depthguard live: listening ({args.layout}, {', '.join(options.connect)}) for "
-              f"{', '.join(rig.cameras)}; publishing /depthguard/distances and /depthguard/status", file=sys.stderr,
-              flush=True)
+              f"{', '.join(rig.cameras)}; publishing {outputs}", file=sys.stderr, flush=True)
+        if scaling is not None:
+            print(f"depthguard live: speed scaling: C {scaling.params.intrusion:g} m ({scaling.hidden}), T_r >= "
+                  f"{scaling.extra_time:g} s + the frames' age, stopping within "
+                  f"{scaling.ssm.stopping_time(scaling.joint_speed):.3f} s: the robot stops where a surface point is "
+                  f"within {scaling.at_rest(scaling.extra_time + 0.05):.2f} m of possibly occupied space",
+                  file=sys.stderr, flush=True)
         start = time.monotonic()
         try:
             while args.duration is None or time.monotonic() - start < args.duration:

@@ -48,6 +48,8 @@ STATUS_TOPIC = "/depthguard/status"
 DISTANCES_TYPE = "std_msgs/msg/Float64MultiArray"
 STATUS_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 DIAGNOSTICS_TOPIC = "/diagnostics"
+SCALING_TOPIC = "/depthguard/speed_scaling"
+SCALING_TYPE = "control_msgs/msg/SpeedScalingFactor"
 #: Diagnostic levels (diagnostic_msgs/msg/DiagnosticStatus).
 OK, WARN, ERROR = 0, 1, 2
 NODE_NAME = "depthguard"
@@ -205,11 +207,17 @@ class LiveNode:
     takes them) for the robot's control points, and publishes the answers (see the module docstring).
 
     ``out``: a CSV file to write one row per point per answer (replay's columns, plus ``cameras``, those counted as
-    seen, and ``latency_ms``, from the set's newest stamp to the answer). Start with :meth:`start`, stop with
-    :meth:`close`; ``answers``, ``dropped``, ``deadline_misses`` and per-camera ``counts`` say how it went."""
+    seen, and ``latency_ms``, from the set's newest stamp to the answer; with ``ssm`` also ``speed_factor`` and
+    ``reaction_ms``). Start with :meth:`start`, stop with :meth:`close`; ``answers``, ``dropped``,
+    ``deadline_misses`` and per-camera ``counts`` say how it went.
+
+    ``ssm``: None, or :class:`~depthguard.avoidance.SpeedScaling`'s keyword arguments (``params``, ``joint_speed``,
+    ``braking``, ``hold``): then every answer also publishes ``/depthguard/speed_scaling``
+    (``control_msgs/msg/SpeedScalingFactor``), right after the status, and 0 whenever no answer can be given (the
+    joints unknown, a set that failed)."""
 
     def __init__(self, rig, robot, topics: Topics, options: LiveOptions, monitor_options: dict, out=None,
-                 record=None):
+                 record=None, ssm: dict | None = None):
         import zenoh
 
         self.rig = rig
@@ -227,6 +235,9 @@ class LiveNode:
         self.dropped = 0
         self.deadline_misses = 0
         self.last = None  # (time, why, cameras seen) of the last answer
+        self.ssm = None if ssm is None else dict(ssm)
+        self.scaling = None  # the SpeedScaling, made on the worker's thread with the monitor
+        self.last_scaling = None  # the last ScalingAnswer published
         self.recent: collections.deque = collections.deque(maxlen=1000)  # the last answers' (time, why, seen)
         self.errors: collections.deque = collections.deque(maxlen=100)  # the last errors, one line each
         self._warned: set = set()
@@ -256,6 +267,8 @@ class LiveNode:
                                   self._recorder)
         self._diagnostics = _Publisher(self.session, DIAGNOSTICS_TOPIC, STATUS_TYPE, options.layout, options.domain, 3,
                                        seed, self._recorder)
+        self._scaling = None if ssm is None else _Publisher(self.session, SCALING_TOPIC, SCALING_TYPE, options.layout,
+                                                            options.domain, 4, seed, self._recorder)
         self._next_diagnostics = 0.0
         self._node_token = None
         if options.layout == "rmw_zenoh":
@@ -392,10 +405,10 @@ class LiveNode:
         self._wake.set()
         if self._worker.is_alive():
             self._worker.join()
-        for entity in [*self._subscribers, self._distances.publisher, self._status.publisher,
-                       self._diagnostics.publisher]:
+        outputs = [p for p in (self._distances, self._status, self._diagnostics, self._scaling) if p is not None]
+        for entity in [*self._subscribers, *(p.publisher for p in outputs)]:
             entity.undeclare()
-        for token in (self._distances.token, self._status.token, self._diagnostics.token, self._node_token):
+        for token in [*(p.token for p in outputs), self._node_token]:
             if token is not None:
                 token.undeclare()
         self.session.close()
@@ -407,6 +420,10 @@ class LiveNode:
 
         try:
             monitor = DistanceMonitor(self.rig, robot=self.robot, **self.monitor_options)
+            if self.ssm is not None:
+                from depthguard.avoidance import SpeedScaling
+
+                self.scaling = SpeedScaling(monitor, **self.ssm)
         except BaseException as exc:  # reported to start()'s caller
             self._startup_error = exc
             self._ready.set()
@@ -416,7 +433,7 @@ class LiveNode:
         out_file = open(self._out_path, "w", newline="") if self._out_path is not None else None  # noqa: SIM115
         writer = csv.writer(out_file) if out_file is not None else None
         if writer is not None:
-            writer.writerow(CSV_HEADER)
+            writer.writerow(CSV_HEADER + (["speed_factor", "reaction_ms"] if self.scaling is not None else []))
         try:
             while not self._stop.is_set():
                 self._wake.wait(0.005)
@@ -449,6 +466,7 @@ class LiveNode:
                     except Exception as exc:  # noqa: BLE001 - the loop must keep answering; the fault is kept
                         self.errors.append(f"answering the set at {sets[-1].time!r} s: {type(exc).__name__}: {exc}")
                         _LOG.exception("depthguard live: a set could not be answered")
+                        self._publish_scaling(None)
                     if out_file is not None:
                         out_file.flush()
         finally:
@@ -463,8 +481,10 @@ class LiveNode:
                                 now=clock.time() - self.options.transport)
         except DepthguardError as exc:
             self.errors.append(str(exc))
+            self._publish_scaling(None)
             return
         if answer is None:  # no joints at all yet: the robot's points are unknown
+            self._publish_scaling(None)
             return
         newest = max((image.timestamp for image in frame_set.images.values()), default=frame_set.time)
         latency = clock.time() - newest
@@ -474,9 +494,24 @@ class LiveNode:
         self.last = (frame_set.time, frame_set.why, answer.seen)
         self.recent.append(self.last)
         self._publish(answer, loop)
+        scaling = None
+        if self.scaling is not None:  # after the distances, which do not wait for it
+            scaling = self.scaling.factor(answer.prepared, answer.joints, clock=clock.time)
+            self._publish_scaling(scaling)
         if writer is not None:
+            extra = [] if scaling is None else [repr(scaling.factor), f"{scaling.reaction_time * 1e3:.3f}"]
             for row in answer.rows(self.robot.control_point_names):
-                writer.writerow(row + [";".join(answer.seen), f"{latency * 1e3:.3f}"])
+                writer.writerow(row + [";".join(answer.seen), f"{latency * 1e3:.3f}"] + extra)
+
+    def _publish_scaling(self, scaling) -> None:
+        """``/depthguard/speed_scaling`` (with ``ssm``): the factor of ``scaling`` (a ScalingAnswer), 0 for None."""
+        if self._scaling is None:
+            return
+        from depthguard.avoidance import ScalingAnswer
+
+        scaling = ScalingAnswer(0.0, math.inf, "no answer") if scaling is None else scaling
+        self.last_scaling = scaling
+        self._scaling.put(wire.type_store().types[SCALING_TYPE](factor=float(scaling.factor)))
 
     def clock_problem(self, name: str) -> str:
         """Why camera ``name``'s clock and the host's disagree, "" when they agree (within
@@ -516,6 +551,14 @@ class LiveNode:
                                    value(key="answers", value=str(self.answers)),
                                    value(key="sets_dropped", value=str(self.dropped)),
                                    value(key="deadline_misses", value=str(self.deadline_misses))]))
+        scaling = self.last_scaling
+        if scaling is not None:
+            level = ERROR if scaling.factor == 0.0 else (WARN if scaling.factor < 1.0 else OK)
+            message = scaling.why or (f"limited by {scaling.limiting}" if scaling.limiting else "full speed")
+            statuses.append(status(level=level, name="depthguard: speed scaling", message=message, hardware_id="",
+                                   values=[value(key="factor", value=repr(float(scaling.factor))),
+                                           value(key="reaction_ms", value=f"{scaling.reaction_time * 1e3:.3f}"),
+                                           value(key="distance", value=repr(float(scaling.distance)))]))
         self._diagnostics.put(types[STATUS_TYPE](header=ros_header(store, clock.time_ns(), ""), status=statuses))
 
     def _publish(self, answer, loop) -> None:

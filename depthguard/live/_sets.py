@@ -30,7 +30,7 @@ import numpy as np
 from depthguard import config
 from depthguard.depth import DepthImage
 from depthguard.errors import InputError
-from depthguard.validation import check_real
+from depthguard.validation import check_points, check_real
 
 __all__ = ["JointHistory", "FrameSet", "FrameSetLoop", "SetAnswer", "answer_set", "RESULT_COLUMNS"]
 
@@ -274,6 +274,8 @@ class SetAnswer:
         named: one flag per other camera of the rig: ``missing_camera:<name>`` (no frame yet, or left out) or
             ``stale_camera:<name>`` (a frame too old at the set's time, or without joints near its stamp); and
             ``reset_camera:<name>`` for a camera whose stamps went back since the last set.
+        prepared: the monitor's :class:`~depthguard.PreparedSet` of the set (more queries: speed scaling).
+        joints: (n,) radians, the robot's joints the points were placed at (None when ``points`` were given).
     """
 
     frame_set: FrameSet
@@ -282,6 +284,8 @@ class SetAnswer:
     result: object
     seen: tuple
     named: tuple
+    prepared: object = None
+    joints: object = None
 
     def flags(self, k: int) -> list[str]:
         """Point k's flags: the result's, then the cameras'."""
@@ -303,6 +307,7 @@ def answer_set(monitor, loop: FrameSetLoop, frame_set: FrameSet, robot=None, poi
     allowance when that is later): the one answering step of ``live`` and ``replay``. None when the robot's joints
     are not known at all (no answer can name its points)."""
     now = frame_set.time if now is None else max(now, frame_set.time)
+    q = None
     if points is None:
         q = loop.joints.at(frame_set.time)
         if q is None and frame_set.joints:
@@ -312,7 +317,8 @@ def answer_set(monitor, loop: FrameSetLoop, frame_set: FrameSet, robot=None, poi
             return None
         points = robot.control_point_positions(q)
     camera_joints = frame_set.joints if robot is not None else None
-    result = monitor.query(frame_set.images, points, camera_joints=camera_joints or None, now=now)
+    prepared = monitor.prepare_set(frame_set.images, camera_joints=camera_joints or None, now=now)
+    result = prepared.query(check_points(points), check=False)
     seen, named = [], []
     for name in loop.cameras:
         image = frame_set.images.get(name)
@@ -323,4 +329,4 @@ def answer_set(monitor, loop: FrameSetLoop, frame_set: FrameSet, robot=None, poi
         else:
             named.append(f"stale_camera:{name}")
     named += [f"reset_camera:{name}" for name in frame_set.reset]
-    return SetAnswer(frame_set, frame_set.index, np.asarray(points), result, tuple(seen), tuple(named))
+    return SetAnswer(frame_set, frame_set.index, np.asarray(points), result, tuple(seen), tuple(named), prepared, q)

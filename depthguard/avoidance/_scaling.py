@@ -1,0 +1,159 @@
+"""SSM's speed factor for a controller that scales a trajectory of its own (design §9, §12b): ros2_control's speed
+scaling (``control_msgs/msg/SpeedScalingFactor``), which runs the trajectory at ``factor`` times its speed. The
+trajectory itself is not told, only a bound on its joint speeds, so the factor holds for any motion within that bound
+(:meth:`SpeedSeparationMonitor.speed_factor_within`).
+
+Where the distances come from: the robot's surface (design §9): spheres that cover every moving link's padded
+capsule, none more than Z_r beyond it (``RobotModel.with_surface_points``), asked of the monitor's prepared set, each
+distance less its sphere's radius. A monitor with a ``detection_capability`` answers with its detectable space
+(``PreparedSet.detectable_distances``; C for that d plus the band its concessions hide); one without, with its
+query (C for ``query_hidden_band``, which its self-filter's shell often makes coarser than 70 mm: refused).
+
+What the reaction time counts (design §9, T_r), from the OLDEST frame of the set to the last instant the factor may
+be applied:
+
+    T_r = (clock - oldest stamp) + the set's preparation + one control cycle   (PreparedSet.reaction_time)
+          + transport      the factor's way to the controller (computing the factor included)
+          + hold           how long the controller applies a factor with no newer one (its watchdog)
+          + clock skew     config.CLOCK_SKEW_TOLERANCE: the cameras' clocks may lag the host's by that much
+
+A host clock behind the set's newest stamp by more than the skew tolerance says the clocks disagree: the factor is 0.
+So is it where no frame was usable (distance 0 everywhere), and where the joints are not known.
+
+Frames and units: world frame, metres, seconds, radians.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from depthguard import config
+from depthguard.avoidance._limits import JointLimits
+from depthguard.avoidance._ssm import SpeedSeparationMonitor, SSMParams
+from depthguard.errors import InputError
+from depthguard.validation import check_real
+
+
+@dataclass(frozen=True)
+class ScalingAnswer:
+    """One speed factor and what it rests on.
+
+    Attributes:
+        factor: in [0, 1], the fraction of the trajectory's speed allowed.
+        reaction_time: T_r, seconds, as counted (inf when nothing says how old the frames are).
+        why: "" when the factor comes from the distances; else why it is 0 ("blind", "clock", "no joints").
+        limiting: the name of the surface point that set the factor ("" when 1 or 0 for a reason).
+        distance: metres, that point's distance from its sphere's surface (inf: none).
+    """
+
+    factor: float
+    reaction_time: float
+    why: str = ""
+    limiting: str = ""
+    distance: float = math.inf
+
+
+class SpeedScaling:
+    """SSM's factor for a scaled trajectory, from a :class:`~depthguard.DistanceMonitor`'s prepared sets (see the
+    module's docstring).
+
+    Args:
+        monitor: the :class:`~depthguard.DistanceMonitor` whose sets are asked (its robot, rho, concessions).
+        params: :class:`SSMParams` (default: its defaults). Its ``detection_capability`` is replaced by the band
+            the monitor's concessions may hide (``query_hidden_band``), refused above ISO 13855's 70 mm; its
+            ``sensing_uncertainty`` grows by the monitor's robot zone; its ``robot_uncertainty`` is the covering
+            spheres' tolerance.
+        joint_speed: (n,) or a number, rad/s: the most each joint moves at factor 1 (default: the robot's velocity
+            limits from its URDF).
+        braking: (n,) or a number, rad/s^2: the deceleration each joint is sure of (default
+            ``config.JOINT_ACCELERATION``).
+        hold: seconds the controller applies a factor before it must have a newer one, else stop (its watchdog).
+        transport: seconds from the factor's computation to the controller.
+        control_period: seconds, the controller's cycle.
+    """
+
+    def __init__(self, monitor, params: SSMParams | None = None, *, joint_speed=None, braking=None,
+                 hold: float = config.SSM_HOLD, transport: float = config.LIVE_TRANSPORT,
+                 control_period: float = config.SSM_CONTROL_PERIOD):
+        robot = monitor.robot
+        if robot is None:
+            raise InputError("speed scaling needs the monitor's robot (DistanceMonitor(robot=...))", field="robot")
+        params = SSMParams() if params is None else params
+        if not isinstance(params, SSMParams):
+            raise InputError(f"params must be SSMParams, got {type(params).__name__}", field="params")
+        self.hold = check_real(hold, "hold", minimum=0.0, maximum=10.0, unit="seconds", field="hold")
+        self.transport = check_real(transport, "transport", minimum=0.0, maximum=10.0, unit="seconds",
+                                    field="transport")
+        self.control_period = check_real(control_period, "control_period", minimum=0.0, maximum=1.0,
+                                         unit="seconds", field="control_period")
+        self.detectable = monitor.detectable is not None
+        if self.detectable:  # distances to what a ball of the detection capability fits in (freespace.detectable)
+            band = monitor.detectable.capability + monitor.hidden_band
+            why = f"detection capability {monitor.detectable.capability:g} m + {monitor.hidden_band:.3f} m hidden"
+        else:
+            band, why = monitor.query_hidden_band()
+        if band > config.SSM_INTRUSION_LIMIT * (1.0 + 1e-12):
+            raise InputError(f"SSM cannot be sound here: the monitor's distances may leave out an object {band:.3f} m "
+                             f"thick next to a surface ({why}), coarser than ISO 13855's 70 mm, for which no "
+                             "intrusion distance C is defined", field="detection_capability")
+        tolerance = params.robot_uncertainty if params.robot_uncertainty > 0.0 else config.SSM_ROBOT_UNCERTAINTY
+        self.params = replace(params, detection_capability=band, robot_uncertainty=tolerance,
+                              sensing_uncertainty=params.sensing_uncertainty + monitor.robot_zone)
+        self.hidden = why
+        limits = JointLimits.from_robot(robot, velocity=joint_speed, acceleration=braking)
+        if not np.all(limits.velocity > 0.0):
+            raise InputError("joint_speed must be > 0 for every joint", field="joint_speed")
+        self.joint_speed = limits.velocity
+        self.surface = robot.with_surface_points(tolerance)
+        self.radii = self.surface.control_point_radii
+        self.names = self.surface.control_point_names
+        self.rho = monitor.rho
+        self.ssm = SpeedSeparationMonitor(self.params, rho=monitor.rho, braking=limits.acceleration,
+                                          reaches=robot.joint_reaches())
+        rest = self.at_rest(self.extra_time + self.control_period)
+        if not monitor.rho > rest:
+            raise InputError(f"the monitor's rho ({monitor.rho:g} m) is not above SSM's protective separation at rest "
+                             f"({rest:.3f} m, with these joint speeds, braking and hold): beyond rho nothing is told, "
+                             "so the factor would always be 0; give a larger rho", field="rho")
+
+    @property
+    def extra_time(self) -> float:
+        """Seconds T_r counts beyond the set's own age and preparation: transport + hold + clock skew."""
+        return self.transport + self.hold + config.CLOCK_SKEW_TOLERANCE
+
+    def at_rest(self, reaction_time: float) -> float:
+        """Metres, the protective separation S_p of a robot at rest here, with this reaction time and the stopping
+        time of the joint speeds (v_h near): a distance below it stops the robot."""
+        from depthguard.avoidance._ssm import protective_separation_distance
+
+        stopping = replace(self.params, stopping_time=self.ssm.stopping_time(self.joint_speed))
+        return protective_separation_distance(stopping, 0.0, reaction_time)
+
+    def factor(self, prepared, joints, clock=time.time) -> ScalingAnswer:
+        """The factor on ``prepared`` (a :class:`~depthguard.PreparedSet` of the monitor) for the robot at
+        ``joints`` ((n,) radians, None: unknown), with ``clock()`` the host's clock in the frames' time base
+        (seconds), read after the distances are known."""
+        if joints is None:
+            return ScalingAnswer(0.0, math.inf, "no joints")
+        points, jacobians = self.surface.control_point_kinematics(np.asarray(joints, dtype=np.float64))
+        if self.detectable:
+            distance = prepared.detectable_distances(points, limit=self.rho, check=False).distance
+            distance = np.where(distance >= self.rho, np.inf, distance)
+        else:
+            distance = prepared.query(points, check=False).distance
+        surface = np.where(np.isfinite(distance), np.maximum(distance - self.radii, 0.0), np.inf)
+        now = clock()
+        if prepared.time is None:
+            return ScalingAnswer(0.0, math.inf, "blind")
+        if prepared.newest is not None and now < prepared.newest - config.CLOCK_SKEW_TOLERANCE:
+            return ScalingAnswer(0.0, math.inf, "clock")
+        reaction = prepared.reaction_time(now, self.control_period) + self.extra_time
+        verdict = self.ssm.speed_factor_within(surface, jacobians, self.joint_speed, reaction, radii=self.radii,
+                                               check=False)
+        k = verdict.limiting
+        return ScalingAnswer(verdict.factor, reaction, "", self.names[k] if k >= 0 else "",
+                             float(surface[k]) if k >= 0 else float(np.min(surface, initial=math.inf)))

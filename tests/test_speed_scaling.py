@@ -1,0 +1,135 @@
+"""SSM's factor for a trajectory the controller scales (depthguard.avoidance.SpeedScaling, ``live --ssm``).
+
+The judge of ``speed_factor_within`` is ``speed_factor`` itself, the per-command rule with its proof: for random
+configurations, distances and commands anywhere in the joint-speed box, the bound's factor never exceeds the
+command's own factor with no direction trusted, and the scaled command keeps S_p <= D at every approaching point.
+``SpeedScaling`` is checked on what it composes: the surface spheres' distances less their radii, the reaction time
+(the set's age + preparation + control period + transport + hold + clock skew), and the reasons for 0."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import depthguard as dg
+from depthguard import config
+from depthguard.avoidance import SpeedScaling, SpeedSeparationMonitor, SSMParams
+from depthguard.avoidance._ssm import _protective  # the formula, to check the scaled command against S_p
+from depthguard.errors import InputError
+from depthguard.robots import RobotModel
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return RobotModel.default()
+
+
+def test_the_bound_never_exceeds_any_command_s_own_factor(robot):
+    rng = np.random.default_rng(7)
+    surface = robot.with_surface_points(0.01)
+    radii = surface.control_point_radii
+    braking = np.full(robot.n_joints, 10.0)
+    ssm = SpeedSeparationMonitor(SSMParams(), rho=2.5, braking=braking, reaches=robot.joint_reaches())
+    positive = 0
+    for trial in range(60):
+        q = rng.uniform(robot.lower, robot.upper)
+        _, jacobians = surface.control_point_kinematics(q)
+        m = len(radii)
+        distances = rng.uniform(0.6, 2.5, m)
+        distances[rng.random(m) < 0.2] = np.inf
+        speed = rng.uniform(0.05, 1.0, robot.n_joints)
+        reaction = rng.uniform(0.05, 0.4)
+        bound = ssm.speed_factor_within(distances, jacobians, speed, reaction, radii=radii)
+        assert 0.0 <= bound.factor <= 1.0
+        positive += bound.factor > 0.0
+        for _ in range(20):  # commands in the box, corners included
+            dq = speed * rng.choice([-1.0, 1.0, rng.uniform(-1, 1)], robot.n_joints)
+            own = ssm.speed_factor(distances, np.zeros((m, 3)), jacobians, dq, reaction)
+            assert bound.factor <= own.factor + 1e-12, (trial, bound.factor, own.factor)
+            # the scaled command keeps S_p at its speed within every approaching point's distance
+            v = np.linalg.norm(np.einsum("mkn,n->mk", jacobians, bound.factor * dq), axis=1)
+            t_s = ssm.stopping_time(dq)
+            d = np.where(np.isfinite(distances), distances, 2.5)
+            s_p = _protective(ssm.params, v, reaction, d, t_s)
+            assert np.all((v == 0.0) | (s_p <= d + 1e-9))
+    assert positive > 10  # the bound lets the robot move where there is room
+
+
+def test_the_bound_refuses_what_it_cannot_use(robot):
+    ssm = SpeedSeparationMonitor(SSMParams(), rho=1.0, braking=np.full(robot.n_joints, 10.0))
+    jac = np.zeros((2, 3, robot.n_joints))
+    with pytest.raises(InputError) as error:
+        ssm.speed_factor_within([1.0, 1.0], jac, np.zeros(robot.n_joints), 0.1)
+    assert error.value.field == "joint_speed"
+    with pytest.raises(InputError) as error:
+        ssm.speed_factor_within([1.0, 1.0], jac, np.ones(3), 0.1)
+    assert error.value.field == "joint_speed"
+    with pytest.raises(InputError) as error:
+        ssm.speed_factor_within([1.0, -1.0], jac, np.ones(robot.n_joints), 0.1)
+    assert error.value.field == "distances"
+
+
+class _Prepared:
+    """A prepared set of given detectable distances (metres, at the surface points' centres) and times."""
+
+    def __init__(self, distance, time=10.0, newest=10.0, prepare_seconds=0.004):
+        self.distance, self.time, self.newest, self.prepare_seconds = distance, time, newest, prepare_seconds
+
+    def detectable_distances(self, points, limit=math.inf, check=True):
+        return type("R", (), {"distance": np.minimum(np.broadcast_to(self.distance, (len(points),)), limit)})()
+
+    reaction_time = dg.PreparedSet.reaction_time
+
+
+@pytest.fixture(scope="module")
+def scaling(robot):
+    from depthguard_lab.simulation import default_workcell
+
+    rig = default_workcell().scaled(0.25).rig
+    monitor = dg.DistanceMonitor(rig, robot=robot, rho=1.5, detection_capability=0.04)
+    return SpeedScaling(monitor, joint_speed=0.3, hold=0.1)
+
+
+def test_speed_scaling_counts_every_delay_and_the_spheres(scaling, robot):
+    q = np.zeros(robot.n_joints)
+    answer = scaling.factor(_Prepared(0.8), q, clock=lambda: 10.03)
+    extra = config.LIVE_TRANSPORT + 0.1 + config.CLOCK_SKEW_TOLERANCE
+    assert answer.reaction_time == pytest.approx(0.03 + 0.004 + config.SSM_CONTROL_PERIOD + extra)
+    assert scaling.extra_time == pytest.approx(extra)
+    _, jacobians = scaling.surface.control_point_kinematics(q)
+    surface = np.maximum(0.8 - scaling.radii, 0.0)
+    want = scaling.ssm.speed_factor_within(surface, jacobians, scaling.joint_speed, answer.reaction_time,
+                                           radii=scaling.radii)
+    assert answer.factor == want.factor and 0.0 < answer.factor < 1.0
+    assert answer.limiting in scaling.names and answer.why == ""
+    # older frames, a longer hold: less speed; nothing within rho: the most
+    older = scaling.factor(_Prepared(0.8, time=9.9), q, clock=lambda: 10.03)
+    assert older.factor < answer.factor
+    nothing = scaling.factor(_Prepared(np.inf), q, clock=lambda: 10.03)
+    assert nothing.factor >= answer.factor
+    near = scaling.factor(_Prepared(0.5), q, clock=lambda: 10.03)
+    assert near.factor == 0.0 and near.why == ""
+
+
+def test_speed_scaling_is_zero_without_joints_frames_or_an_agreeing_clock(scaling, robot):
+    q = np.zeros(robot.n_joints)
+    assert scaling.factor(_Prepared(np.inf), None).why == "no joints"
+    blind = scaling.factor(_Prepared(np.inf, time=None, newest=None), q, clock=lambda: 10.0)
+    assert (blind.factor, blind.why) == (0.0, "blind")
+    behind = scaling.factor(_Prepared(np.inf), q, clock=lambda: 10.0 - 2 * config.CLOCK_SKEW_TOLERANCE)
+    assert (behind.factor, behind.why) == (0.0, "clock")
+
+
+def test_speed_scaling_refuses_a_rho_within_its_protective_separation_and_a_coarse_band(robot):
+    from depthguard_lab.simulation import default_workcell
+
+    rig = default_workcell().scaled(0.25).rig
+    with pytest.raises(InputError) as error:
+        SpeedScaling(dg.DistanceMonitor(rig, robot=robot, rho=0.4, detection_capability=0.04), joint_speed=0.3)
+    assert error.value.field == "rho"
+    # the query's own distances: its self-filter's shell here is thicker than ISO 13855's 70 mm
+    with pytest.raises(InputError) as error:
+        SpeedScaling(dg.DistanceMonitor(rig, robot=robot, rho=1.5), joint_speed=0.3)
+    assert error.value.field == "detection_capability"
