@@ -15,7 +15,10 @@ latency p99 <= 33 ms, memory growth <= 1 MB per minute.
 
 Not part of the test suite (minutes long, timing): run by hand.
 
-    .venv/bin/python benchmarks/soak_live.py [--minutes 10] [--cameras 2|4] [--pool 60]
+    .venv/bin/python benchmarks/soak_live.py [--minutes 10] [--cameras 2|4] [--pool 60] [--ssm]
+
+``--ssm``: the node also publishes the speed factor (``live --ssm --rho 1.5 --ssm-joint-speed 0.5``: SSM on the
+detectable space of the robot's surface spheres, design §9); the report adds how the factors were spread.
 """
 
 from __future__ import annotations
@@ -154,11 +157,15 @@ def proc_sample(pid: int) -> tuple[float, float]:
     return cpu, rss
 
 
+SSM_OPTIONS = ["--ssm", "--rho", "1.5", "--ssm-joint-speed", "0.5"]
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=10.0)
     parser.add_argument("--cameras", type=int, choices=(2, 4), default=2)
     parser.add_argument("--pool", type=int, default=60, help="frames rendered and played back and forth")
+    parser.add_argument("--ssm", action="store_true", help="the node also publishes /depthguard/speed_scaling")
     args = parser.parse_args(argv)
     package = resources.files("depthguard_lab.simulation")
     scene = Path(str(package / "scenario_b.yaml"))
@@ -175,7 +182,8 @@ def main(argv=None) -> None:
         dg.save_rig(workcell.rig, rig_file)
         out = Path(folder) / "live.csv"
         node = subprocess.Popen([sys.executable, "-m", "depthguard.cli", "live", "--rig", str(rig_file), "--robot",
-                                 "iiwa", "--connect", endpoint, "--out", str(out), "--duration", str(seconds + 5)],
+                                 "iiwa", "--connect", endpoint, "--out", str(out), "--duration", str(seconds + 5),
+                                 *SSM_OPTIONS * args.ssm],
                                 stderr=subprocess.PIPE, text=True)
         samples = []
         time.sleep(3.0)  # the node starts, connects, compiles nothing (warm cache) and makes its renderer
@@ -205,7 +213,8 @@ def main(argv=None) -> None:
     # What else the node said (a kernel compiled at run time stalls it for seconds; a warning names its cause).
     said = [line for line in err.splitlines() if line not in summary and "listening" not in line]
     print(f"\n{len(workcell.rig.cameras)} cameras x {RATE:g} Hz, joint states {JOINT_RATE:g} Hz, {args.minutes:g} min; "
-          f"node: depthguard live (rmw_zenoh layout, max_age {config.DEFAULT_MAX_AGE:g} s)")
+          f"node: depthguard live (rmw_zenoh layout, max_age {config.DEFAULT_MAX_AGE:g} s"
+          f"{', ' + ' '.join(SSM_OPTIONS) if args.ssm else ''})")
     print(f"  frames published per camera: {', '.join(f'{n} {c}' for n, c in publisher.published.items())}")
     print(f"  node: {summary[-1].split(': ', 1)[1] if summary else err[-300:]}")
     print(f"  answers while the cameras ran {len(answers)} ({len(fresh)} with every camera seen, "
@@ -221,6 +230,12 @@ def main(argv=None) -> None:
               f"{'met' if np.percentile(latency, 99) <= 33 else 'NOT met'})")
         print(f"  deadline misses (latency > max_age): {misses} of {len(latency)} ({100 * misses / len(latency):.2f} "
               f"%; goal <= 0.1 %: {'met' if misses <= 0.001 * len(latency) else 'NOT met'})")
+    if args.ssm and answers:
+        factor = np.array([float(r["speed_factor"]) for r in answers])
+        reaction = np.array([float(r["reaction_ms"]) for r in answers])
+        print(f"  speed factor: 0 in {100 * (factor == 0).mean():.1f} % of the answers, 1 in "
+              f"{100 * (factor == 1).mean():.1f} %, median {np.median(factor):.3f}; reaction time T_r p50 "
+              f"{np.percentile(reaction, 50):.0f}, p99 {np.percentile(reaction, 99):.0f} ms")
     if said:
         print(f"  the node also said ({len(said)} lines): " + " | ".join(line[:160] for line in said[:5]))
     if len(samples) >= 3:
@@ -237,5 +252,6 @@ def main(argv=None) -> None:
 
 if __name__ == "__main__":
     cameras = 4 if "--cameras" in sys.argv and sys.argv[sys.argv.index("--cameras") + 1:][:1] == ["4"] else 2
-    with report(__file__, name=f"soak_live_{cameras}_cameras"):  # docs/figures/soak_live_<n>_cameras.md
+    ssm = "_ssm" if "--ssm" in sys.argv else ""
+    with report(__file__, name=f"soak_live_{cameras}_cameras{ssm}"):  # docs/figures/soak_live_<n>_cameras.md
         main()

@@ -260,6 +260,12 @@ def test_a_camera_that_stops_loses_messages_restarts_or_steps_back_is_named(reco
         send(["second"], ns=ns - 10**9)
         assert wait_for(lambda: any("reset_camera:second" in r for r in open(tmp_path / "live.csv").read().split())), (
             list(node.recent)[-6:], list(node.errors), node.dropped, node.counts["second"])
+        # A frame stamped 10 s ahead of the host's clock (a clock stepped forward) is held out of the loop, counted,
+        # and the answers go on (the loop's clock, which never goes back, is not carried ahead).
+        answered = node.answers
+        publisher.publish_frame("second", time.time_ns() + 10 * 10**9, data["second"])
+        assert wait_for(lambda: node.counts["second"].future == 1)
+        assert wait_for(lambda: node.answers > answered + 2)
     finally:
         node.close()
         publisher.close()

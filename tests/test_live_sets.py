@@ -145,6 +145,17 @@ def test_a_stamp_that_goes_back_resets_the_camera():
     assert s.reset == ()  # named once, in the set after the reset
 
 
+def test_a_stamp_that_jumps_ahead_resets_the_camera():
+    loop = loop_with_joints()
+    loop.add_frame(frame("a", 2.0))
+    loop.add_frame(frame("b", 2.0))
+    loop.add_frame(frame("a", 2.0 + 0.9 * dg.config.STAMP_JUMP))  # within the jump: no reset
+    assert loop.camera("a").resets == 0
+    jumped = 2.0 + 0.9 * dg.config.STAMP_JUMP + 1.01 * dg.config.STAMP_JUMP
+    loop.add_frame(frame("a", jumped))
+    assert loop.camera("a").resets == 1 and loop.camera("a").frame.timestamp == jumped
+
+
 def test_frames_of_unknown_cameras_or_without_stamps_are_refused_by_name():
     loop = loop_with_joints()
     with pytest.raises(InputError, match="'c'"):

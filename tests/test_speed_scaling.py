@@ -133,3 +133,22 @@ def test_speed_scaling_refuses_a_rho_within_its_protective_separation_and_a_coar
     with pytest.raises(InputError) as error:
         SpeedScaling(dg.DistanceMonitor(rig, robot=robot, rho=1.5), joint_speed=0.3)
     assert error.value.field == "detection_capability"
+
+
+def test_beyond_the_full_speed_distance_a_point_does_not_slow_the_robot(robot):
+    surface = robot.with_surface_points(0.01)
+    radii = surface.control_point_radii
+    # one human speed at every separation: the full-speed distance is then the least (the default's near speed
+    # makes it larger, which only asks a little farther)
+    ssm = SpeedSeparationMonitor(SSMParams(human_speed_near=1.6), rho=5.0, braking=np.full(robot.n_joints, 10.0),
+                                 reaches=robot.joint_reaches())
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        _, jacobians = surface.control_point_kinematics(rng.uniform(robot.lower, robot.upper))
+        speed, reaction = rng.uniform(0.1, 1.0, robot.n_joints), rng.uniform(0.05, 0.4)
+        full = ssm.full_speed_distance(jacobians, speed, reaction, radii)
+        assert ssm.speed_factor_within(full, jacobians, speed, reaction, radii=radii).factor == 1.0
+        k = rng.integers(len(full))
+        nearer = full.copy()
+        nearer[k] *= 0.98
+        assert ssm.speed_factor_within(nearer, jacobians, speed, reaction, radii=radii).factor < 1.0

@@ -38,6 +38,11 @@ from depthguard.errors import InputError
 from depthguard.validation import check_real
 
 
+#: Seconds the query of the detectable distances is expected to take at most, in the reaction time its reach is
+#: chosen for (a longer one only makes a factor below 1 where 1 was possible: never unsound).
+QUERY_SLACK = 0.05
+
+
 @dataclass(frozen=True)
 class ScalingAnswer:
     """One speed factor and what it rests on.
@@ -141,8 +146,16 @@ class SpeedScaling:
             return ScalingAnswer(0.0, math.inf, "no joints")
         points, jacobians = self.surface.control_point_kinematics(np.asarray(joints, dtype=np.float64))
         if self.detectable:
-            distance = prepared.detectable_distances(points, limit=self.rho, check=False).distance
-            distance = np.where(distance >= self.rho, np.inf, distance)
+            # Asked only as far as a point can slow the robot (full_speed_distance at the reaction time expected
+            # after the query): "at least that far" is then a true lower bound that lets it go at full speed, and
+            # the detectable space beyond is not looked at (its cost grows with the reach).
+            limit = self.rho
+            if prepared.time is not None:
+                expected = prepared.reaction_time(clock(), self.control_period) + self.extra_time + QUERY_SLACK
+                full = self.ssm.full_speed_distance(jacobians, self.joint_speed, expected, self.radii)
+                limit = min(self.rho, float(np.max(full + self.radii)))
+            distance = prepared.detectable_distances(points, limit=limit, check=False).distance
+            distance = np.where(distance >= limit, np.inf if limit >= self.rho else limit, distance)
         else:
             distance = prepared.query(points, check=False).distance
         surface = np.where(np.isfinite(distance), np.maximum(distance - self.radii, 0.0), np.inf)

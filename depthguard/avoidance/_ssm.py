@@ -444,6 +444,28 @@ class SpeedSeparationMonitor:
                           stopping_time=t_s)
 
 
+    def full_speed_distance(self, jacobians, joint_speed, reaction_time: float, radii=None) -> np.ndarray:
+        """(m,) metres: a distance from each sphere's surface at or beyond which that point does not slow
+        :meth:`speed_factor_within` at all (its k_i >= 1): S_p with the near human speed at the point's bound speed,
+        plus the braking path's bend, and a hair for rounding. Asking distances only up to it (and taking "at least
+        it" as it) changes no factor: the space beyond need not be looked at. Arguments as there (unchecked)."""
+        radii = np.zeros(len(jacobians)) if radii is None else radii
+        speed, whole, t_s = self._bound_speeds(jacobians, joint_speed, radii)
+        need = speed * reaction_time + whole * 0.5 * t_s
+        fixed = _fixed_part(self.params, reaction_time, None, t_s)  # v_h near: the larger
+        return (fixed + need) * (1.0 + 1e-9) + 1e-9
+
+    def _bound_speeds(self, jacobians, joint_speed, radii):
+        """(s (m,), V (m,), T_s): each sphere's bound speed, the bound of any point of the robot, the stopping time
+        (see :meth:`speed_factor_within`)."""
+        columns = np.linalg.norm(jacobians, axis=1)  # (m, n) each joint's speed of each centre per rad/s
+        speed = (columns + radii[:, None]) @ joint_speed
+        whole = None if self.reaches is None else float(self.reaches @ joint_speed)
+        if whole is not None:
+            speed = np.minimum(speed, whole)
+        whole = speed if whole is None else np.full(len(speed), whole)
+        return speed, whole, self.stopping_time(joint_speed)
+
     def speed_factor_within(self, distances, jacobians, joint_speed, reaction_time: float, *, radii=None,
                             check: bool = True) -> SSMVerdict:
         """The factor k in [0, 1] that keeps SSM's condition for EVERY command k dq with |dq_i| <= joint_speed_i,
@@ -487,13 +509,7 @@ class SpeedSeparationMonitor:
             raise InputError(f"joint_speed has {joint_speed.shape[0]} joints, braking {self.braking.shape[0]}",
                              field="joint_speed")
         distances = np.where(np.isfinite(distances), distances, self.rho)
-        columns = np.linalg.norm(jacobians, axis=1)  # (m, n) each joint's speed of each centre per rad/s
-        speed = (columns + radii[:, None]) @ joint_speed
-        whole = None if self.reaches is None else float(self.reaches @ joint_speed)
-        if whole is not None:
-            speed = np.minimum(speed, whole)
-        t_s = self.stopping_time(joint_speed)
-        whole = speed if whole is None else np.full(len(speed), whole)
+        speed, whole, t_s = self._bound_speeds(jacobians, joint_speed, radii)
         allowed = _allowed(params, distances, reaction_time, t_s)
         slope = _speed_slope(params, reaction_time, t_s)
         room = np.where(np.isfinite(allowed), allowed * slope, np.inf)

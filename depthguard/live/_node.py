@@ -84,6 +84,7 @@ class CameraCounts:
     offset: float = math.nan  # the last image's arrival (host clock) minus its stamp, seconds
     sequence: int | None = None  # the last image's rmw_zenoh sequence number
     restarts: int = 0  # the publisher started again (its sequence number went back)
+    future: int = 0  # frames stamped more than LIVE_CLOCK_OFFSET ahead of the host's clock: held out of the loop
 
 
 def session_config(connect: list[str]):
@@ -451,6 +452,11 @@ class LiveNode:
                         with self._lock:
                             self._frames.setdefault(name, image)
                         continue
+                    if image.timestamp > clock.time() + config.LIVE_CLOCK_OFFSET:
+                        # From the future: it would carry the loop's clock (which never goes back) ahead of the
+                        # host's, and every camera's answers would wait for it. Held out; its camera goes stale.
+                        counts.future += 1
+                        continue
                     sets += loop.add_frame(image)
                 sets += loop.tick(clock.time() - self.options.transport)
                 if clock.time() >= self._next_diagnostics:
@@ -545,6 +551,7 @@ class LiveNode:
                                        value(key="received", value=str(counts.received)),
                                        value(key="missed", value=str(counts.missed)),
                                        value(key="restarts", value=str(counts.restarts)),
+                                       value(key="from_the_future", value=str(counts.future)),
                                        value(key="clock_offset_ms", value=f"{counts.offset * 1e3:.1f}")]))
         statuses.append(status(level=WARN if self.deadline_misses else OK, name="depthguard: node",
                                message=f"{self.answers} answers", hardware_id="", values=[

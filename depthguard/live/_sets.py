@@ -16,8 +16,9 @@ same sets whichever drives it, as long as every frame arrives within the wait.
 - **Joints.** One :class:`JointHistory`. A frame without joint states around its stamp (``config.JOINT_GAP``;
   ``config.JOINT_HOLD``, 0 by default: no state is held past its time) is left out of the set and named in
   ``no_joints``: its camera counts as blind.
-- **A stamp that goes backwards** (a camera or its driver restarted, a clock stepped back) resets that camera: its
-  carried frame is dropped (``resets`` counts it) and its new frame starts again.
+- **A stamp that goes backwards, or jumps ahead** by more than ``config.STAMP_JUMP`` (a camera or its driver
+  restarted, a clock stepped, a camera silent that long) resets that camera: its carried frame is dropped
+  (``resets`` counts it), its new frame starts again, and the next set names it (``reset_camera:<name>``).
 """
 
 from __future__ import annotations
@@ -115,7 +116,7 @@ class FrameSet:
         joints: camera -> (n,) float64 joints at that frame's stamp, the robot's order (empty without a robot).
         new: the cameras whose frame is new in this set.
         no_joints: cameras with a frame but no joint state near its stamp (left out: they count as blind).
-        reset: cameras whose stamps went back since the last set (started again).
+        reset: cameras whose stamps went back, or jumped ahead, since the last set (started again).
     """
 
     index: int
@@ -208,8 +209,8 @@ class FrameSetLoop:
             raise InputError("a live frame needs a finite stamp", camera=image.camera, field="header.stamp")
         out = self.tick(stamp)
         previous = state.frame
-        if previous is not None and stamp <= previous.timestamp:
-            state.resets += 1  # a stamp that went back: the camera starts again
+        if previous is not None and not previous.timestamp < stamp <= previous.timestamp + config.STAMP_JUMP:
+            state.resets += 1  # a stamp that went back, or jumped ahead: the camera starts again
             state.reset_since_set = True
         state.frame, state.joints, state.new = image, None, True
         state.received += 1
