@@ -17,7 +17,7 @@ Not part of the test suite (minutes long, timing): run by hand.
 
     .venv/bin/python benchmarks/soak_live.py [--minutes 10] [--cameras 2|4] [--pool 60] [--ssm]
 
-``--ssm``: the node also publishes the speed factor (``live --ssm --rho 1.5 --ssm-joint-speed 0.5``: SSM on the
+``--ssm``: the node also publishes the speed factor (``live --ssm --ssm-joint-speed 0.5``: SSM on the
 detectable space of the robot's surface spheres, design §9); the report adds how the factors were spread.
 """
 
@@ -157,7 +157,7 @@ def proc_sample(pid: int) -> tuple[float, float]:
     return cpu, rss
 
 
-SSM_OPTIONS = ["--ssm", "--rho", "1.5", "--ssm-joint-speed", "0.5"]
+SSM_OPTIONS = ["--ssm", "--ssm-joint-speed", "0.5"]
 
 
 def main(argv=None) -> None:

@@ -334,9 +334,9 @@ def test_bad_live_options_are_named(recording, tmp_path, capsys, argv, words):
 
 
 @pytest.mark.parametrize("argv, words", [
-    (["--ssm", "--rho", "0.4"], ["rho", "protective separation"]),
-    (["--ssm", "--rho", "1.0", "--ssm-joint-speed", "1,2"], ["--ssm-joint-speed"]),
-    (["--ssm", "--rho", "1.0", "--ssm-braking", "0"], ["--ssm-braking"]),
+    (["--ssm", "--invalid", "neighbors"], ["detection_capability", "70 mm"]),
+    (["--ssm", "--ssm-joint-speed", "1,2"], ["--ssm-joint-speed"]),
+    (["--ssm", "--ssm-braking", "0"], ["--ssm-braking"]),
     (["--ssm", "--detection-capability", "0.08"], ["--detection-capability"]),
     (["--ssm", "--ssm-hold", "nan"], ["--ssm-hold"]),
     (["--detection-capability", "0.04"], ["needs --ssm"])])
@@ -354,7 +354,7 @@ def test_speed_scaling_is_published_after_each_answer_as_ros2_control_takes_it(r
     with the reaction time the node counted (which holds the hold, the transport and the clock's skew)."""
     from depthguard.avoidance import SpeedScaling
 
-    options = dict(OPTIONS, rho=1.0, detection_capability=0.04)
+    options = dict(OPTIONS, detection_capability=0.04)
     ssm = dict(joint_speed=0.3, hold=0.1)
     rows, published, answers, node = play(recording, robot, tmp_path, options=options, ssm=ssm)
     scaling = SpeedScaling(dg.DistanceMonitor(recording.rig, robot=robot, **options), **ssm)
@@ -371,8 +371,8 @@ def test_speed_scaling_is_published_after_each_answer_as_ros2_control_takes_it(r
         reaction = float(row["reaction_ms"]) / 1e3
         assert reaction >= scaling.extra_time + scaling.control_period
         points, jacobians = scaling.surface.control_point_kinematics(q)
-        distance = prepared.detectable_distances(points, limit=1.0, check=False).distance
-        surface = np.where(distance >= 1.0, np.inf, np.maximum(distance - scaling.radii, 0.0))
+        distance = prepared.detectable_distances(points, limit=5.0, check=False).distance  # exact this far
+        surface = np.maximum(distance - scaling.radii, 0.0)
         want = scaling.ssm.speed_factor_within(surface, jacobians, scaling.joint_speed, reaction,
                                                radii=scaling.radii).factor
         assert float(row["speed_factor"]) == pytest.approx(want, abs=1e-4)

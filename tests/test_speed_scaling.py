@@ -107,8 +107,8 @@ def test_speed_scaling_counts_every_delay_and_the_spheres(scaling, robot):
     # older frames, a longer hold: less speed; nothing within rho: the most
     older = scaling.factor(_Prepared(0.8, time=9.9), q, clock=lambda: 10.03)
     assert older.factor < answer.factor
-    nothing = scaling.factor(_Prepared(np.inf), q, clock=lambda: 10.03)
-    assert nothing.factor >= answer.factor
+    nothing = scaling.factor(_Prepared(np.inf), q, clock=lambda: 10.03)  # asked as far as it matters: nothing
+    assert nothing.factor == 1.0
     near = scaling.factor(_Prepared(0.5), q, clock=lambda: 10.03)
     assert near.factor == 0.0 and near.why == ""
 
@@ -122,16 +122,16 @@ def test_speed_scaling_is_zero_without_joints_frames_or_an_agreeing_clock(scalin
     assert (behind.factor, behind.why) == (0.0, "clock")
 
 
-def test_speed_scaling_refuses_a_rho_within_its_protective_separation_and_a_coarse_band(robot):
+def test_speed_scaling_needs_a_detectable_space_of_at_most_70_mm(robot):
     from depthguard_lab.simulation import default_workcell
 
     rig = default_workcell().scaled(0.25).rig
+    # the query's own distances: their band (the self-filter's shell here) is coarser than ISO 13855's 70 mm
     with pytest.raises(InputError) as error:
-        SpeedScaling(dg.DistanceMonitor(rig, robot=robot, rho=0.4, detection_capability=0.04), joint_speed=0.3)
-    assert error.value.field == "rho"
-    # the query's own distances: its self-filter's shell here is thicker than ISO 13855's 70 mm
-    with pytest.raises(InputError) as error:
-        SpeedScaling(dg.DistanceMonitor(rig, robot=robot, rho=1.5), joint_speed=0.3)
+        SpeedScaling(dg.DistanceMonitor(rig, robot=robot, rho=0.4), joint_speed=0.3)
+    assert error.value.field == "detection_capability"
+    with pytest.raises(InputError) as error:  # hole fills hide more than 70 mm - 40 mm here
+        SpeedScaling(dg.DistanceMonitor(rig, robot=robot, detection_capability=0.04, invalid="neighbors"))
     assert error.value.field == "detection_capability"
 
 

@@ -4,10 +4,12 @@ trajectory itself is not told, only a bound on its joint speeds, so the factor h
 (:meth:`SpeedSeparationMonitor.speed_factor_within`).
 
 Where the distances come from: the robot's surface (design §9): spheres that cover every moving link's padded
-capsule, none more than Z_r beyond it (``RobotModel.with_surface_points``), asked of the monitor's prepared set, each
-distance less its sphere's radius. A monitor with a ``detection_capability`` answers with its detectable space
-(``PreparedSet.detectable_distances``; C for that d plus the band its concessions hide); one without, with its
-query (C for ``query_hidden_band``, which its self-filter's shell often makes coarser than 70 mm: refused).
+capsule, none more than Z_r beyond it (``RobotModel.with_surface_points``), asked of the monitor's detectable space
+(``PreparedSet.detectable_distances``: what a ball of the monitor's ``detection_capability`` d fits in; C for d plus
+the band its concessions hide), each distance less its sphere's radius; asked only as far as a point can slow the
+robot (``full_speed_distance``), so the monitor's rho, which its distances keep, does not bound SSM's reach. The
+query's own distances are not used: their band (the self-filter's shell: 0.12-0.29 m with the shipped robots) is
+coarser than the 70 mm for which ISO 13855 gives a C.
 
 What the reaction time counts (design §9, T_r), from the OLDEST frame of the set to the last instant the factor may
 be applied:
@@ -67,9 +69,10 @@ class SpeedScaling:
     module's docstring).
 
     Args:
-        monitor: the :class:`~depthguard.DistanceMonitor` whose sets are asked (its robot, rho, concessions).
-        params: :class:`SSMParams` (default: its defaults). Its ``detection_capability`` is replaced by the band
-            the monitor's concessions may hide (``query_hidden_band``), refused above ISO 13855's 70 mm; its
+        monitor: the :class:`~depthguard.DistanceMonitor` whose sets are asked (its robot; its detectable space,
+            of its ``detection_capability``; its concessions).
+        params: :class:`SSMParams` (default: its defaults). Its ``detection_capability`` is replaced by the
+            monitor's plus the band its concessions may hide, refused above ISO 13855's 70 mm; its
             ``sensing_uncertainty`` grows by the monitor's robot zone; its ``robot_uncertainty`` is the covering
             spheres' tolerance.
         joint_speed: (n,) or a number, rad/s: the most each joint moves at factor 1 (default: the robot's velocity
@@ -95,12 +98,11 @@ class SpeedScaling:
                                     field="transport")
         self.control_period = check_real(control_period, "control_period", minimum=0.0, maximum=1.0,
                                          unit="seconds", field="control_period")
-        self.detectable = monitor.detectable is not None
-        if self.detectable:  # distances to what a ball of the detection capability fits in (freespace.detectable)
-            band = monitor.detectable.capability + monitor.hidden_band
-            why = f"detection capability {monitor.detectable.capability:g} m + {monitor.hidden_band:.3f} m hidden"
-        else:
-            band, why = monitor.query_hidden_band()
+        if monitor.detectable is None:
+            raise InputError("speed scaling needs the monitor's detectable space: DistanceMonitor("
+                             "detection_capability=d) (and the rig's workspace)", field="detection_capability")
+        band = monitor.detectable.capability + monitor.hidden_band
+        why = f"detection capability {monitor.detectable.capability:g} m + {monitor.hidden_band:.3f} m hidden"
         if band > config.SSM_INTRUSION_LIMIT * (1.0 + 1e-12):
             raise InputError(f"SSM cannot be sound here: the monitor's distances may leave out an object {band:.3f} m "
                              f"thick next to a surface ({why}), coarser than ISO 13855's 70 mm, for which no "
@@ -116,14 +118,9 @@ class SpeedScaling:
         self.surface = robot.with_surface_points(tolerance)
         self.radii = self.surface.control_point_radii
         self.names = self.surface.control_point_names
-        self.rho = monitor.rho
-        self.ssm = SpeedSeparationMonitor(self.params, rho=monitor.rho, braking=limits.acceleration,
+        # No rho: each distance is asked up to where it stops mattering (full_speed_distance), none is "beyond".
+        self.ssm = SpeedSeparationMonitor(self.params, rho=math.inf, braking=limits.acceleration,
                                           reaches=robot.joint_reaches())
-        rest = self.at_rest(self.extra_time + self.control_period)
-        if not monitor.rho > rest:
-            raise InputError(f"the monitor's rho ({monitor.rho:g} m) is not above SSM's protective separation at rest "
-                             f"({rest:.3f} m, with these joint speeds, braking and hold): beyond rho nothing is told, "
-                             "so the factor would always be 0; give a larger rho", field="rho")
 
     @property
     def extra_time(self) -> float:
@@ -144,24 +141,18 @@ class SpeedScaling:
         (seconds), read after the distances are known."""
         if joints is None:
             return ScalingAnswer(0.0, math.inf, "no joints")
-        points, jacobians = self.surface.control_point_kinematics(np.asarray(joints, dtype=np.float64))
-        if self.detectable:
-            # Asked only as far as a point can slow the robot (full_speed_distance at the reaction time expected
-            # after the query): "at least that far" is then a true lower bound that lets it go at full speed, and
-            # the detectable space beyond is not looked at (its cost grows with the reach).
-            limit = self.rho
-            if prepared.time is not None:
-                expected = prepared.reaction_time(clock(), self.control_period) + self.extra_time + QUERY_SLACK
-                full = self.ssm.full_speed_distance(jacobians, self.joint_speed, expected, self.radii)
-                limit = min(self.rho, float(np.max(full + self.radii)))
-            distance = prepared.detectable_distances(points, limit=limit, check=False).distance
-            distance = np.where(distance >= limit, np.inf if limit >= self.rho else limit, distance)
-        else:
-            distance = prepared.query(points, check=False).distance
-        surface = np.where(np.isfinite(distance), np.maximum(distance - self.radii, 0.0), np.inf)
-        now = clock()
-        if prepared.time is None:
+        if prepared.time is None:  # no usable frame: nothing is known
             return ScalingAnswer(0.0, math.inf, "blind")
+        points, jacobians = self.surface.control_point_kinematics(np.asarray(joints, dtype=np.float64))
+        # Asked only as far as a point can slow the robot (full_speed_distance at the reaction time expected after
+        # the query): "at least that far" is a true lower bound that lets it go at full speed, and the detectable
+        # space beyond is not looked at (its cost grows with the reach).
+        expected = prepared.reaction_time(clock(), self.control_period) + self.extra_time + QUERY_SLACK
+        full = self.ssm.full_speed_distance(jacobians, self.joint_speed, expected, self.radii)
+        limit = float(np.max(full + self.radii))
+        distance = prepared.detectable_distances(points, limit=limit, check=False).distance
+        surface = np.maximum(np.minimum(distance, limit) - self.radii, 0.0)
+        now = clock()
         if prepared.newest is not None and now < prepared.newest - config.CLOCK_SKEW_TOLERANCE:
             return ScalingAnswer(0.0, math.inf, "clock")
         reaction = prepared.reaction_time(now, self.control_period) + self.extra_time
