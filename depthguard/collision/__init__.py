@@ -30,6 +30,7 @@ from depthguard.collision._difference import (
     reference_image,
     robot_tiles,
     tile_features,
+    tile_free_depth,
 )
 from depthguard.collision._epipolar import EpipolarBands, TileGrid, workspace_depths
 from depthguard.collision._plan import MAX_GRID_CELLS, ConfigurationGrid, plan_path, wave_propagation
@@ -46,6 +47,7 @@ from depthguard.collision._tables import (
     UNKNOWN,
     Verdict,
     camera_collisions,
+    depth_ordered_collisions,
     intersection_image,
     obstacle_image,
     revised_obstacle_images,
@@ -74,6 +76,7 @@ __all__ = [
     "box_tiles",
     "camera_collisions",
     "depth_metres",
+    "depth_ordered_collisions",
     "depth_difference_image",
     "difference_image",
     "feature_distances",
@@ -86,6 +89,7 @@ __all__ = [
     "revised_obstacle_images",
     "robot_tiles",
     "tile_features",
+    "tile_free_depth",
     "verdict",
     "wave_propagation",
     "workspace_depths",

@@ -108,6 +108,17 @@ def depth_metres(image, grid: TileGrid, name: str = "image") -> np.ndarray:
     return metres
 
 
+def tile_free_depth(image, grid: TileGrid) -> np.ndarray:
+    """(rows, cols) float64 metres: per tile, the optical depth up to which every pixel of the tile saw its frustum
+    free (design §3, §10): the least d - m(d) over its pixels (d: the measured depth, m: the camera's noise margin),
+    0 where a pixel of the tile has no measurement (nothing is proven free there). Whatever this camera cannot see
+    lies behind it; a robot wholly in front of it along a tile's pixels meets nothing there (the depth order of the
+    collision test, :class:`ImageCollisionTest`). ``image``: as :func:`depth_metres` takes it."""
+    metres = depth_metres(image, grid)
+    free = np.where(metres > 0.0, np.maximum(metres - grid.camera.noise.margin(metres), 0.0), 0.0)
+    return np.minimum.reduceat(np.minimum.reduceat(free, grid.first_row[:-1], axis=0), grid.first_col[:-1], axis=1)
+
+
 def depth_difference_image(image, reference, grid: TileGrid, thresholds=(0.05, 0.25)) -> np.ndarray:
     """The depth variant's difference image (beyond the paper), (rows, cols) bool: a pixel changed when it has a
     measurement in one of ``image`` and ``reference`` but not the other, or when both measure and differ by more than

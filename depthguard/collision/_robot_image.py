@@ -90,6 +90,25 @@ class RobotProjector:
             return self._bits(np.ascontiguousarray(ends[:, self.moving]), self.radii[self.moving])
         return self._bits(ends, self.radii)
 
+    def capsule_bits(self, configurations, moving_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Per capsule, for the depth order of the collision test: (bits (C, K, m, words) uint64: the tiles each of
+        the m capsules covers in each of the (K, n) configurations; far (C, K, m) float64 metres: the deepest optical
+        depth any point of that capsule has in that camera, its ends' depth plus its radius). ``moving_only``: the
+        capsules a joint moves only (:meth:`images`)."""
+        ends = self._segments(configurations)
+        radii = self.radii
+        if moving_only:
+            ends, radii = np.ascontiguousarray(ends[:, self.moving]), radii[self.moving]
+        words = max(grid.words for grid in self.grids)
+        bits = np.zeros((len(self.grids), ends.shape[0], ends.shape[1], words), dtype=np.uint64)
+        for j in range(ends.shape[1]):
+            bits[:, :, j] = self._bits(np.ascontiguousarray(ends[:, j: j + 1]), radii[j: j + 1])
+        far = np.empty((len(self.grids), ends.shape[0], ends.shape[1]))
+        for c, (R, t, *_rest) in enumerate(self._poses):
+            depth = ends @ R[2] + t[2]  # (K, m, 2) optical depth of each capsule's two ends
+            far[c] = depth.max(axis=2) + radii
+        return bits, far
+
     def images(self, joints, moving_only: bool = False) -> list[np.ndarray]:
         """Step 3 at ``joints`` ((n,) radians): per camera, (rows, cols) bool tiles covered by the robot; with
         ``moving_only``, by the links a joint moves only. A future configuration is tested with those: its base is

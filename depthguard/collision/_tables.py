@@ -89,6 +89,32 @@ def camera_collisions(revised, robot) -> tuple[bool, bool]:
     return bool(np.any(robot & (revised == OBSTACLE))), bool(np.any(robot & (revised == POSSIBLE)))
 
 
+def depth_ordered_collisions(revised, free, bits, far, grid, chunk: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """(Coll_RO (K,), Coll_RP (K,)) bool of K configurations in one camera, with the depth order (design §10): a tile
+    that a capsule covers counts only where the capsule reaches behind the depth up to which the camera saw that
+    tile free (``far > free``): an obstacle, or whatever the current robot hides, lies behind that depth, so a capsule
+    wholly in front of it along the tile's pixels meets nothing there.
+
+    revised: (rows, cols) labels (Table III); free: (rows, cols) metres (:func:`tile_free_depth`; 0 proves nothing);
+    bits: (K, m, words) uint64, each capsule's tiles; far: (K, m) metres, each capsule's deepest optical depth
+    (:meth:`RobotProjector.capsule_bits`). Configurations are unpacked ``chunk`` at a time."""
+    revised = np.asarray(revised)
+    obstacle = (revised == OBSTACLE).reshape(-1)
+    possible = (revised == POSSIBLE).reshape(-1)
+    free = np.asarray(free, dtype=np.float64).reshape(-1)
+    n = grid.n_tiles
+    k_total = bits.shape[0]
+    ro = np.zeros(k_total, dtype=bool)
+    rp = np.zeros(k_total, dtype=bool)
+    for start in range(0, k_total, chunk):
+        part = np.ascontiguousarray(bits[start: start + chunk, :, : grid.words]).astype("<u8")
+        covered = np.unpackbits(part.view(np.uint8), axis=-1, bitorder="little")[..., :n].astype(bool)
+        hit = covered & (far[start: start + chunk, :, None] > free[None, None, :])  # (k, m, n_tiles)
+        ro[start: start + chunk] = np.any(hit & obstacle, axis=(1, 2))
+        rp[start: start + chunk] = np.any(hit & possible, axis=(1, 2))
+    return ro, rp
+
+
 @dataclass(frozen=True)
 class Verdict:
     """The collision test of one robot configuration (or swept volume) over C cameras.

@@ -15,6 +15,7 @@ from depthguard.collision._boxes import box_corners, grid_bits
 from depthguard.collision._difference import (
     depth_metres,
     depth_difference_image,
+    tile_free_depth,
     difference_image,
     light_gain,
     reference_image,
@@ -23,7 +24,8 @@ from depthguard.collision._difference import (
 )
 from depthguard.collision._epipolar import EpipolarBands, TileGrid
 from depthguard.collision._robot_image import RobotProjector
-from depthguard.collision._tables import Verdict, camera_collisions, obstacle_image, revised_obstacle_images, verdict
+from depthguard.collision._tables import (Verdict, camera_collisions, depth_ordered_collisions, obstacle_image,
+                                          revised_obstacle_images, verdict)
 from depthguard.errors import InputError
 
 
@@ -62,6 +64,11 @@ class ImageCollisionTest:
             reference (:func:`light_gain`, the median ratio over the tiles) divides its mean grey values before they
             are compared. A camera whose gain cannot be estimated or lies outside ``config.LIGHT_GAIN_RANGE`` sees
             every tile as foreground (the conservative answer); :attr:`gains` holds the last estimates (NaN there).
+        depth_order: with depth images (default True): a camera asserts Coll_RO or Coll_RP at a tile only where the
+            future robot's capsule there reaches behind the depth up to which that camera saw the tile free
+            (:func:`tile_free_depth`, :func:`depth_ordered_collisions`; design §10); False: the images alone, as the
+            paper. Applies to :meth:`test` and :class:`ConfigurationTable`; :meth:`test_motion`'s swept volumes use
+            the images alone (more collisions, never fewer).
 
     Use: :meth:`set_reference` once (images of the workspace with the robot in several configurations and no
     obstacle), :meth:`observe` per set of images with the robot's joints at their capture, then :meth:`test` for any
@@ -70,7 +77,7 @@ class ImageCollisionTest:
 
     def __init__(self, rig: Rig, robot, workspace, tiles=(64, 64), theta: int | None = None, thresholds=None,
                  geometry: str = "capsules", x_max: float = 0.02, lighting: bool = True, images: str = "intensity",
-                 unseen: str = "occupied", classifier=None):
+                 unseen: str = "occupied", classifier=None, depth_order: bool = True):
         if not isinstance(rig, Rig):
             raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}", field="rig")
         try:
@@ -98,6 +105,10 @@ class ImageCollisionTest:
             raise InputError(f"thresholds must be two finite numbers >= 0 (the two tile features' changes), got "
                              f"{thresholds!r}", field="thresholds")
         self.lighting = bool(lighting) and images == "intensity"
+        if not isinstance(depth_order, bool):
+            raise InputError(f"depth_order must be True or False, got {depth_order!r}", field="depth_order")
+        self.depth_order = depth_order and images == "depth"
+        self.free = None  # per camera, (rows, cols) metres: the tiles' free depth of the last observed depth images
         self.classifier = classifier
         self.gains = []
         self.robot = robot
@@ -176,6 +187,7 @@ class ImageCollisionTest:
         obstacle images, kept for :meth:`test`, and returned (per camera, (rows, cols) uint8 labels). A set that is
         refused (bad images or joints) leaves no answer behind: :meth:`test` refuses until a set is observed."""
         self.revised = None  # no test answers from older images once a new set arrived
+        self.free = None
         self.gains = []
         if self.reference is None:
             raise InputError("set_reference first: the difference images need the reference", field="reference")
@@ -195,12 +207,21 @@ class ImageCollisionTest:
                 gains.append(gain)
                 foreground = difference_image(features, reference, self.thresholds, gain, self.classifier)
             obstacles.append(obstacle_image(foreground, robot))
-        self.revised = revised_obstacle_images(obstacles, self.bands, self.theta)
+        revised = revised_obstacle_images(obstacles, self.bands, self.theta)
+        if self.depth_order:
+            self.free = [tile_free_depth(frame, grid) for frame, grid in zip(frames, self.grids)]
+        self.revised = revised
         self.gains = gains
         return self.revised
 
     def test(self, joints) -> Verdict:
-        """Step 6 for the configuration ``joints`` against the last observed images."""
+        """Step 6 for the configuration ``joints`` against the last observed images (with the depth order when
+        ``depth_order``)."""
+        if self.depth_order and self.silhouette is None:
+            if self.revised is None:
+                raise InputError("observe a set of images first", field="revised")
+            q = self.robot.joint_vector(joints)[None]
+            return ConfigurationTable(self, q).verdict(0)
         return self._verdict(self.robot_image(joints, future=True))
 
     def test_motion(self, path, chunk: int = 8) -> Verdict:
@@ -257,6 +278,10 @@ class ConfigurationTable:
         self.test = test
         self.bits = test.robot_bits(configurations)
         self.configurations = np.asarray(configurations, dtype=np.float64)
+        #: with the test's depth order: each capsule's tiles and deepest depth (RobotProjector.capsule_bits)
+        self.capsules = None
+        if test.depth_order and test.silhouette is None:
+            self.capsules = test.projector.capsule_bits(self.configurations, moving_only=True)
         if piece is not None:
             robot = test.robot
             link = robot.control_points[robot.end_effector_index].link
@@ -281,7 +306,12 @@ class ConfigurationTable:
         words = self.bits.shape[2]
         ro = np.empty((c, len(self.configurations)), dtype=bool)
         rp = np.empty_like(ro)
+        ordered = self.capsules is not None and test.free is not None and revised is test.revised
         for k, (grid, image) in enumerate(zip(test.grids, revised)):
+            if ordered:
+                ro[k], rp[k] = depth_ordered_collisions(image, test.free[k], self.capsules[0][k],
+                                                        self.capsules[1][k], grid)
+                continue
             obstacle = np.zeros(words, dtype=np.uint64)
             possible = np.zeros(words, dtype=np.uint64)
             obstacle[: grid.words] = grid.pack(np.asarray(image) == OBSTACLE)
@@ -292,4 +322,12 @@ class ConfigurationTable:
         every = np.all(ro | rp, axis=0)
         klass = np.where(~every, "A", np.where(n_ro < c - test.theta, "B", np.where(n_ro < c, "C", "D")))
         collision = every if test.unseen == "occupied" else (klass == "C") | (klass == "D")
+        self._flags = (ro, rp)
         return collision, klass
+
+    def verdict(self, k: int) -> Verdict:
+        """Configuration k's :class:`Verdict` against the test's last observed images."""
+        collision, klass = self.verdicts()
+        ro, rp = self._flags
+        return Verdict(bool(collision[k]), str(klass[k]), tuple(bool(x) for x in ro[:, k]),
+                       tuple(bool(x) for x in rp[:, k]))
