@@ -1,7 +1,7 @@
-"""The depth order of the image-based collision test (design §10, issue 27, first step): a camera asserts Coll_RO /
-Coll_RP at a tile only where the future robot's capsule there reaches behind the depth up to which the camera saw
-the tile free. Judged by a pixel-by-pixel loop (the tiles' free depth) and by constructed cases that fail if the
-order is dropped or reversed; scenario C's judge (tests/test_scenario_c.py) runs with it on by default."""
+"""The depth order of the image-based collision test (design §10; issue 27's first step, off by default): a camera
+asserts Coll_RO / Coll_RP at a tile only where the future robot's capsule there reaches behind the depth up to which
+the camera saw the tile free. Judged by a pixel-by-pixel loop (the tiles' free depth) and by constructed cases that
+fail if the order is dropped or reversed; scenario C's judge (tests/test_scenario_c.py) runs with it too."""
 
 from __future__ import annotations
 

@@ -452,6 +452,14 @@ def test_the_depth_variant_misses_no_future_configuration_that_touches_the_perso
     _assert_no_miss_on_real_evidence(counts)
 
 
+def test_the_depth_order_misses_no_future_configuration_that_touches_the_person(workcell, frames, futures):
+    test = _collision_test(workcell, frames, "depth", depth_order=True)
+    assert test.depth_order
+    counts = _judge(test, workcell, frames, futures, "depth")
+    print(f"\ndepth, depth order (theta 3, unseen occupied): {counts}")
+    _assert_no_miss_on_real_evidence(counts)
+
+
 # ------------------------------------------------------------------------------------------------ 5. intensity
 
 def test_the_intensity_variant_misses_no_future_configuration_that_touches_the_person(workcell, frames, futures):
