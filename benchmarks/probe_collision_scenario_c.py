@@ -12,6 +12,11 @@ random configurations around one of them (+-0.6 rad per joint), as many anywhere
 false alarm.
 
     .venv/bin/python benchmarks/probe_collision_scenario_c.py [--every 3] [--future 40] [--images intensity depth]
+
+With depth images, two more rules (issue 27): ``depth order`` (ImageCollisionTest(depth_order=True), the default
+theta and unseen), and ``depth grid``: a configuration collides iff the monitor's fused distance (DistanceMonitor,
+its defaults but rho = 0.3 m, the free-space memory on) from a surface sphere of the future robot
+(``with_surface_points(0.01)``, the moving links') to possibly occupied space is at most its radius.
 """
 
 from __future__ import annotations
@@ -70,9 +75,9 @@ def main() -> None:
              ("default (C-1, occupied)", None, "occupied")]
     for kind in args.images:
         source = (lambda f: f.intensity) if kind == "intensity" else (lambda f: {n: d.data for n, d in f.depth.items()})
-        for rule, theta, unseen in rules:
+        for rule, theta, unseen in rules + ([("depth order", None, "occupied")] if kind == "depth" else []):
             test = ImageCollisionTest(workcell.rig, robot, workcell.rig.workspace, tiles=(64, 64), theta=theta,
-                                      images=kind, unseen=unseen)
+                                      images=kind, unseen=unseen, depth_order=rule == "depth order")
             test.set_reference({name: [source(frames[i])[name] for i in reference_frames]
                                 for name in workcell.rig.cameras},
                                joints=[frames[i].joints for i in reference_frames])
@@ -97,6 +102,35 @@ def main() -> None:
             gain_text = f"{np.nanmin(gains):.2f}-{np.nanmax(gains):.2f}" if kind == "intensity" else "-"
             print(f"{kind:10s} {rule:22s} {touching:9d} {missed:7d} {free:14d} {alarms:7d} ({alarms / max(free, 1):4.0%}) "
                   f"{gain_text:>11s} {np.median(times) * 1e3:11.1f}")
+    if "depth" in args.images:
+        depth_grid_rule(workcell, frames, observed, futures, clearances)
+
+
+def depth_grid_rule(workcell, frames, observed, futures, clearances) -> None:
+    """The depth grid's verdict (see the module's docstring), printed as one more row."""
+    import depthguard as dg
+
+    robot = workcell.robot
+    surface = robot.with_surface_points(0.01)  # spheres covering the moving links' capsules (the base stays)
+    radii = surface.control_point_radii
+    monitor = dg.DistanceMonitor(workcell.rig, robot=robot, rho=0.3)
+    touching = missed = free = alarms = 0
+    times = []
+    for i in observed:
+        frame = frames[i]
+        start = time.perf_counter()
+        images = {n: dg.depth_image(d.data, workcell.rig.cameras[n], timestamp=frame.time) for n, d in frame.depth.items()}
+        prepared = monitor.prepare_set(images, joints=frame.joints, now=frame.time)
+        collision = np.array([bool(np.any(prepared.query(surface.control_point_positions(q)).distance <= radii))
+                              for q in futures[i]])
+        times.append(time.perf_counter() - start)
+        c = clearances[i]
+        touching += int((c < 0).sum())
+        missed += int(((c < 0) & ~collision).sum())
+        free += int((c > FALSE_ALARM_CLEARANCE).sum())
+        alarms += int(((c > FALSE_ALARM_CLEARANCE) & collision).sum())
+    print(f"{'depth':10s} {'depth grid (rho 0.3)':22s} {touching:9d} {missed:7d} {free:14d} {alarms:7d} "
+          f"({alarms / max(free, 1):4.0%}) {'-':>11s} {np.median(times) * 1e3:11.1f}")
 
 
 if __name__ == "__main__":
