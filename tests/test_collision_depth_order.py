@@ -80,3 +80,22 @@ def test_each_capsule_s_far_depth_bounds_its_points_depth():
             points = a + s * (b - a) + u
             depth = points @ T[2, :3] + T[2, 3]
             assert depth.max() <= far[0, k, j] + 1e-12
+
+
+def test_the_depth_order_is_off_by_default_asked_by_a_bool_and_only_with_depth_images():
+    import pytest
+
+    from depthguard.collision import ImageCollisionTest
+    from depthguard.errors import InputError
+
+    camera = _camera()
+    rig = dg.Rig({"c": camera, "d": dg.PinholeCamera("d", 160, 128, 140.0, 140.0, 79.5, 63.5,
+                                                     look_at((0.0, 2.5, 0.6), (0.0, 0.0, 0.5)), depth_scale=0.001)})
+    robot = RobotModel.default()
+    workspace = [[-1.0, -1.0, 0.0], [1.0, 1.0, 1.5]]
+    assert not ImageCollisionTest(rig, robot, workspace, tiles=(8, 8), images="depth").depth_order
+    assert ImageCollisionTest(rig, robot, workspace, tiles=(8, 8), images="depth", depth_order=True).depth_order
+    assert not ImageCollisionTest(rig, robot, workspace, tiles=(8, 8), depth_order=True).depth_order  # intensity
+    with pytest.raises(InputError) as error:
+        ImageCollisionTest(rig, robot, workspace, tiles=(8, 8), images="depth", depth_order="yes")
+    assert error.value.field == "depth_order"
