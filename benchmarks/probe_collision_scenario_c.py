@@ -15,8 +15,9 @@ false alarm.
 
 With depth images, two more rules (issue 27): ``depth order`` (ImageCollisionTest(depth_order=True), the default
 theta and unseen), and ``depth grid``: a configuration collides iff the monitor's fused distance (DistanceMonitor,
-its defaults but rho = 0.3 m, the free-space memory on) from a surface sphere of the future robot
-(``with_surface_points(0.01)``, the moving links') to possibly occupied space is at most its radius.
+its defaults but rho = 0.3 m, the free-space memory on; unmeasured pixels occupied, and again filled from their
+neighbours) from a surface sphere of the future robot (``with_surface_points(0.01)``, the moving links') to possibly
+occupied space is at most its radius.
 """
 
 from __future__ import annotations
@@ -103,17 +104,19 @@ def main() -> None:
             print(f"{kind:10s} {rule:22s} {touching:9d} {missed:7d} {free:14d} {alarms:7d} ({alarms / max(free, 1):4.0%}) "
                   f"{gain_text:>11s} {np.median(times) * 1e3:11.1f}")
     if "depth" in args.images:
-        depth_grid_rule(workcell, frames, observed, futures, clearances)
+        for invalid in ("occupied", "neighbors"):
+            depth_grid_rule(workcell, frames, observed, futures, clearances, invalid)
 
 
-def depth_grid_rule(workcell, frames, observed, futures, clearances) -> None:
-    """The depth grid's verdict (see the module's docstring), printed as one more row."""
+def depth_grid_rule(workcell, frames, observed, futures, clearances, invalid: str) -> None:
+    """The depth grid's verdict (see the module's docstring), printed as one more row; ``invalid``: the monitor's
+    policy for pixels without a measurement ("neighbors" fills holes: a concession whose band is printed)."""
     import depthguard as dg
 
     robot = workcell.robot
     surface = robot.with_surface_points(0.01)  # spheres covering the moving links' capsules (the base stays)
     radii = surface.control_point_radii
-    monitor = dg.DistanceMonitor(workcell.rig, robot=robot, rho=0.3)
+    monitor = dg.DistanceMonitor(workcell.rig, robot=robot, rho=0.3, invalid=invalid)
     touching = missed = free = alarms = 0
     times = []
     for i in observed:
@@ -129,8 +132,11 @@ def depth_grid_rule(workcell, frames, observed, futures, clearances) -> None:
         missed += int(((c < 0) & ~collision).sum())
         free += int((c > FALSE_ALARM_CLEARANCE).sum())
         alarms += int(((c > FALSE_ALARM_CLEARANCE) & collision).sum())
-    print(f"{'depth':10s} {'depth grid (rho 0.3)':22s} {touching:9d} {missed:7d} {free:14d} {alarms:7d} "
+    print(f"{'depth':10s} {'grid, invalid ' + invalid[:8]:22s} {touching:9d} {missed:7d} {free:14d} {alarms:7d} "
           f"({alarms / max(free, 1):4.0%}) {'-':>11s} {np.median(times) * 1e3:11.1f}")
+    if invalid != "occupied":
+        band, why = monitor.query_hidden_band()
+        print(f"{'':10s} (what the concessions may hide next to a surface: {why})")
 
 
 if __name__ == "__main__":
