@@ -21,6 +21,7 @@ back, the status stamped with the answer's time.
 from __future__ import annotations
 
 import collections
+import contextlib
 import dataclasses
 import csv
 import json
@@ -144,15 +145,14 @@ class _Recorder:
         from depthguard.io.files import atomic_folder
         from depthguard.io.ros_messages import ros_typestore
 
-        self._atomic = atomic_folder(folder)
-        path = self._atomic.__enter__()
-        try:
+        # The folder appears whole at close(): the atomic folder stays open past this constructor (an ExitStack
+        # holds it), and is discarded if the writer cannot start.
+        with contextlib.ExitStack() as stack:
+            path = stack.enter_context(atomic_folder(folder))
             self._writer = Writer(path, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP)
             self._writer.open()
             save_rig(rig, path / "rig.yaml")
-        except BaseException:
-            self._atomic.__exit__(*__import__("sys").exc_info())
-            raise
+            self._folder = stack.pop_all()
         self._store = ros_typestore()
         self._connections: dict = {}
         self._queue: collections.deque = collections.deque()
@@ -189,7 +189,7 @@ class _Recorder:
         self._wake.set()
         self._thread.join()
         self._writer.close()
-        self._atomic.__exit__(None, None, None)
+        self._folder.close()
 
 
 @dataclass
@@ -235,7 +235,6 @@ class LiveNode:
         self._joint_seen = -math.inf  # the newest joint state's stamp
         self.dropped = 0
         self.deadline_misses = 0
-        self.last = None  # (time, why, cameras seen) of the last answer
         self.ssm = None if ssm is None else dict(ssm)
         self.scaling = None  # the SpeedScaling, made on the worker's thread with the monitor
         self.last_scaling = None  # the last ScalingAnswer published
@@ -357,6 +356,12 @@ class LiveNode:
         self._joint_seen = max(self._joint_seen, stamp)
         self.joint_states += 1
         self._wake.set()
+
+    @property
+    def last(self):
+        """(time, why, cameras seen) of the last answer, None before the first."""
+        recent = self.recent
+        return recent[-1] if recent else None
 
     def joints_received(self, ns: int) -> bool:
         """Whether a joint state stamped ``ns`` nanoseconds has been received (tests, tools)."""
@@ -497,8 +502,7 @@ class LiveNode:
         if latency > self.max_age:
             self.deadline_misses += 1
         self.answers += 1
-        self.last = (frame_set.time, frame_set.why, answer.seen)
-        self.recent.append(self.last)
+        self.recent.append((frame_set.time, frame_set.why, answer.seen))
         self._publish(answer, loop)
         scaling = None
         if self.scaling is not None:  # after the distances, which do not wait for it
