@@ -234,11 +234,11 @@ LIVE_CLOCK_OFFSET = 1.0
 #: Otherwise the camera has no joints for that frame and counts as stale for the set (blind, named). JOINT_HISTORY
 #: states are kept (8 s at 500 Hz).
 JOINT_GAP = 0.05
+JOINT_HOLD = 0.0
+JOINT_HISTORY = 4096
 #: Live and replay: a camera whose stamp jumps ahead of its last one by more than STAMP_JUMP seconds (a clock stepped,
 #: a driver restarted, a camera silent that long) is reset, as one whose stamp goes back: named in the next set.
 STAMP_JUMP = 1.0
-JOINT_HOLD = 0.0
-JOINT_HISTORY = 4096
 
 #: Camera intrinsics, pixels: focal lengths fx, fy in [FOCAL_LENGTH_MIN, INTRINSICS_LIMIT], principal point
 #: |cx|, |cy| <= INTRINSICS_LIMIT (a pixel's frustum slopes (u - cx) / fx then stay far from overflow).

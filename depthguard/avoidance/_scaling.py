@@ -35,7 +35,7 @@ import numpy as np
 
 from depthguard import config
 from depthguard.avoidance._limits import JointLimits
-from depthguard.avoidance._ssm import SpeedSeparationMonitor, SSMParams
+from depthguard.avoidance._ssm import SpeedSeparationMonitor, SSMParams, protective_separation_distance
 from depthguard.errors import InputError
 from depthguard.validation import check_real
 
@@ -101,12 +101,10 @@ class SpeedScaling:
         if monitor.detectable is None:
             raise InputError("speed scaling needs the monitor's detectable space: DistanceMonitor("
                              "detection_capability=d) (and the rig's workspace)", field="detection_capability")
+        # The monitor refused at its making a capability that, with the band its concessions hide, exceeds ISO
+        # 13855's 70 mm (DistanceMonitor: field detection_capability); C is taken for that sum.
         band = monitor.detectable.capability + monitor.hidden_band
         why = f"detection capability {monitor.detectable.capability:g} m + {monitor.hidden_band:.3f} m hidden"
-        if band > config.SSM_INTRUSION_LIMIT * (1.0 + 1e-12):
-            raise InputError(f"SSM cannot be sound here: the monitor's distances may leave out an object {band:.3f} m "
-                             f"thick next to a surface ({why}), coarser than ISO 13855's 70 mm, for which no "
-                             "intrusion distance C is defined", field="detection_capability")
         tolerance = params.robot_uncertainty if params.robot_uncertainty > 0.0 else config.SSM_ROBOT_UNCERTAINTY
         self.params = replace(params, detection_capability=band, robot_uncertainty=tolerance,
                               sensing_uncertainty=params.sensing_uncertainty + monitor.robot_zone)
@@ -130,8 +128,6 @@ class SpeedScaling:
     def at_rest(self, reaction_time: float) -> float:
         """Metres, the protective separation S_p of a robot at rest here, with this reaction time and the stopping
         time of the joint speeds (v_h near): a distance below it stops the robot."""
-        from depthguard.avoidance._ssm import protective_separation_distance
-
         stopping = replace(self.params, stopping_time=self.ssm.stopping_time(self.joint_speed))
         return protective_separation_distance(stopping, 0.0, reaction_time)
 

@@ -443,7 +443,6 @@ class SpeedSeparationMonitor:
                           protective_distance=protective, limiting=limiting, certified=certified,
                           stopping_time=t_s)
 
-
     def full_speed_distance(self, jacobians, joint_speed, reaction_time: float, radii=None) -> np.ndarray:
         """(m,) metres: a distance from each sphere's surface at or beyond which that point does not slow
         :meth:`speed_factor_within` at all (its k_i >= 1): S_p with the near human speed at the point's bound speed,

@@ -149,7 +149,8 @@ def run(args) -> int:
         from depthguard.avoidance import SpeedScaling
 
         monitored["detection_capability"] = args.detection_capability or config.SSM_DETECTION_CAPABILITY
-        # Checked here, before connecting (the node makes its own on its thread): C, rho against S_p at rest.
+        # Checked here, before connecting (the node makes its own monitor on its thread, where its OpenGL context
+        # lives): the detection capability with what the concessions hide, the joint speeds and braking.
         scaling = SpeedScaling(DistanceMonitor(rig, robot=robot, **monitored), **ssm)
     node = LiveNode(rig, robot, topics, options, monitored, out=None if args.dry_run else args.out,
                     record=None if args.dry_run else args.record, ssm=ssm)
