@@ -375,6 +375,11 @@ SSM_REQUERY = 0.005
 #: the reaction time T_r.
 SSM_HOLD = 0.1
 SSM_CONTROL_PERIOD = 0.002
+#: Speed scaling: the largest joint speed (rad/s or m/s) and braking (rad/s^2 or m/s^2) it takes, above any arm's: a
+#: larger one is a wrong value (a URDF's placeholder limit, a unit slip), and a braking that large would claim a stop
+#: within no time. Refused by name.
+SSM_JOINT_SPEED_MAX = 100.0
+SSM_BRAKING_MAX = 1000.0
 #: ISO 13855's intrusion distance C for a detection capability d: C = 8 (d - 14 mm) for 14 mm < d <= 40 mm, 0 for
 #: d <= 14 mm (a finger cannot reach in unseen), 850 mm (an arm's reach) for 40 mm < d <= 70 mm. ISO 13855 gives C for
 #: no coarser d (a sensor that misses a 70 mm arm sees only the trunk, and needs another formula): d above

@@ -337,6 +337,9 @@ def test_bad_live_options_are_named(recording, tmp_path, capsys, argv, words):
     (["--ssm", "--invalid", "neighbors"], ["detection_capability", "70 mm"]),
     (["--ssm", "--ssm-joint-speed", "1,2"], ["--ssm-joint-speed"]),
     (["--ssm", "--ssm-braking", "0"], ["--ssm-braking"]),
+    (["--ssm", "--ssm-joint-speed", "1e300"], ["joint_speed", "at most 100"]),
+    (["--ssm", "--ssm-braking", "1e9"], ["braking", "at most 1000"]),
+    (["--ssm", "--ssm-joint-speed", "inf"], ["--ssm-joint-speed"]),
     (["--ssm", "--detection-capability", "0.08"], ["--detection-capability"]),
     (["--ssm", "--ssm-hold", "nan"], ["--ssm-hold"]),
     (["--detection-capability", "0.04"], ["needs --ssm"])])

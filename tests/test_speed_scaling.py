@@ -152,3 +152,25 @@ def test_beyond_the_full_speed_distance_a_point_does_not_slow_the_robot(robot):
         nearer = full.copy()
         nearer[k] *= 0.98
         assert ssm.speed_factor_within(nearer, jacobians, speed, reaction, radii=radii).factor < 1.0
+
+
+@pytest.mark.parametrize("options, field", [
+    (dict(joint_speed=1e300), "joint_speed"), (dict(joint_speed=0.0), "joint_speed"),
+    (dict(joint_speed=float("nan")), "joint_speed"), (dict(joint_speed=float("inf")), "joint_speed"),
+    (dict(joint_speed=0.5, braking=1e300), "braking"), (dict(joint_speed=0.5, braking=1e-300 * 0), "braking"),
+    (dict(joint_speed=0.5, braking=float("nan")), "braking"), (dict(joint_speed=0.5, hold=float("inf")), "hold"),
+    (dict(joint_speed=[0.5, 0.5]), "joint_speed"), (dict(joint_speed="fast"), "joint_speed")])
+def test_joint_speeds_brakings_and_holds_that_are_not_real_are_refused_by_name(robot, options, field):
+    from depthguard_lab.simulation import default_workcell
+
+    monitor = dg.DistanceMonitor(default_workcell().scaled(0.25).rig, robot=robot, detection_capability=0.04)
+    with pytest.raises(InputError) as error:
+        SpeedScaling(monitor, **options)
+    assert error.value.field == field
+
+
+def test_the_joint_speeds_default_to_the_urdf_s_velocity_limits(robot):
+    from depthguard_lab.simulation import default_workcell
+
+    monitor = dg.DistanceMonitor(default_workcell().scaled(0.25).rig, robot=robot, detection_capability=0.04)
+    assert SpeedScaling(monitor).joint_speed.tolist() == robot.velocity_limits.tolist()  # the iiwa's: 10 rad/s

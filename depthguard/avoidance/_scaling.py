@@ -109,9 +109,18 @@ class SpeedScaling:
         self.params = replace(params, detection_capability=band, robot_uncertainty=tolerance,
                               sensing_uncertainty=params.sensing_uncertainty + monitor.robot_zone)
         self.hidden = why
-        limits = JointLimits.from_robot(robot, velocity=joint_speed, acceleration=braking)
-        if not np.all(limits.velocity > 0.0):
-            raise InputError("joint_speed must be > 0 for every joint", field="joint_speed")
+        try:
+            limits = JointLimits.from_robot(robot, velocity=joint_speed, acceleration=braking)
+        except InputError as error:  # named for this class's arguments
+            name = {"velocity": "joint_speed", "acceleration": "braking"}.get(error.field, error.field)
+            raise InputError(f"{name}: {error.message}", field=name) from None
+        for name, values, most, unit in (("joint_speed", limits.velocity, config.SSM_JOINT_SPEED_MAX, "rad/s"),
+                                         ("braking", limits.acceleration, config.SSM_BRAKING_MAX, "rad/s^2")):
+            if not np.all((values > 0.0) & (values <= most)):
+                given = "the URDF's velocity limits" if name == "joint_speed" and joint_speed is None else "given"
+                shown = ", ".join(f"{v:g}" for v in values)
+                raise InputError(f"{name} must be > 0 and at most {most:g} {unit} for every joint, got {shown} "
+                                 f"({given})", field=name)
         self.joint_speed = limits.velocity
         self.surface = robot.with_surface_points(tolerance)
         self.radii = self.surface.control_point_radii
