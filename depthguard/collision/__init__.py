@@ -11,6 +11,7 @@
   :func:`verdict`); fail-safe by default (theta = C - 1, class B collides).
 - :class:`ImageCollisionTest` runs them over a rig; :class:`ConfigurationTable` gives many configurations' verdicts
   by bitwise operations.
+- The depth grid's verdict on the distances' frames (:class:`DepthGridCollisionTest`): a second opinion.
 - Step 9: :class:`ConfigurationGrid`, :func:`wave_propagation`, :func:`plan_path`.
 - Step 8, pick-and-place: :mod:`depthguard.collision._update` (:class:`ReferenceUpdate`).
 
@@ -32,6 +33,7 @@ from depthguard.collision._difference import (
     tile_features,
     tile_free_depth,
 )
+from depthguard.collision._grid import DepthGridCollisionTest, GridVerdicts
 from depthguard.collision._epipolar import EpipolarBands, TileGrid, workspace_depths
 from depthguard.collision._plan import MAX_GRID_CELLS, ConfigurationGrid, plan_path, wave_propagation
 from depthguard.collision._robot_image import RobotProjector
@@ -60,9 +62,11 @@ __all__ = [
     "BayesTileClassifier",
     "ConfigurationGrid",
     "ConfigurationTable",
+    "DepthGridCollisionTest",
     "ERROR",
     "EpipolarBands",
     "FOUR_NEIGHBOURS",
+    "GridVerdicts",
     "ImageCollisionTest",
     "LABELS",
     "MAX_GRID_CELLS",
