@@ -13,11 +13,14 @@ false alarm.
 
     .venv/bin/python benchmarks/probe_collision_scenario_c.py [--every 3] [--future 40] [--images intensity depth]
 
-With depth images, two more rules (issue 27): ``depth order`` (ImageCollisionTest(depth_order=True), the default
-theta and unseen), and ``depth grid``: a configuration collides iff the monitor's fused distance (DistanceMonitor,
-its defaults but rho = 0.3 m, the free-space memory on; unmeasured pixels occupied, and again filled from their
-neighbours) from a surface sphere of the future robot (``with_surface_points(0.01)``, the moving links') to possibly
-occupied space is at most its radius.
+With depth images, more rules (issue 27): ``depth order`` (ImageCollisionTest(depth_order=True), the default
+theta and unseen), and ``depth grid``: the library's DepthGridCollisionTest (a configuration collides unless every
+sphere over its moving links, ``with_surface_points(0.01)``, lies farther than its radius plus 2.5 pixel footprints
++ 1 mm from possibly occupied space, the space between links the grid takes for the robot included; a
+DistanceMonitor with its defaults but rho = 0.3 m, the free-space memory on; unmeasured pixels occupied, and again
+filled from their neighbours). ``no links`` is a diagnosis, not a rule: the same without the space between links
+(``blind_distance``) and without the slack, as the previous probe counted it; it can miss a hand between two links.
+``disagree`` counts the configurations on which a rule and the default image rule differ.
 """
 
 from __future__ import annotations
@@ -73,7 +76,8 @@ def main() -> None:
     print(f"{'images':10s} {'rule':22s} {'touching':>9s} {'missed':>7s} {'free > 0.15 m':>14s} {'false alarms':>13s} "
           f"{'gain range':>11s} {'ms per set':>11s}")
     rules = [("paper (theta 1, B free)", 1, "free"), ("theta 1, B occupied", 1, "occupied"),
-             ("default (C-1, occupied)", None, "occupied")]
+             ("theta 2, B occupied", 2, "occupied"), ("default (C-1, occupied)", None, "occupied")]
+    defaults = {}
     for kind in args.images:
         source = (lambda f: f.intensity) if kind == "intensity" else (lambda f: {n: d.data for n, d in f.depth.items()})
         for rule, theta, unseen in rules + ([("depth order", None, "occupied")] if kind == "depth" else []):
@@ -88,6 +92,8 @@ def main() -> None:
                 start = time.perf_counter()
                 test.observe(source(frames[i]), frames[i].joints)
                 collision, _ = ConfigurationTable(test, futures[i]).verdicts()
+                if kind == "depth" and rule.startswith("default"):
+                    defaults[i] = collision
                 times.append(time.perf_counter() - start)
                 gains += list(test.gains)
                 c = clearances[i]
@@ -105,35 +111,48 @@ def main() -> None:
                   f"{gain_text:>11s} {np.median(times) * 1e3:11.1f}")
     if "depth" in args.images:
         for invalid in ("occupied", "neighbors"):
-            depth_grid_rule(workcell, frames, observed, futures, clearances, invalid)
+            depth_grid_rule(workcell, frames, observed, futures, clearances, invalid, defaults)
 
 
-def depth_grid_rule(workcell, frames, observed, futures, clearances, invalid: str) -> None:
-    """The depth grid's verdict (see the module's docstring), printed as one more row; ``invalid``: the monitor's
-    policy for pixels without a measurement ("neighbors" fills holes: a concession whose band is printed)."""
+def depth_grid_rule(workcell, frames, observed, futures, clearances, invalid: str, defaults: dict) -> None:
+    """The depth grid's verdict (see the module's docstring), printed as a row, and the diagnosis without the space
+    between links as another; ``invalid``: the monitor's policy for pixels without a measurement ("neighbors" fills
+    holes: a concession whose band is printed); ``defaults``: the default image rule's verdicts by frame."""
     import depthguard as dg
+    from depthguard.collision import DepthGridCollisionTest
 
     robot = workcell.robot
-    surface = robot.with_surface_points(0.01)  # spheres covering the moving links' capsules (the base stays)
-    radii = surface.control_point_radii
+    test = DepthGridCollisionTest(robot, 0.01)
     monitor = dg.DistanceMonitor(workcell.rig, robot=robot, rho=0.3, invalid=invalid)
-    touching = missed = free = alarms = 0
-    times = []
+    holes = "holes occ." if invalid == "occupied" else "holes filled"
+    rows = {"grid, " + holes: [0] * 5, "no links, " + holes: [0] * 5}  # touching, missed, free, alarms, disagree
+    times, conceded = [], {}
     for i in observed:
         frame = frames[i]
         start = time.perf_counter()
         images = {n: dg.depth_image(d.data, workcell.rig.cameras[n], timestamp=frame.time) for n, d in frame.depth.items()}
         prepared = monitor.prepare_set(images, joints=frame.joints, now=frame.time)
-        collision = np.array([bool(np.any(prepared.query(surface.control_point_positions(q)).distance <= radii))
-                              for q in futures[i]])
+        verdicts = test.verdicts(prepared, futures[i])
         times.append(time.perf_counter() - start)
+        points = np.concatenate([test.surface.control_point_positions(q) for q in futures[i]])
+        dropped = (prepared.query(points).distance.reshape(len(futures[i]), -1) <= test.radii).any(axis=1)
+        for f, c in zip(verdicts.conceded, verdicts.collision):
+            if not c:
+                for name in f.names:
+                    conceded[name] = conceded.get(name, 0) + 1
         c = clearances[i]
-        touching += int((c < 0).sum())
-        missed += int(((c < 0) & ~collision).sum())
-        free += int((c > FALSE_ALARM_CLEARANCE).sum())
-        alarms += int(((c > FALSE_ALARM_CLEARANCE) & collision).sum())
-    print(f"{'depth':10s} {'grid, invalid ' + invalid[:8]:22s} {touching:9d} {missed:7d} {free:14d} {alarms:7d} "
-          f"({alarms / max(free, 1):4.0%}) {'-':>11s} {np.median(times) * 1e3:11.1f}")
+        for key, collision in zip(rows, (verdicts.collision, dropped)):
+            row = rows[key]
+            row[0] += int((c < 0).sum())
+            row[1] += int(((c < 0) & ~collision).sum())
+            row[2] += int((c > FALSE_ALARM_CLEARANCE).sum())
+            row[3] += int(((c > FALSE_ALARM_CLEARANCE) & collision).sum())
+            row[4] += int((collision != defaults[i]).sum()) if i in defaults else 0
+    for key, (touching, missed, free, alarms, disagree) in rows.items():
+        ms = f"{np.median(times) * 1e3:11.1f}" if key.startswith("grid") else f"{'-':>11s}"
+        print(f"{'depth':10s} {key:22s} {touching:9d} {missed:7d} {free:14d} {alarms:7d} "
+              f"({alarms / max(free, 1):4.0%}) {'-':>11s} {ms}   disagree {disagree}")
+    print(f"{'':10s} (free verdicts resting on a concession: {conceded or 'none'})")
     if invalid != "occupied":
         band, why = monitor.query_hidden_band()
         print(f"{'':10s} (what the concessions may hide next to a surface: {why})")
