@@ -13,8 +13,8 @@ false alarm.
 
     .venv/bin/python benchmarks/probe_collision_scenario_c.py [--every 3] [--future 40] [--images intensity depth]
 
-With depth images, more rules (issue 27): ``depth order`` (ImageCollisionTest(depth_order=True), the default
-theta and unseen), and ``depth grid``: the library's DepthGridCollisionTest (a configuration collides unless every
+With depth images, more rules (issue 27): ``+ depth order`` (ImageCollisionTest(depth_order=True), class B
+colliding), and ``depth grid``: the library's DepthGridCollisionTest (a configuration collides unless every
 sphere over its moving links, ``with_surface_points(0.01)``, lies farther than its radius plus 2.5 pixel footprints
 + 1 mm from possibly occupied space, the space between links the grid takes for the robot included; a
 DistanceMonitor with its defaults but rho = 0.3 m, the free-space memory on; unmeasured pixels occupied, and again
@@ -46,31 +46,10 @@ def main() -> None:
     parser.add_argument("--images", nargs="+", default=["intensity", "depth"], choices=["intensity", "depth"])
     parser.add_argument("--verbose", action="store_true", help="print every missed collision")
     args = parser.parse_args()
-    with resources.as_file(resources.files("depthguard_lab.simulation").joinpath("scenario_c.yaml")) as path:
-        workcell = load_workcell(path)
+    workcell, reference_frames, observed, frames, futures, clearances = scenario_c(args.every, args.future)
     robot = workcell.robot
-    reference_frames = range(0, int(3.0 * workcell.rate), 5)
-    observed = range(int(3.0 * workcell.rate), workcell.n_frames, args.every)
-    frames = {f.index: f for f in simulate(workcell, frames=sorted(set(reference_frames) | set(observed)))}
     truth = TruthComputer(robot)
     part_names = {name: workcell.part_names(name) for name in workcell.obstacle_names}
-    rng = np.random.default_rng(0)
-    futures = {}
-    for i in observed:
-        t = frames[i].time
-        ahead = [workcell.joints_at(min(t + s, workcell.duration)) for s in (0.2, 0.4, 0.6, 0.8, 1.0)]
-        base = ahead[rng.integers(len(ahead))]
-        spread = np.clip(base + rng.uniform(-0.6, 0.6, (args.future // 2, robot.n_joints)), robot.lower, robot.upper)
-        anywhere = rng.uniform(np.maximum(robot.lower, -np.pi), np.minimum(robot.upper, np.pi),
-                               (args.future - args.future // 2, robot.n_joints))
-        # and the configurations nearest the person among 300 candidates anywhere (so that some touch it)
-        candidates = rng.uniform(np.maximum(robot.lower, -np.pi), np.minimum(robot.upper, np.pi),
-                                 (300, robot.n_joints))
-        obstacles = workcell.obstacles_at(t)
-        near = np.array([truth(q, obstacles, part_names).clearance for q in candidates])
-        futures[i] = np.vstack([ahead, spread, anywhere, candidates[np.argsort(near)[: args.future // 4]]])
-    clearances = {i: np.array([truth(q, workcell.obstacles_at(frames[i].time), part_names).clearance
-                               for q in futures[i]]) for i in observed}
     print(f"scenario C: {len(observed)} observed frames, {sum(len(v) for v in futures.values())} future "
           f"configurations, {sum(int((v < 0).sum()) for v in clearances.values())} of them touch the person")
     print(f"{'images':10s} {'rule':22s} {'touching':>9s} {'missed':>7s} {'free > 0.15 m':>14s} {'false alarms':>13s} "
@@ -80,9 +59,11 @@ def main() -> None:
     defaults = {}
     for kind in args.images:
         source = (lambda f: f.intensity) if kind == "intensity" else (lambda f: {n: d.data for n, d in f.depth.items()})
-        for rule, theta, unseen in rules + ([("depth order", None, "occupied")] if kind == "depth" else []):
+        ordered = [("theta 1 + depth order", 1, "occupied"), ("theta 2 + depth order", 2, "occupied"),
+                   ("default + depth order", None, "occupied")]
+        for rule, theta, unseen in rules + (ordered if kind == "depth" else []):
             test = ImageCollisionTest(workcell.rig, robot, workcell.rig.workspace, tiles=(64, 64), theta=theta,
-                                      images=kind, unseen=unseen, depth_order=rule == "depth order")
+                                      images=kind, unseen=unseen, depth_order=rule.endswith("depth order"))
             test.set_reference({name: [source(frames[i])[name] for i in reference_frames]
                                 for name in workcell.rig.cameras},
                                joints=[frames[i].joints for i in reference_frames])
@@ -92,7 +73,7 @@ def main() -> None:
                 start = time.perf_counter()
                 test.observe(source(frames[i]), frames[i].joints)
                 collision, _ = ConfigurationTable(test, futures[i]).verdicts()
-                if kind == "depth" and rule.startswith("default"):
+                if kind == "depth" and rule == "default (C-1, occupied)":
                     defaults[i] = collision
                 times.append(time.perf_counter() - start)
                 gains += list(test.gains)
@@ -112,6 +93,38 @@ def main() -> None:
     if "depth" in args.images:
         for invalid in ("occupied", "neighbors"):
             depth_grid_rule(workcell, frames, observed, futures, clearances, invalid, defaults)
+
+
+def scenario_c(every: int = 3, future: int = 40):
+    """(workcell, reference frame indices, observed frame indices, frames by index, future configurations by
+    observed frame ((k, joints) radians), their true clearances by observed frame ((k,) metres, coal)): the
+    module's docstring's sets, seeded."""
+    with resources.as_file(resources.files("depthguard_lab.simulation").joinpath("scenario_c.yaml")) as path:
+        workcell = load_workcell(path)
+    robot = workcell.robot
+    reference_frames = range(0, int(3.0 * workcell.rate), 5)
+    observed = range(int(3.0 * workcell.rate), workcell.n_frames, every)
+    frames = {f.index: f for f in simulate(workcell, frames=sorted(set(reference_frames) | set(observed)))}
+    truth = TruthComputer(robot)
+    part_names = {name: workcell.part_names(name) for name in workcell.obstacle_names}
+    rng = np.random.default_rng(0)
+    futures = {}
+    for i in observed:
+        t = frames[i].time
+        ahead = [workcell.joints_at(min(t + s, workcell.duration)) for s in (0.2, 0.4, 0.6, 0.8, 1.0)]
+        base = ahead[rng.integers(len(ahead))]
+        spread = np.clip(base + rng.uniform(-0.6, 0.6, (future // 2, robot.n_joints)), robot.lower, robot.upper)
+        anywhere = rng.uniform(np.maximum(robot.lower, -np.pi), np.minimum(robot.upper, np.pi),
+                               (future - future // 2, robot.n_joints))
+        # and the configurations nearest the person among 300 candidates anywhere (so that some touch it)
+        candidates = rng.uniform(np.maximum(robot.lower, -np.pi), np.minimum(robot.upper, np.pi),
+                                 (300, robot.n_joints))
+        obstacles = workcell.obstacles_at(t)
+        near = np.array([truth(q, obstacles, part_names).clearance for q in candidates])
+        futures[i] = np.vstack([ahead, spread, anywhere, candidates[np.argsort(near)[: future // 4]]])
+    clearances = {i: np.array([truth(q, workcell.obstacles_at(frames[i].time), part_names).clearance
+                               for q in futures[i]]) for i in observed}
+    return workcell, reference_frames, observed, frames, futures, clearances
 
 
 def depth_grid_rule(workcell, frames, observed, futures, clearances, invalid: str, defaults: dict) -> None:

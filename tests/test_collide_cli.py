@@ -33,7 +33,8 @@ def _values(q) -> str:
 def recorded(tmp_path_factory):
     """A folder as a recording gives it: rig.yaml (four 160 x 128 cameras around a KUKA iiwa, the workspace), 8-bit
     grey PNGs of the reference (the robot in five poses) and of the current scene (the robot at NOW, a bright box
-    where THROUGH's end-effector is), and the same as 16-bit depth PNGs (millimetres)."""
+    where THROUGH's end-effector is), and the same as 16-bit depth PNGs (millimetres; the robot's collision meshes, as
+    a depth camera measures it)."""
     from depthguard.depth import write_depth_png
     from depthguard.robots import RobotModel
     from depthguard.scenes import Box, render_depth
@@ -45,7 +46,8 @@ def recorded(tmp_path_factory):
                for k, eye in enumerate(EYES)}
     dg.save_rig(dg.Rig(cameras, workspace=WORKSPACE), root / "rig.yaml")
     robot = RobotModel.default()
-    silhouette = RobotSilhouette(robot, geometry="capsules")
+    silhouette = RobotSilhouette(robot, geometry="capsules")  # the grey images' robot
+    meshes = RobotSilhouette(robot, geometry="meshes", renderer=silhouette.renderer)  # what a depth camera measures
     target = robot.control_point_positions(np.array(THROUGH))[robot.end_effector_index]
     box = Box.from_bounds(target - 0.07, target + 0.07)
     floor = Box.from_bounds([-3.0, -3.0, -0.3], [3.0, 3.0, -0.2])
@@ -57,7 +59,8 @@ def recorded(tmp_path_factory):
             robot_depth = silhouette.render(camera, np.array(q))
             grey = background.copy()
             grey[robot_depth > 0] = 235
-            depth = np.where(robot_depth > 0, robot_depth, floor_depth)
+            mesh_depth = meshes.render(camera, np.array(q))
+            depth = np.where(mesh_depth > 0, mesh_depth, floor_depth)
             stem = f"ref{k}" if k < len(POSES) else "now"
             if stem == "now":
                 box_depth = render_depth(camera, [box])

@@ -99,3 +99,52 @@ def test_the_depth_order_is_off_by_default_asked_by_a_bool_and_only_with_depth_i
     with pytest.raises(InputError) as error:
         ImageCollisionTest(rig, robot, workspace, tiles=(8, 8), images="depth", depth_order="yes")
     assert error.value.field == "depth_order"
+
+
+def test_unexplained_tiles_count_the_changed_pixels_the_rendered_robot_cannot_explain():
+    """Against a pixel loop: a pixel counts when it changed (depth_difference_image's rule) and no robot is rendered
+    within a pixel of it, or it measured nearer than the nearest such robot surface by more than the tolerance and
+    the noise margin there; a tile when more than the fraction of its pixels count."""
+    from depthguard.collision import unexplained_tiles
+
+    grid = TileGrid(_camera(), 7, 9)
+    cam = grid.camera
+    rng = np.random.default_rng(3)
+    shape = cam.shape
+    reference = rng.uniform(1.0, 4.0, shape)
+    reference[rng.random(shape) < 0.03] = 0.0
+    now = reference.copy()
+    moved = rng.random(shape) < 0.5
+    now[moved] = rng.uniform(0.5, 4.0, int(moved.sum()))
+    now[rng.random(shape) < 0.03] = 0.0
+    near = np.where(rng.random(shape) < 0.4, rng.uniform(0.8, 4.0, shape), 0.0).astype(np.float32)
+    near[:40, :60] = 0.0  # a stretch without the robot
+    got = unexplained_tiles(now, reference, near, grid, (0.05, 0.25), tolerance=0.02)
+    h, w = shape
+    counts = np.zeros((grid.rows, grid.cols))
+    for v in range(h):
+        r = np.searchsorted(grid.first_row, v, side="right") - 1
+        for u in range(w):
+            c = np.searchsorted(grid.first_col, u, side="right") - 1
+            d, ref = now[v, u], reference[v, u]
+            if (d > 0) == (ref > 0) and (d == 0 or abs(d - ref) <= max(0.05, float(cam.noise.margin(ref)))):
+                continue
+            window = near[max(v - 1, 0): v + 2, max(u - 1, 0): u + 2]
+            if (window > 0).any():
+                d_r = float(window[window > 0].min())
+                if d == 0 or d >= d_r - 0.02 - float(cam.noise.margin(d_r)):
+                    continue
+            counts[r, c] += 1
+    pixels = np.outer(np.diff(grid.first_row), np.diff(grid.first_col))
+    np.testing.assert_array_equal(got, counts / pixels > 0.25)
+    assert got.any() and not got.all()
+
+
+def test_table_i_makes_an_unexplained_foreground_tile_under_the_robot_an_obstacle():
+    from depthguard.collision import ERROR, UNKNOWN, obstacle_image
+
+    foreground = np.array([[True, True, False], [True, False, False]])
+    robot = np.array([[True, True, True], [False, False, False]])
+    unexplained = np.array([[True, False, True], [True, False, False]])
+    assert obstacle_image(foreground, robot).tolist() == [[UNKNOWN, UNKNOWN, ERROR], [OBSTACLE, 0, 0]]
+    assert obstacle_image(foreground, robot, unexplained).tolist() == [[OBSTACLE, UNKNOWN, ERROR], [OBSTACLE, 0, 0]]

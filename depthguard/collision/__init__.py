@@ -32,6 +32,7 @@ from depthguard.collision._difference import (
     robot_tiles,
     tile_features,
     tile_free_depth,
+    unexplained_tiles,
 )
 from depthguard.collision._grid import DepthGridCollisionTest, GridVerdicts
 from depthguard.collision._epipolar import EpipolarBands, TileGrid, workspace_depths
@@ -94,6 +95,7 @@ __all__ = [
     "robot_tiles",
     "tile_features",
     "tile_free_depth",
+    "unexplained_tiles",
     "verdict",
     "wave_propagation",
     "workspace_depths",

@@ -14,6 +14,7 @@ from scipy import ndimage
 
 from depthguard.kernels import collision as collision_kernels
 from depthguard.collision._epipolar import TileGrid
+from depthguard import config
 from depthguard.errors import InputError
 
 #: The 4-neighbourhood of the morphological closing (section 3.2).
@@ -146,6 +147,35 @@ def depth_difference_image(image, reference, grid: TileGrid, thresholds=(0.05, 0
                                     grid.first_row, grid.first_col, changed)
     counts = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
     return _closed(changed / counts > thresholds[1])
+
+
+def unexplained_tiles(image, reference, near, grid: TileGrid, thresholds=(0.05, 0.25),
+                      tolerance: float = config.SELF_FILTER_TOLERANCE) -> np.ndarray:
+    """(rows, cols) bool: the depth variant's tiles where more than thresholds[1] of the pixels changed (as
+    :func:`depth_difference_image` decides a pixel) in a way the current robot cannot explain: no robot rendered
+    within a pixel of it, or a measurement nearer than the rendered robot by more than ``tolerance`` and the noise
+    margin (design §7's self-filter rule). Such a tile shows an obstacle even where the robot's tile image covers it
+    (Table I would call it unknown): a hand lying next to a link. ``near``: (height, width) float32 metres, the
+    robot's padded geometry rendered at the images' joints (:meth:`depthguard.self_filter.RobotSilhouette.render`),
+    0 where it is not; ``image``, ``reference`` as for :func:`depth_difference_image`."""
+    cam = grid.camera
+    now = np.asarray(image)
+    if now.shape != cam.shape or now.dtype not in (np.uint16, np.float32, np.float64):
+        now = depth_metres(image, grid)
+    ref = np.asarray(reference)
+    if ref.shape != cam.shape or ref.dtype != np.float64:
+        ref = depth_metres(reference, grid, "reference")
+    near = np.asarray(near, dtype=np.float32)
+    if near.shape != cam.shape:
+        raise InputError(f"near must be the robot's {cam.shape} render, got {near.shape}", camera=cam.name,
+                         field="near")
+    scale = cam.depth_scale if now.dtype == np.uint16 else 1.0
+    counts = np.empty((grid.rows, grid.cols))
+    k0, k1, k2 = cam.noise.coefficients()
+    collision_kernels.unexplained_changes(_read_only(now), scale, _read_only(ref), float(thresholds[0]), k0, k1, k2,
+                                          _read_only(near), float(tolerance), grid.first_row, grid.first_col, counts)
+    pixels = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
+    return counts / pixels > float(thresholds[1])
 
 
 def light_gain(features, reference_features, darkest: float = 10.0) -> float:

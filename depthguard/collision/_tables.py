@@ -29,13 +29,17 @@ def _mask(image, name: str, shape=None) -> np.ndarray:
     return array
 
 
-def obstacle_image(foreground, robot) -> np.ndarray:
+def obstacle_image(foreground, robot, unexplained=None) -> np.ndarray:
     """Table I: (rows, cols) uint8 labels from the difference image ``foreground`` and the current robot image
     ``robot`` (both (rows, cols) bool): background where neither is set, obstacle where only the difference is,
     unknown where both are (an obstacle may be in front of or behind the robot), error where only the robot is (the
-    background is seen where the robot should be)."""
+    background is seen where the robot should be). ``unexplained`` ((rows, cols) bool, depth images:
+    :func:`unexplained_tiles`): foreground tiles whose change the robot cannot explain pixel by pixel are obstacles
+    under the robot's tile image too (more obstacles, never fewer)."""
     foreground = _mask(foreground, "foreground")
     robot = _mask(robot, "robot", foreground.shape)
+    if unexplained is not None:
+        robot = robot & ~(_mask(unexplained, "unexplained", foreground.shape) & foreground)
     return (np.where(foreground, np.where(robot, UNKNOWN, OBSTACLE), np.where(robot, ERROR, BACKGROUND))
             .astype(np.uint8))
 

@@ -21,6 +21,7 @@ from depthguard.collision._difference import (
     reference_image,
     robot_tiles,
     tile_features,
+    unexplained_tiles,
 )
 from depthguard.collision._epipolar import EpipolarBands, TileGrid
 from depthguard.collision._robot_image import RobotProjector
@@ -79,7 +80,7 @@ class ImageCollisionTest:
 
     def __init__(self, rig: Rig, robot, workspace, tiles=(64, 64), theta: int | None = None, thresholds=None,
                  geometry: str = "capsules", x_max: float = 0.02, lighting: bool = True, images: str = "intensity",
-                 unseen: str = "occupied", classifier=None, depth_order: bool = False):
+                 unseen: str = "occupied", classifier=None, depth_order: bool = False, robot_pixels: bool = True):
         if not isinstance(rig, Rig):
             raise InputError(f"rig must be a depthguard Rig, got {type(rig).__name__}", field="rig")
         try:
@@ -110,6 +111,10 @@ class ImageCollisionTest:
         if not isinstance(depth_order, bool):
             raise InputError(f"depth_order must be True or False, got {depth_order!r}", field="depth_order")
         self.depth_order = depth_order and images == "depth"
+        if not isinstance(robot_pixels, bool):
+            raise InputError(f"robot_pixels must be True or False, got {robot_pixels!r}", field="robot_pixels")
+        self.robot_pixels = robot_pixels and images == "depth"
+        self._pixel_silhouette = None  # the robot's padded hulls, rendered per observed set (robot_pixels)
         self.free = None  # per camera, (rows, cols) metres: the tiles' free depth of the last observed depth images
         self.classifier = classifier
         self.gains = []
@@ -197,7 +202,10 @@ class ImageCollisionTest:
         robot_now = self.robot_image(joints)
         obstacles = []
         gains = []
-        for frame, grid, reference, robot in zip(frames, self.grids, self.reference, robot_now):
+        unexplained = [None] * len(self.grids)
+        if self.robot_pixels:
+            unexplained = self._unexplained(frames, joints)
+        for frame, grid, reference, robot, odd in zip(frames, self.grids, self.reference, robot_now, unexplained):
             if self.images == "depth":
                 gains.append(1.0)
                 foreground = depth_difference_image(frame, reference, grid, self.thresholds)
@@ -208,13 +216,25 @@ class ImageCollisionTest:
                     gain = math.nan  # no trustworthy estimate: every tile of this camera is foreground
                 gains.append(gain)
                 foreground = difference_image(features, reference, self.thresholds, gain, self.classifier)
-            obstacles.append(obstacle_image(foreground, robot))
+            obstacles.append(obstacle_image(foreground, robot, odd))
         revised = revised_obstacle_images(obstacles, self.bands, self.theta)
         if self.depth_order:
             self.free = [tile_free_depth(frame, grid) for frame, grid in zip(frames, self.grids)]
         self.revised = revised
         self.gains = gains
         return self.revised
+
+    def _unexplained(self, frames, joints) -> list[np.ndarray]:
+        """Per camera, :func:`unexplained_tiles` of ``frames`` against the reference, the robot rendered at
+        ``joints``."""
+        if self._pixel_silhouette is None:
+            from depthguard.self_filter import RobotSilhouette  # OpenGL: only with depth images
+
+            self._pixel_silhouette = RobotSilhouette(self.robot, geometry="hulls")
+        q = self.robot.joint_vector(joints)
+        return [unexplained_tiles(frame, reference, self._pixel_silhouette.render(grid.camera, q), grid,
+                                  self.thresholds)
+                for frame, grid, reference in zip(frames, self.grids, self.reference)]
 
     def test(self, joints) -> Verdict:
         """Step 6 for the configuration ``joints`` against the last observed images (with the depth order when

@@ -299,6 +299,46 @@ def tile_moments(image, first_row, first_col, row_weight, out):
                 out[r, c, 1] += total * weight
 
 
+@kernel(parallel=True)
+def unexplained_changes(now, scale, reference, threshold, k0, k1, k2, near, tolerance, first_row, first_col, out):
+    """Per tile, the number of changed pixels that the current robot cannot explain: out (rows, cols) float64
+    (written). now, scale, reference, threshold, k0, k1, k2, first_row, first_col: as :func:`depth_changes` takes
+    them (the image in units of scale metres, the reference in metres, the change threshold in metres, the noise
+    margin's coefficients, the tiles' first pixels), and a pixel changed by its rule. near: (height, width) float32 metres, the nearest surface of
+    the robot's padded geometry rendered into the camera at the images' joints, 0 where it is not (the self-filter's
+    render, design §7); tolerance: float, metres, the self-filter's. A changed pixel is the robot's only where the
+    robot is rendered within one pixel of it (d_r: the nearest such surface in its 3 x 3 neighbourhood) and its
+    measurement lies no nearer than d_r - tolerance - m(d_r), or it has none (the robot may drop a pixel); any other
+    changed pixel shows something that is not the robot. One thread per row of tiles."""
+    rows = first_row.shape[0] - 1
+    cols = first_col.shape[0] - 1
+    height, width = near.shape
+    for r in prange(rows):
+        for c in range(cols):
+            out[r, c] = 0.0
+        for v in range(first_row[r], first_row[r + 1]):
+            for c in range(cols):
+                count = 0
+                for u in range(first_col[c], first_col[c + 1]):
+                    d = now[v, u] * scale
+                    ref = reference[v, u]
+                    seen = d > 0.0 and d < np.inf
+                    if seen == (ref > 0.0) and \
+                            (not seen or abs(d - ref) <= max(threshold, k0 + k1 * ref + k2 * ref * ref)):
+                        continue  # unchanged
+                    d_r = np.inf
+                    for dv in range(-1, 2):
+                        vv = min(max(v + dv, 0), height - 1)
+                        for du in range(-1, 2):
+                            x = np.float64(near[vv, min(max(u + du, 0), width - 1)])
+                            if x > 0.0 and x < d_r:
+                                d_r = x
+                    if d_r < np.inf and (not seen or d >= d_r - tolerance - max(k0 + (k1 + k2 * d_r) * d_r, 0.0)):
+                        continue  # the robot may be what changed here
+                    count += 1
+                out[r, c] += count
+
+
 @kernel()
 def depth_changes(now, scale, reference, threshold, k0, k1, k2, first_row, first_col, out):
     """Per tile, the number of pixels whose depth changed: out (rows, cols) float64 (written). now: (height, width)
