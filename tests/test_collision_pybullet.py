@@ -439,12 +439,13 @@ def test_the_rendered_images_are_the_camera_models(world, judged):
 def test_the_current_configuration_respects_theta(world, judged):
     """The method's assumption holds for the observed images: the current robot's tile image meets the box's in
     exactly theta = 1 camera, and there the box's tiles under the robot became possible obstacles (the other three
-    cameras see the box in their epipolar bands). The current configuration itself is judged free."""
+    cameras see the box in their epipolar bands), or obstacles outright where their pixels show what the robot
+    cannot be (``robot_pixels``). The current configuration itself is judged free."""
     assert sum(judged.overlap) == THETA
     for grid, overlap, revised in zip(judged.test.grids, judged.overlap, judged.revised):
         box = box_tiles(grid.camera, grid)
         if overlap:
-            assert np.any(box & (revised == POSSIBLE)), grid.camera.name
+            assert np.any(box & ((revised == POSSIBLE) | (revised == OBSTACLE))), grid.camera.name
         assert np.any(box & (revised == OBSTACLE)), f"{grid.camera.name} does not see the box"
         assert not np.any(revised == UNKNOWN)
     assert not judged.test.test(judged.now).collision

@@ -196,7 +196,7 @@ def scene():
     rng = np.random.default_rng(11)
     backgrounds = {name: np.kron(rng.integers(40, 160, (32, 40)), np.ones((8, 8))) for name in cameras}
     s = types.SimpleNamespace(robot=robot, link=link, cameras=cameras, rig=dg.Rig(cameras), backgrounds=backgrounds,
-                              silhouette=RobotSilhouette(robot, geometry="capsules"))
+                              silhouette=RobotSilhouette(robot, geometry="meshes"))  # the robot as a camera sees it
     s.A = Box((0.0, -0.72, 0.06), (0.06, 0.06, 0.06))
     top_A = np.array([0.0, -0.72, 0.12])
     s.q_A = _ik(robot, link, top_A + (0.0, 0.0, 0.02), -1.57)      # the gripper 2 cm above the piece
@@ -254,7 +254,9 @@ def _verdicts(s, reference, images, joints, configurations):
     by the paper's rule (theta = 1, class B free) and by the default (theta = C - 1, class B collides)."""
     out = []
     for options in ({"theta": 1, "unseen": "free"}, {}):
-        test = ImageCollisionTest(s.rig, s.robot, WORKSPACE, tiles=(32, 32), **options)
+        # the reference given as tile features alone (the update's subject): Table I without robot_pixels, which
+        # compares pixels with reference images
+        test = ImageCollisionTest(s.rig, s.robot, WORKSPACE, tiles=(32, 32), robot_pixels=False, **options)
         test.reference = [np.array(r, copy=True) for r in reference]
         test.observe(images, joints)
         out.append([test.test(q) for q in configurations])

@@ -65,6 +65,10 @@ def add_options(parser, *, plan: bool) -> None:
                              "default) or free (the paper's class B)")
     parser.add_argument("--depth", action="store_true",
                         help="depth images instead of 8-bit intensity images (the depth variant)")
+    parser.add_argument("--no-robot-pixels", action="store_true",
+                        help="the paper's Table I: a changed tile under the robot's tile image is unknown even where "
+                             "its pixels show something the robot cannot be (default: an obstacle; without it a hand "
+                             "lying along a link is missed)")
     parser.add_argument("--gripped", metavar="CX,CY,CZ,HX,HY,HZ", default=None,
                         help="a work piece the robot holds: a box in the end-effector link's frame (centre and half "
                              "extents, metres), part of the robot in the images and in every test")
@@ -170,7 +174,8 @@ def prepare(args):
     if not sep or not rows.strip().isdigit() or not cols.strip().isdigit():
         raise InputError(f"--tiles takes ROWSxCOLS, e.g. 64x64, got {args.tiles!r}")
     test = ImageCollisionTest(rig, robot, workspace, tiles=(int(rows), int(cols)), theta=args.theta,
-                              images="depth" if args.depth else "intensity", unseen=args.unseen)
+                              images="depth" if args.depth else "intensity", unseen=args.unseen,
+                              robot_pixels=not args.no_robot_pixels)
     stacks = {}
     for name, pattern in references.items():
         paths = sorted(glob.glob(pattern))

@@ -32,6 +32,7 @@ from depthguard.collision._difference import (
     robot_tiles,
     tile_features,
     tile_free_depth,
+    unexplained_intensity_tiles,
     unexplained_tiles,
 )
 from depthguard.collision._grid import DepthGridCollisionTest, GridVerdicts
@@ -95,6 +96,7 @@ __all__ = [
     "robot_tiles",
     "tile_features",
     "tile_free_depth",
+    "unexplained_intensity_tiles",
     "unexplained_tiles",
     "verdict",
     "wave_propagation",

@@ -178,6 +178,36 @@ def unexplained_tiles(image, reference, near, grid: TileGrid, thresholds=(0.05, 
     return counts / pixels > float(thresholds[1])
 
 
+#: The intensity variant's pixel rule (:func:`unexplained_intensity_tiles`): a pixel changed when its grey value,
+#: divided by the light gain, differs from the reference image's by more than this many grey levels; a tile counts
+#: when more than the fraction of its pixels changed outside the robot.
+UNEXPLAINED_GREY = 12.0
+UNEXPLAINED_FRACTION = 0.25
+
+
+def unexplained_intensity_tiles(image, reference, gain: float, near, grid: TileGrid,
+                                grey: float = UNEXPLAINED_GREY, fraction: float = UNEXPLAINED_FRACTION) -> np.ndarray:
+    """(rows, cols) bool: the intensity variant's tiles where more than ``fraction`` of the pixels changed where the
+    current robot cannot be: a grey value (divided by ``gain``, :func:`light_gain`) more than ``grey`` levels from the
+    reference image's (:func:`reference_image`), at a pixel with nothing of the robot rendered within one pixel
+    (``near``: (height, width) float32 metres, the robot's padded geometry rendered at the image's joints, 0 where it
+    is not). Without depth, a change inside the robot's silhouette may be the robot; one outside cannot (its shadow
+    could: such a tile becomes an obstacle, the conservative answer). A NaN gain (no estimate of the light) makes
+    every tile count."""
+    pixels = _image(image, grid, "image").astype(np.float64)
+    ref = np.asarray(reference, dtype=np.float64)
+    near = np.asarray(near)
+    if ref.shape != grid.camera.shape or near.shape != grid.camera.shape:
+        raise InputError(f"reference and near must be {grid.camera.shape} images, got {ref.shape} and {near.shape}",
+                         camera=grid.camera.name, field="reference")
+    if not math.isfinite(gain) or gain <= 0.0:
+        return np.ones((grid.rows, grid.cols), dtype=bool)
+    robot = ndimage.maximum_filter(near > 0.0, size=3, mode="nearest")
+    changed = (np.abs(pixels / gain - ref) > grey) & ~robot
+    counts = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
+    return _tile_sums(changed.astype(np.float64), grid) / counts > fraction
+
+
 def light_gain(features, reference_features, darkest: float = 10.0) -> float:
     """How much brighter the whole image is than the reference (a change of the room's light): the median, over the
     tiles whose reference mean is at least ``darkest`` grey levels, of the ratio of their mean grey values. NaN when

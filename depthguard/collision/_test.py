@@ -21,8 +21,10 @@ from depthguard.collision._difference import (
     reference_image,
     robot_tiles,
     tile_features,
+    unexplained_intensity_tiles,
     unexplained_tiles,
 )
+from depthguard.collision._boxes import moved_box
 from depthguard.collision._epipolar import EpipolarBands, TileGrid
 from depthguard.collision._robot_image import RobotProjector
 from depthguard.collision._tables import (Verdict, camera_collisions, depth_ordered_collisions, obstacle_image,
@@ -113,8 +115,14 @@ class ImageCollisionTest:
         self.depth_order = depth_order and images == "depth"
         if not isinstance(robot_pixels, bool):
             raise InputError(f"robot_pixels must be True or False, got {robot_pixels!r}", field="robot_pixels")
-        self.robot_pixels = robot_pixels and images == "depth"
+        self.robot_pixels = robot_pixels
         self._pixel_silhouette = None  # the robot's padded hulls, rendered per observed set (robot_pixels)
+        #: A gripped work piece (a :class:`~depthguard.scenes.Box` in the end-effector link's frame, or None), part of
+        #: the robot's render for ``robot_pixels`` (:class:`ReferenceUpdate` sets it when the robot grips one).
+        self.piece = None
+        #: Per camera, the tiles of the last observed set whose change neither the robot nor its gripped piece
+        #: explains ((rows, cols) bool; None without ``robot_pixels``).
+        self.unexplained = None
         self.free = None  # per camera, (rows, cols) metres: the tiles' free depth of the last observed depth images
         self.classifier = classifier
         self.gains = []
@@ -127,6 +135,7 @@ class ImageCollisionTest:
 
             self.silhouette = RobotSilhouette(robot, geometry=geometry)
         self.reference = None
+        self.reference_images = None
         self.revised = None
 
     def _per_camera(self, images: Mapping, field: str) -> list:
@@ -184,6 +193,7 @@ class ImageCollisionTest:
             unpacked = [self.projector.unpack(bits[:, k]) for k in range(len(q))]
             robots = [[images[c] for images in unpacked] for c in range(len(self.grids))]
         references = [reference_image(stack, grid, robot) for stack, grid, robot in zip(stacks, self.grids, robots)]
+        self.reference_images = references  # per camera, (h, w) float64: the median images (robot_pixels compares pixels)
         # intensity: the reference's tile features; depth: the reference depth image itself (metres)
         self.reference = [tile_features(image, grid) if self.images == "intensity" else image
                           for image, grid in zip(references, self.grids)]
@@ -202,13 +212,13 @@ class ImageCollisionTest:
         robot_now = self.robot_image(joints)
         obstacles = []
         gains = []
-        unexplained = [None] * len(self.grids)
-        if self.robot_pixels:
-            unexplained = self._unexplained(frames, joints)
-        for frame, grid, reference, robot, odd in zip(frames, self.grids, self.reference, robot_now, unexplained):
+        near = self._robot_renders(joints) if self.robot_pixels else [None] * len(self.grids)
+        unexplained = []
+        for c, (frame, grid, reference, robot) in enumerate(zip(frames, self.grids, self.reference, robot_now)):
             if self.images == "depth":
                 gains.append(1.0)
                 foreground = depth_difference_image(frame, reference, grid, self.thresholds)
+                odd = None if near[c] is None else unexplained_tiles(frame, reference, near[c], grid, self.thresholds)
             else:
                 features = tile_features(frame, grid)
                 gain = light_gain(features, reference) if self.lighting else 1.0
@@ -216,25 +226,41 @@ class ImageCollisionTest:
                     gain = math.nan  # no trustworthy estimate: every tile of this camera is foreground
                 gains.append(gain)
                 foreground = difference_image(features, reference, self.thresholds, gain, self.classifier)
+                odd = None
+                if near[c] is not None:
+                    if self.reference_images is None:
+                        raise InputError("robot_pixels compares pixels with the reference images: set the reference "
+                                         "with set_reference (or robot_pixels=False)", field="reference")
+                    odd = unexplained_intensity_tiles(frame, self.reference_images[c], gain, near[c], grid)
             obstacles.append(obstacle_image(foreground, robot, odd))
+            unexplained.append(odd)
         revised = revised_obstacle_images(obstacles, self.bands, self.theta)
         if self.depth_order:
             self.free = [tile_free_depth(frame, grid) for frame, grid in zip(frames, self.grids)]
         self.revised = revised
         self.gains = gains
+        self.unexplained = unexplained if self.robot_pixels else None
         return self.revised
 
-    def _unexplained(self, frames, joints) -> list[np.ndarray]:
-        """Per camera, :func:`unexplained_tiles` of ``frames`` against the reference, the robot rendered at
-        ``joints``."""
+    def _robot_renders(self, joints) -> list[np.ndarray]:
+        """Per camera, the robot's padded hulls rendered at ``joints``: (height, width) float32 metres, 0 where it
+        is not (:meth:`depthguard.self_filter.RobotSilhouette.render`)."""
         if self._pixel_silhouette is None:
-            from depthguard.self_filter import RobotSilhouette  # OpenGL: only with depth images
+            from depthguard.self_filter import RobotSilhouette  # OpenGL: only with robot_pixels
 
             self._pixel_silhouette = RobotSilhouette(self.robot, geometry="hulls")
         q = self.robot.joint_vector(joints)
-        return [unexplained_tiles(frame, reference, self._pixel_silhouette.render(grid.camera, q), grid,
-                                  self.thresholds)
-                for frame, grid, reference in zip(frames, self.grids, self.reference)]
+        renders = [self._pixel_silhouette.render(grid.camera, q) for grid in self.grids]
+        if self.piece is not None:
+            from depthguard.scenes import render_depth
+
+            link = self.robot.control_points[self.robot.end_effector_index].link
+            piece = moved_box(self.piece, self.robot.link_poses(q)[link])
+            for c, grid in enumerate(self.grids):
+                drawn = render_depth(grid.camera, [piece])
+                renders[c] = np.where((drawn > 0) & ((renders[c] == 0) | (drawn < renders[c])), drawn,
+                                      renders[c]).astype(np.float32)
+        return renders
 
     def test(self, joints) -> Verdict:
         """Step 6 for the configuration ``joints`` against the last observed images (with the depth order when

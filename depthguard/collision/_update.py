@@ -140,10 +140,12 @@ class ReferenceUpdate:
         from now on it is part of the robot (:meth:`robot_image`) until :meth:`released`."""
         box_corners(piece_in_gripper, "piece_in_gripper")
         self.piece_in_gripper = piece_in_gripper
+        self.collision_test.piece = piece_in_gripper  # part of the robot's render (robot_pixels)
 
     def released(self) -> None:
         """The robot let go of its work piece (call :meth:`start` with it where it now lies)."""
         self.piece_in_gripper = None
+        self.collision_test.piece = None
 
     def piece_at(self, joints) -> Box | None:
         """The gripped piece at ``joints`` ((n,) radians), world frame; None when nothing is gripped."""
@@ -181,8 +183,11 @@ class ReferenceUpdate:
         test.observe(images, q)
         robot_now = self.robot_image(q)
         seen = [revised == OBSTACLE for revised in test.revised]  # foreground outside the bare robot's tiles
-        obstacles = [np.where(robot, UNKNOWN, np.where(fg, OBSTACLE, BACKGROUND)).astype(np.uint8)
-                     for fg, robot in zip(seen, robot_now)]
+        # ... and, with robot_pixels, tiles whose change neither the robot nor the piece explains: obstacles anyway
+        odd = test.unexplained or [None] * len(seen)
+        obstacles = [np.where(robot & ~(fg & (u if u is not None else np.zeros_like(fg))), UNKNOWN,
+                              np.where(fg, OBSTACLE, BACKGROUND)).astype(np.uint8)
+                     for fg, robot, u in zip(seen, robot_now, odd)]
         test.revised = revised_obstacle_images(obstacles, test.bands, test.theta)
 
         # Per camera: the current image's reference content (tile features, or depth pixels in metres), and the
@@ -216,6 +221,12 @@ class ReferenceUpdate:
             reference = np.array(test.reference[c], dtype=np.float64, copy=True)
             if test.images == "intensity":
                 reference[absorb] = currents[c][absorb]
+                if test.reference_images is not None:  # the pixels robot_pixels compares, at the same brightness
+                    rows, cols = grid.tile_of_pixels()
+                    pixels = absorb[rows[:, None], cols[None, :]]
+                    image = np.array(test.reference_images[c], dtype=np.float64, copy=True)
+                    image[pixels] = np.asarray(images[test.names[c]], dtype=np.float64)[pixels] / test.gains[c]
+                    test.reference_images[c] = image
             else:
                 rows, cols = grid.tile_of_pixels()
                 pixels = absorb[rows[:, None], cols[None, :]]
@@ -224,6 +235,8 @@ class ReferenceUpdate:
             self.absorbed[c] = absorb
             self.pending[c] = self.pending[c] & ~absorb
         test.reference = references
+        if test.images == "depth":  # the reference is the image itself
+            test.reference_images = references
         return self.done
 
     def possible_obstacles(self, foreground, robot_now) -> list[np.ndarray]:
