@@ -125,8 +125,8 @@ def test_the_image_test_misses_no_configuration_or_motion_that_touches_a_limb(ju
     test = image_test(case, references, joints, now, robot, images)
     verdicts = [test.test(q) for q in futures]
     missed = [k for k in np.flatnonzero(touching) if not verdicts[k].collision]
-    print(f"\n{label}: image test ({images}), {touching.sum()} touching, missed {len(missed)}; clear ones judged colliding "
-          f"{sum(v.collision for v, t in zip(verdicts, touching) if not t)} of {(~touching).sum()}")
+    print(f"\n{label}: image test ({images}), {touching.sum()} touching, missed {len(missed)}; clear ones judged "
+          f"colliding {sum(v.collision for v, t in zip(verdicts, touching) if not t)} of {(~touching).sum()}")
     assert not missed, f"missed: {futures[missed[0]].round(3).tolist()}, {verdicts[missed[0]]}"
     # Motions through a touching configuration whose ends are clear: the swept volume must collide.
     rng = np.random.default_rng(SEED + 1)

@@ -193,7 +193,7 @@ class ImageCollisionTest:
             unpacked = [self.projector.unpack(bits[:, k]) for k in range(len(q))]
             robots = [[images[c] for images in unpacked] for c in range(len(self.grids))]
         references = [reference_image(stack, grid, robot) for stack, grid, robot in zip(stacks, self.grids, robots)]
-        self.reference_images = references  # per camera, (h, w) float64: the median images (robot_pixels compares pixels)
+        self.reference_images = references  # per camera, (h, w) float64 medians: what robot_pixels compares
         # intensity: the reference's tile features; depth: the reference depth image itself (metres)
         self.reference = [tile_features(image, grid) if self.images == "intensity" else image
                           for image, grid in zip(references, self.grids)]

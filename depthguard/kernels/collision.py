@@ -301,15 +301,15 @@ def tile_moments(image, first_row, first_col, row_weight, out):
 
 @kernel(parallel=True)
 def unexplained_changes(now, scale, reference, threshold, k0, k1, k2, near, tolerance, first_row, first_col, out):
-    """Per tile, the number of changed pixels that the current robot cannot explain: out (rows, cols) float64
-    (written). now, scale, reference, threshold, k0, k1, k2, first_row, first_col: as :func:`depth_changes` takes
-    them (the image in units of scale metres, the reference in metres, the change threshold in metres, the noise
-    margin's coefficients, the tiles' first pixels), and a pixel changed by its rule. near: (height, width) float32 metres, the nearest surface of
-    the robot's padded geometry rendered into the camera at the images' joints, 0 where it is not (the self-filter's
-    render, design §7); tolerance: float, metres, the self-filter's. A changed pixel is the robot's only where the
-    robot is rendered within one pixel of it (d_r: the nearest such surface in its 3 x 3 neighbourhood) and its
-    measurement lies no nearer than d_r - tolerance - m(d_r), or it has none (the robot may drop a pixel); any other
-    changed pixel shows something that is not the robot. One thread per row of tiles."""
+    """Per tile, the number of changed pixels that the current robot cannot explain: out (rows, cols) float64 (written).
+    now, scale, reference, threshold, k0, k1, k2, first_row, first_col: as :func:`depth_changes` takes them (the
+    image in units of scale metres, the reference in metres, the change threshold in metres, the noise margin's
+    coefficients, the tiles' first pixels), and a pixel changed by its rule. near: (height, width) float32 metres,
+    the nearest surface of the robot's padded geometry rendered into the camera at the images' joints, 0 where it is
+    not (the self-filter's render, design §7); tolerance: float, metres, the self-filter's. A changed pixel is the
+    robot's only where the robot is rendered within one pixel of it (d_r: the nearest such surface in its 3 x 3
+    neighbourhood) and its measurement lies no nearer than d_r - tolerance - m(d_r), or it has none (the robot may
+    drop a pixel); any other changed pixel shows something that is not the robot. One thread per row of tiles."""
     rows = first_row.shape[0] - 1
     cols = first_col.shape[0] - 1
     height, width = near.shape
