@@ -62,7 +62,7 @@ def main() -> None:
     rig = dg.Rig({f"c{k}": _camera(f"c{k}", eye) for k, eye in enumerate(eyes)})
     robot = RobotModel.default()
     workspace = [[-1.0, -1.0, -0.1], [1.2, 1.0, 1.5]]
-    test = ImageCollisionTest(rig, robot, workspace, tiles=(64, 64), theta=1)
+    test = ImageCollisionTest(rig, robot, workspace, tiles=(64, 64), theta=1, robot_pixels=False)  # Table I's steps
     rng = np.random.default_rng(0)
 
     # 1. Verdicts for the whole table: K random configurations within the joint limits, their tile images projected.

@@ -281,7 +281,8 @@ def _geometry_and_collision() -> None:
                 grids[0].row_edges, grids[0].words, np.zeros((1, grids[0].words), dtype=np.uint64))
     # The collision test's difference images: the tiles' features of intensity images (8 and 16 bits, floats) and the
     # depth variant's changes (uint16 and float frames against a float64 reference in metres).
-    from depthguard.collision import depth_difference_image, tile_features
+    from depthguard.collision import (depth_difference_image, tile_features, unexplained_intensity_tiles,
+                                      unexplained_tiles)
 
     for dtype in (np.uint8, np.uint16, np.float32, np.float64):
         tile_features(np.zeros(cam.shape, dtype=dtype), grids[0])
@@ -289,6 +290,9 @@ def _geometry_and_collision() -> None:
     for image in (np.full(cam.shape, 1000, dtype=np.uint16), np.full(cam.shape, 1.0, dtype=np.float32),
                   np.full(cam.shape, 1.0)):
         depth_difference_image(image, reference, grids[0])
+        unexplained_tiles(image, reference, np.zeros(cam.shape, dtype=np.float32), grids[0])  # robot_pixels' rule
+    for image in (np.zeros(cam.shape, dtype=np.uint8), np.zeros(cam.shape)):  # and its grey rule
+        unexplained_intensity_tiles(image, reference, 1.0, np.zeros(cam.shape, dtype=np.float32), grids[0])
     # The wave-propagation planner over a small configuration grid, around a wall.
     from depthguard.collision import ConfigurationGrid, plan_path
 

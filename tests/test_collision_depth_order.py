@@ -138,6 +138,9 @@ def test_unexplained_tiles_count_the_changed_pixels_the_rendered_robot_cannot_ex
     pixels = np.outer(np.diff(grid.first_row), np.diff(grid.first_col))
     np.testing.assert_array_equal(got, counts / pixels > 0.25)
     assert got.any() and not got.all()
+    some = rng.random(got.shape) < 0.5  # only the tiles asked for are looked at; the others are False
+    np.testing.assert_array_equal(unexplained_tiles(now, reference, near, grid, (0.05, 0.25), 0.02, tiles=some),
+                                  got & some)
 
 
 def test_table_i_makes_an_unexplained_foreground_tile_under_the_robot_an_obstacle():

@@ -150,14 +150,15 @@ def depth_difference_image(image, reference, grid: TileGrid, thresholds=(0.05, 0
 
 
 def unexplained_tiles(image, reference, near, grid: TileGrid, thresholds=(0.05, 0.25),
-                      tolerance: float = config.SELF_FILTER_TOLERANCE) -> np.ndarray:
+                      tolerance: float = config.SELF_FILTER_TOLERANCE, tiles=None) -> np.ndarray:
     """(rows, cols) bool: the depth variant's tiles where more than thresholds[1] of the pixels changed (as
     :func:`depth_difference_image` decides a pixel) in a way the current robot cannot explain: no robot rendered
     within a pixel of it, or a measurement nearer than the rendered robot by more than ``tolerance`` and the noise
     margin (design §7's self-filter rule). Such a tile shows an obstacle even where the robot's tile image covers it
     (Table I would call it unknown): a hand lying next to a link. ``near``: (height, width) float32 metres, the
     robot's padded geometry rendered at the images' joints (:meth:`depthguard.self_filter.RobotSilhouette.render`),
-    0 where it is not; ``image``, ``reference`` as for :func:`depth_difference_image`."""
+    0 where it is not; ``image``, ``reference`` as for :func:`depth_difference_image`; ``tiles``: (rows, cols) bool,
+    the tiles to look at (default all; the others are False)."""
     cam = grid.camera
     now = np.asarray(image)
     if now.shape != cam.shape or now.dtype not in (np.uint16, np.float32, np.float64):
@@ -165,17 +166,37 @@ def unexplained_tiles(image, reference, near, grid: TileGrid, thresholds=(0.05, 
     ref = np.asarray(reference)
     if ref.shape != cam.shape or ref.dtype != np.float64:
         ref = depth_metres(reference, grid, "reference")
-    near = np.asarray(near, dtype=np.float32)
-    if near.shape != cam.shape:
-        raise InputError(f"near must be the robot's {cam.shape} render, got {near.shape}", camera=cam.name,
-                         field="near")
+    near = _near(near, grid)
     scale = cam.depth_scale if now.dtype == np.uint16 else 1.0
     counts = np.empty((grid.rows, grid.cols))
     k0, k1, k2 = cam.noise.coefficients()
     collision_kernels.unexplained_changes(_read_only(now), scale, _read_only(ref), float(thresholds[0]), k0, k1, k2,
-                                          _read_only(near), float(tolerance), grid.first_row, grid.first_col, counts)
+                                          near, float(tolerance), grid.first_row, grid.first_col,
+                                          _wanted(tiles, grid), counts)
     pixels = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
     return counts / pixels > float(thresholds[1])
+
+
+def _near(near, grid: TileGrid) -> np.ndarray:
+    near = np.asarray(near, dtype=np.float32)
+    if near.shape != grid.camera.shape:
+        raise InputError(f"near must be the robot's {grid.camera.shape} render, got {near.shape}",
+                         camera=grid.camera.name, field="near")
+    return _read_only(near)
+
+
+def _wanted(tiles, grid: TileGrid) -> np.ndarray:
+    if tiles is None:
+        return np.ones((grid.rows, grid.cols), dtype=bool)
+    return np.ascontiguousarray(_tile_mask(tiles, grid))
+
+
+def _tile_mask(tiles, grid: TileGrid) -> np.ndarray:
+    tiles = np.asarray(tiles)
+    if tiles.dtype != np.bool_ or tiles.shape != (grid.rows, grid.cols):
+        raise InputError(f"tiles must be a ({grid.rows}, {grid.cols}) bool tile image, got {tiles.dtype} "
+                         f"{tiles.shape}", camera=grid.camera.name, field="tiles")
+    return tiles
 
 
 #: The intensity variant's pixel rule (:func:`unexplained_intensity_tiles`): a pixel changed when its grey value,
@@ -186,26 +207,30 @@ UNEXPLAINED_FRACTION = 0.25
 
 
 def unexplained_intensity_tiles(image, reference, gain: float, near, grid: TileGrid,
-                                grey: float = UNEXPLAINED_GREY, fraction: float = UNEXPLAINED_FRACTION) -> np.ndarray:
+                                grey: float = UNEXPLAINED_GREY, fraction: float = UNEXPLAINED_FRACTION,
+                                tiles=None) -> np.ndarray:
     """(rows, cols) bool: the intensity variant's tiles where more than ``fraction`` of the pixels changed where the
     current robot cannot be: a grey value (divided by ``gain``, :func:`light_gain`) more than ``grey`` levels from the
     reference image's (:func:`reference_image`), at a pixel with nothing of the robot rendered within one pixel
     (``near``: (height, width) float32 metres, the robot's padded geometry rendered at the image's joints, 0 where it
     is not). Without depth, a change inside the robot's silhouette may be the robot; one outside cannot (its shadow
     could: such a tile becomes an obstacle, the conservative answer). A NaN gain (no estimate of the light) makes
-    every tile count."""
-    pixels = _image(image, grid, "image").astype(np.float64)
+    every tile count. ``tiles``: (rows, cols) bool, the tiles to look at (default all; the others are False)."""
+    pixels = _image(image, grid, "image")
     ref = np.asarray(reference, dtype=np.float64)
-    near = np.asarray(near)
-    if ref.shape != grid.camera.shape or near.shape != grid.camera.shape:
-        raise InputError(f"reference and near must be {grid.camera.shape} images, got {ref.shape} and {near.shape}",
-                         camera=grid.camera.name, field="reference")
+    if ref.shape != grid.camera.shape:
+        raise InputError(f"reference must be a {grid.camera.shape} image, got {ref.shape}", camera=grid.camera.name,
+                         field="reference")
+    near = _near(near, grid)
+    wanted = _wanted(tiles, grid)
     if not math.isfinite(gain) or gain <= 0.0:
-        return np.ones((grid.rows, grid.cols), dtype=bool)
-    robot = ndimage.maximum_filter(near > 0.0, size=3, mode="nearest")
-    changed = (np.abs(pixels / gain - ref) > grey) & ~robot
-    counts = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
-    return _tile_sums(changed.astype(np.float64), grid) / counts > fraction
+        return wanted.copy()
+    counts = np.empty((grid.rows, grid.cols))
+    pixels = pixels if pixels.dtype == np.uint8 else pixels.astype(np.float64)  # 8 bits, else any as floats
+    collision_kernels.unexplained_grey(_read_only(pixels), _read_only(ref), float(gain), float(grey), near,
+                                       grid.first_row, grid.first_col, wanted, counts)
+    tiles = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
+    return counts / tiles > fraction
 
 
 def light_gain(features, reference_features, darkest: float = 10.0) -> float:

@@ -218,7 +218,8 @@ class ImageCollisionTest:
             if self.images == "depth":
                 gains.append(1.0)
                 foreground = depth_difference_image(frame, reference, grid, self.thresholds)
-                odd = None if near[c] is None else unexplained_tiles(frame, reference, near[c], grid, self.thresholds)
+                odd = None if near[c] is None else \
+                    unexplained_tiles(frame, reference, near[c], grid, self.thresholds, tiles=foreground & robot)
             else:
                 features = tile_features(frame, grid)
                 gain = light_gain(features, reference) if self.lighting else 1.0
@@ -231,7 +232,8 @@ class ImageCollisionTest:
                     if self.reference_images is None:
                         raise InputError("robot_pixels compares pixels with the reference images: set the reference "
                                          "with set_reference (or robot_pixels=False)", field="reference")
-                    odd = unexplained_intensity_tiles(frame, self.reference_images[c], gain, near[c], grid)
+                    odd = unexplained_intensity_tiles(frame, self.reference_images[c], gain, near[c], grid,
+                                                      tiles=foreground & robot)
             obstacles.append(obstacle_image(foreground, robot, odd))
             unexplained.append(odd)
         revised = revised_obstacle_images(obstacles, self.bands, self.theta)

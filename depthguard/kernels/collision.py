@@ -300,7 +300,8 @@ def tile_moments(image, first_row, first_col, row_weight, out):
 
 
 @kernel(parallel=True)
-def unexplained_changes(now, scale, reference, threshold, k0, k1, k2, near, tolerance, first_row, first_col, out):
+def unexplained_changes(now, scale, reference, threshold, k0, k1, k2, near, tolerance, first_row, first_col, wanted,
+                        out):
     """Per tile, the number of changed pixels that the current robot cannot explain: out (rows, cols) float64 (written).
     now, scale, reference, threshold, k0, k1, k2, first_row, first_col: as :func:`depth_changes` takes them (the
     image in units of scale metres, the reference in metres, the change threshold in metres, the noise margin's
@@ -309,7 +310,8 @@ def unexplained_changes(now, scale, reference, threshold, k0, k1, k2, near, tole
     not (the self-filter's render, design §7); tolerance: float, metres, the self-filter's. A changed pixel is the
     robot's only where the robot is rendered within one pixel of it (d_r: the nearest such surface in its 3 x 3
     neighbourhood) and its measurement lies no nearer than d_r - tolerance - m(d_r), or it has none (the robot may
-    drop a pixel); any other changed pixel shows something that is not the robot. One thread per row of tiles."""
+    drop a pixel); any other changed pixel shows something that is not the robot. wanted: (rows, cols) bool, the
+    tiles to count (the others are 0: work only where the answer can matter). One thread per row of tiles."""
     rows = first_row.shape[0] - 1
     cols = first_col.shape[0] - 1
     height, width = near.shape
@@ -318,6 +320,8 @@ def unexplained_changes(now, scale, reference, threshold, k0, k1, k2, near, tole
             out[r, c] = 0.0
         for v in range(first_row[r], first_row[r + 1]):
             for c in range(cols):
+                if not wanted[r, c]:
+                    continue
                 count = 0
                 for u in range(first_col[c], first_col[c + 1]):
                     d = now[v, u] * scale
@@ -336,6 +340,40 @@ def unexplained_changes(now, scale, reference, threshold, k0, k1, k2, near, tole
                     if d_r < np.inf and (not seen or d >= d_r - tolerance - max(k0 + (k1 + k2 * d_r) * d_r, 0.0)):
                         continue  # the robot may be what changed here
                     count += 1
+                out[r, c] += count
+
+
+@kernel(parallel=True)
+def unexplained_grey(image, reference, gain, grey, near, first_row, first_col, wanted, out):
+    """Per tile, the number of pixels whose grey value changed where the current robot cannot be: out (rows, cols)
+    float64 (written). image: (height, width) uint8 grey values (or float64); reference: (height, width) float64, the reference
+    image's grey values; gain: float, the image's brightness relative to the reference (its values are divided by
+    it); grey: float, grey levels: a pixel changed when |image / gain - reference| exceeds it; near: (height, width)
+    float32 metres, the robot's padded geometry rendered at the image's joints, 0 where it is not: a pixel counts only
+    when nothing of the robot is rendered in its 3 x 3 neighbourhood; first_row, first_col: the tiles' first pixels;
+    wanted: (rows, cols) bool, the tiles to count (the others are 0). One thread per row of tiles."""
+    rows = first_row.shape[0] - 1
+    cols = first_col.shape[0] - 1
+    height, width = near.shape
+    for r in prange(rows):
+        for c in range(cols):
+            out[r, c] = 0.0
+        for v in range(first_row[r], first_row[r + 1]):
+            for c in range(cols):
+                if not wanted[r, c]:
+                    continue
+                count = 0
+                for u in range(first_col[c], first_col[c + 1]):
+                    if abs(np.float64(image[v, u]) / gain - reference[v, u]) <= grey:
+                        continue
+                    robot = False
+                    for dv in range(-1, 2):
+                        vv = min(max(v + dv, 0), height - 1)
+                        for du in range(-1, 2):
+                            if near[vv, min(max(u + du, 0), width - 1)] > 0.0:
+                                robot = True
+                    if not robot:
+                        count += 1
                 out[r, c] += count
 
 
