@@ -6,6 +6,7 @@ fail if the order is dropped or reversed; scenario C's judge (tests/test_scenari
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import depthguard as dg
 from depthguard.collision import (
@@ -143,6 +144,36 @@ def test_unexplained_tiles_count_the_changed_pixels_the_rendered_robot_cannot_ex
                                   got & some)
 
 
+def test_unexplained_intensity_tiles_count_the_changed_pixels_outside_the_robots_silhouette():
+    """Against a pixel loop: a pixel counts when its grey value over the gain is more than 12 levels from the
+    reference's and no robot is rendered within a pixel of it; a tile when more than a quarter of its pixels count."""
+    from depthguard.collision import unexplained_intensity_tiles
+
+    grid = TileGrid(_camera(), 7, 9)
+    shape = grid.camera.shape
+    rng = np.random.default_rng(5)
+    reference = rng.uniform(0, 255, shape)
+    image = np.where(rng.random(shape) < 0.6, rng.integers(0, 256, shape), np.rint(reference * 1.1)).clip(0, 255)
+    image = image.astype(np.uint8)
+    near = np.where(rng.random(shape) < 0.05, 2.0, 0.0).astype(np.float32)
+    near[:60, :80] = 0.0
+    got = unexplained_intensity_tiles(image, reference, 1.1, near, grid)
+    h, w = shape
+    counts = np.zeros((grid.rows, grid.cols))
+    for v in range(h):
+        r = np.searchsorted(grid.first_row, v, side="right") - 1
+        for u in range(w):
+            c = np.searchsorted(grid.first_col, u, side="right") - 1
+            if abs(image[v, u] / 1.1 - reference[v, u]) > 12.0 and not (near[max(v - 1, 0): v + 2,
+                                                                             max(u - 1, 0): u + 2] > 0).any():
+                counts[r, c] += 1
+    pixels = np.outer(np.diff(grid.first_row), np.diff(grid.first_col))
+    np.testing.assert_array_equal(got, counts / pixels > 0.25)
+    assert got.any() and not got.all()
+    float_image = unexplained_intensity_tiles(image.astype(np.float64), reference, 1.1, near, grid)
+    np.testing.assert_array_equal(float_image, got)
+
+
 def test_table_i_makes_an_unexplained_foreground_tile_under_the_robot_an_obstacle():
     from depthguard.collision import ERROR, UNKNOWN, obstacle_image
 
@@ -151,3 +182,33 @@ def test_table_i_makes_an_unexplained_foreground_tile_under_the_robot_an_obstacl
     unexplained = np.array([[True, False, True], [True, False, False]])
     assert obstacle_image(foreground, robot).tolist() == [[UNKNOWN, UNKNOWN, ERROR], [OBSTACLE, 0, 0]]
     assert obstacle_image(foreground, robot, unexplained).tolist() == [[OBSTACLE, UNKNOWN, ERROR], [OBSTACLE, 0, 0]]
+
+
+def test_the_pixel_rule_names_what_it_refuses():
+    from depthguard.collision import ImageCollisionTest, unexplained_intensity_tiles, unexplained_tiles
+
+    grid = TileGrid(_camera(), 4, 5)
+    shape = grid.camera.shape
+    depth, near = np.ones(shape), np.zeros(shape, dtype=np.float32)
+    with pytest.raises(dg.InputError) as error:
+        unexplained_tiles(depth, depth, np.zeros((3, 3), dtype=np.float32), grid)
+    assert error.value.field == "near" and error.value.camera == "c"
+    with pytest.raises(dg.InputError) as error:
+        unexplained_tiles(depth, depth, near, grid, tiles=np.ones((4, 4), dtype=bool))
+    assert error.value.field == "tiles"
+    with pytest.raises(dg.InputError) as error:
+        unexplained_intensity_tiles(np.zeros(shape, dtype=np.uint8), np.zeros((2, 2)), 1.0, near, grid)
+    assert error.value.field == "reference"
+    # no estimate of the light: every tile asked for counts (the conservative answer)
+    assert unexplained_intensity_tiles(np.zeros(shape, dtype=np.uint8), np.zeros(shape), float("nan"), near,
+                                       grid).all()
+    with pytest.raises(dg.InputError) as error:
+        ImageCollisionTest(dg.Rig({"c": grid.camera}), RobotModel.default(), [[-1, -1, 0], [1, 1, 2]],
+                           robot_pixels="yes")
+    assert error.value.field == "robot_pixels"
+    test = ImageCollisionTest(dg.Rig({"c": grid.camera}), RobotModel.default(), [[-1, -1, 0], [1, 1, 2]],
+                              tiles=(4, 5))
+    test.reference = [np.zeros((4, 5, 2))]  # tile features set by hand: no reference images to compare pixels with
+    with pytest.raises(dg.InputError) as error:
+        test.observe({"c": np.zeros(shape, dtype=np.uint8)}, np.zeros(7))
+    assert error.value.field == "reference" and test.revised is None

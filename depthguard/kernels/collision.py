@@ -299,6 +299,21 @@ def tile_moments(image, first_row, first_col, row_weight, out):
                 out[r, c, 1] += total * weight
 
 
+@kernel(inline=True)
+def _nearest_robot(near, v, u):
+    """Metres: the nearest surface of the rendered robot ``near`` ((height, width) float32, 0 where it is not) among
+    pixel (v, u) and its 8 neighbours (clamped at the border), inf when the robot is at none of them."""
+    height, width = near.shape
+    d_r = np.inf
+    for dv in range(-1, 2):
+        vv = min(max(v + dv, 0), height - 1)
+        for du in range(-1, 2):
+            x = np.float64(near[vv, min(max(u + du, 0), width - 1)])
+            if x > 0.0 and x < d_r:
+                d_r = x
+    return d_r
+
+
 @kernel(parallel=True)
 def unexplained_changes(now, scale, reference, threshold, k0, k1, k2, near, tolerance, first_row, first_col, wanted,
                         out):
@@ -314,7 +329,6 @@ def unexplained_changes(now, scale, reference, threshold, k0, k1, k2, near, tole
     tiles to count (the others are 0: work only where the answer can matter). One thread per row of tiles."""
     rows = first_row.shape[0] - 1
     cols = first_col.shape[0] - 1
-    height, width = near.shape
     for r in prange(rows):
         for c in range(cols):
             out[r, c] = 0.0
@@ -330,13 +344,7 @@ def unexplained_changes(now, scale, reference, threshold, k0, k1, k2, near, tole
                     if seen == (ref > 0.0) and \
                             (not seen or abs(d - ref) <= max(threshold, k0 + k1 * ref + k2 * ref * ref)):
                         continue  # unchanged
-                    d_r = np.inf
-                    for dv in range(-1, 2):
-                        vv = min(max(v + dv, 0), height - 1)
-                        for du in range(-1, 2):
-                            x = np.float64(near[vv, min(max(u + du, 0), width - 1)])
-                            if x > 0.0 and x < d_r:
-                                d_r = x
+                    d_r = _nearest_robot(near, v, u)
                     if d_r < np.inf and (not seen or d >= d_r - tolerance - max(k0 + (k1 + k2 * d_r) * d_r, 0.0)):
                         continue  # the robot may be what changed here
                     count += 1
@@ -346,15 +354,14 @@ def unexplained_changes(now, scale, reference, threshold, k0, k1, k2, near, tole
 @kernel(parallel=True)
 def unexplained_grey(image, reference, gain, grey, near, first_row, first_col, wanted, out):
     """Per tile, the number of pixels whose grey value changed where the current robot cannot be: out (rows, cols)
-    float64 (written). image: (height, width) uint8 grey values (or float64); reference: (height, width) float64, the reference
-    image's grey values; gain: float, the image's brightness relative to the reference (its values are divided by
+    float64 (written). image: (height, width) uint8 grey values (or float64); reference: (height, width) float64, the
+    reference image's grey values; gain: float, the image's brightness relative to the reference (its values are divided by
     it); grey: float, grey levels: a pixel changed when |image / gain - reference| exceeds it; near: (height, width)
     float32 metres, the robot's padded geometry rendered at the image's joints, 0 where it is not: a pixel counts only
     when nothing of the robot is rendered in its 3 x 3 neighbourhood; first_row, first_col: the tiles' first pixels;
     wanted: (rows, cols) bool, the tiles to count (the others are 0). One thread per row of tiles."""
     rows = first_row.shape[0] - 1
     cols = first_col.shape[0] - 1
-    height, width = near.shape
     for r in prange(rows):
         for c in range(cols):
             out[r, c] = 0.0
@@ -366,13 +373,7 @@ def unexplained_grey(image, reference, gain, grey, near, first_row, first_col, w
                 for u in range(first_col[c], first_col[c + 1]):
                     if abs(np.float64(image[v, u]) / gain - reference[v, u]) <= grey:
                         continue
-                    robot = False
-                    for dv in range(-1, 2):
-                        vv = min(max(v + dv, 0), height - 1)
-                        for du in range(-1, 2):
-                            if near[vv, min(max(u + du, 0), width - 1)] > 0.0:
-                                robot = True
-                    if not robot:
+                    if _nearest_robot(near, v, u) == np.inf:
                         count += 1
                 out[r, c] += count
 
