@@ -55,35 +55,49 @@ def world(tmp_path_factory):
 def judged(world, robot):
     """label -> (case, futures (k, 7), touching (k,) bool by coal, references {"depth" | "intensity": {camera:
     [images]}} and their joints, the grey images now {camera: image})."""
-    out = {}
     rng = np.random.default_rng(SEED)
-    for case in tl.make_cases(world, robot):
-        if case.label not in CASES:
-            continue
-        references = {kind: {n: [] for n in case.rig.cameras} for kind in ("depth", "intensity")}
-        joints = []
-        for q in (case.q + 0.6, case.q - 0.6, case.q + np.array([0.9, -0.3, 0.5, 0.4, -0.6, 0.3, 0.0])):
+    return {case.label: judge(world, robot, case, rng) for case in tl.make_cases(world, robot) if case.label in CASES}
+
+
+#: The reference images' configurations, as offsets from each scene's (the robot elsewhere, no limb).
+REFERENCE_OFFSETS = (0.6, -0.6, np.array([0.9, -0.3, 0.5, 0.4, -0.6, 0.3, 0.0]))
+
+
+def judge(world, robot, case, rng, offsets=REFERENCE_OFFSETS, spread=SPREAD, count=FUTURES) -> tuple:
+    """One judged scene (the tuple :func:`judged` holds): the references rendered without the limbs (the robot at
+    ``case.q`` + each of ``offsets``; None: one image of the room without the robot, joints None), the case built,
+    its grey images, seeded futures round its configuration and whether each touches a limb."""
+    references = {kind: {n: [] for n in case.rig.cameras} for kind in ("depth", "intensity")}
+    joints = []
+    for q in ([None] if offsets is None else [case.q + offset for offset in offsets]):
+        if q is None:  # the robot out of the room (60 m up) while the room is drawn
+            base = p.getBasePositionAndOrientation(world.body, physicsClientId=world.client)
+            p.resetBasePositionAndOrientation(world.body, [base[0][0], base[0][1], base[0][2] + 60.0], base[1],
+                                              physicsClientId=world.client)
+        else:
             q = np.clip(q, robot.lower, robot.upper)
             world.set_joints(q)
-            scene = ps.PybulletScene(world.client, ps.room())
-            try:
-                for name, cam in case.rig.cameras.items():
-                    depth = ps.render_depth(world.client, cam)[0]
-                    references["depth"][name].append(np.where(np.isfinite(depth), depth, 0.0).astype(np.float32))
-                    references["intensity"][name].append(grey(world, cam))
-            finally:
-                scene.remove()
-            joints.append(q)
-        case = tl.build(world, case, 0.4)
-        world.set_joints(case.q)
-        scene = ps.PybulletScene(world.client, ps.room() + list(case.limbs.values()))
+        scene = ps.PybulletScene(world.client, ps.room())
         try:
-            now = {name: grey(world, cam) for name, cam in case.rig.cameras.items()}
+            for name, cam in case.rig.cameras.items():
+                depth = ps.render_depth(world.client, cam)[0]
+                references["depth"][name].append(np.where(np.isfinite(depth), depth, 0.0).astype(np.float32))
+                references["intensity"][name].append(grey(world, cam))
         finally:
             scene.remove()
-        futures = np.clip(case.q + rng.uniform(-SPREAD, SPREAD, (FUTURES, robot.n_joints)), robot.lower, robot.upper)
-        out[case.label] = (case, futures, touches(world, case, futures), references, joints, now)
-    return out
+            if q is None:
+                p.resetBasePositionAndOrientation(world.body, *base, physicsClientId=world.client)
+        joints.append(q)
+    joints = None if offsets is None else joints
+    case = tl.build(world, case, 0.4)
+    world.set_joints(case.q)
+    scene = ps.PybulletScene(world.client, ps.room() + list(case.limbs.values()))
+    try:
+        now = {name: grey(world, cam) for name, cam in case.rig.cameras.items()}
+    finally:
+        scene.remove()
+    futures = np.clip(case.q + rng.uniform(-spread, spread, (count, robot.n_joints)), robot.lower, robot.upper)
+    return case, futures, touches(world, case, futures), references, joints, now
 
 
 def grey(world, camera) -> np.ndarray:
@@ -170,3 +184,66 @@ def test_the_depth_grid_verdict_misses_a_limb_only_within_the_self_filters_shell
         inside = limbs & (tl.zone_gap(robot, futures[k], case.samples, 0.0) <= 0.0)
         assert inside.any() and shell[inside].all(), \
             f"a limb outside the stated shell missed: {futures[k].round(3).tolist()}"
+
+
+def test_a_finger_the_robot_hides_from_two_cameras_is_missed_by_theta_1_and_kept_by_the_default(world, robot):
+    """Why theta stays C - 1 (design §10): theta 1 assumes the robot hides an obstacle from at most one camera. A
+    finger 5 cm under the horizontal arm's link 2, along it, two cameras straight above the link (it hides the finger
+    from both: no pixel of it drawn) and one low beside it: theta 1 needs C - theta = 2 cameras to confirm what the
+    robot hides and has one, so configurations touching the finger are judged free; the default keeps them."""
+    world.set_joints(tl.Q_HORIZONTAL)
+    # 5 cm under the mesh: beyond the padded hull and the self-filter's tolerance (noise-free cameras), so the camera
+    # that sees it can tell it from the link
+    hand = world.place(tl.capsule(tl.FINGER, [0.2, 0.0, 0.36], [1, 0, 0]), [0, 0, -1], [2, 3, 4], gap=0.05)
+    above = [[hand.centre[0] - 0.04, hand.centre[1], 1.3], [hand.centre[0] + 0.04, hand.centre[1], 1.3]]
+    rig = dg.Rig({"a": tl.camera("a", above[0], np.asarray(above[0]) - [0.0, 0.0, 1.0], up=(1.0, 0.0, 0.0)),
+                  "b": tl.camera("b", above[1], np.asarray(above[1]) - [0.0, 0.0, 1.0], up=(1.0, 0.0, 0.0)),
+                  "s": tl.camera("s", [0.34, -1.3, 0.12], hand.centre)}, workspace=tl.WORKSPACE)
+    case = tl.Case("hidden from two cameras", tl.Q_HORIZONTAL, {"finger": hand}, [], rig,
+                   robot.control_point_positions(tl.Q_HORIZONTAL), len(robot.control_points))
+    # the reference: the room without the robot (no median to leave it in where it stood in every image)
+    case, futures, touching, references, joints, now = judge(world, robot, case, np.random.default_rng(SEED + 2),
+                                                             None, spread=0.5, count=120)
+    assert case.pixels["a", "finger"] == case.pixels["b", "finger"] == 0 and case.pixels["s", "finger"] > 100, \
+        case.pixels
+    assert touching.sum() >= 5
+    for images in ("depth", "intensity"):
+        missed = {}
+        for theta in (1, None):
+            test = ImageCollisionTest(rig, robot, tl.WORKSPACE, tiles=(64, 64), images=images, theta=theta)
+            test.set_reference(references[images], joints=joints)
+            frames = case.frames(TIME)
+            test.observe({n: frames[n].data for n in rig.cameras} if images == "depth" else now, case.q)
+            missed[theta] = sum(not test.test(q).collision for q in futures[touching])
+        print(f"\nhidden from two cameras ({images}): {touching.sum()} touching; theta 1 missed {missed[1]}, the "
+              f"default {missed[None]}")
+        assert missed[None] == 0 and missed[1] > 0, missed
+
+
+def test_a_finger_within_the_shell_the_robot_hides_from_the_other_cameras_is_missed_and_lies_within_the_shell(
+        world, robot):
+    """The stated limit (design §10, README): the image test, like the distances, takes what lies within the
+    self-filter's shell (the padded hull + the tolerance + the noise margins) for the robot in a camera that sees it;
+    when the robot hides it from every other camera, no rule sees it. The finger 1 cm under link 2, the two cameras
+    above: the default misses the configurations touching it, and every sample of the finger lies within the shell
+    of the camera that sees it (thin_limbs.in_shell)."""
+    world.set_joints(tl.Q_HORIZONTAL)
+    finger = world.place(tl.capsule(tl.FINGER, [0.2, 0.0, 0.36], [1, 0, 0]), [0, 0, -1], [2, 3, 4])
+    above = [[finger.centre[0] - 0.04, finger.centre[1], 1.3], [finger.centre[0] + 0.04, finger.centre[1], 1.3]]
+    side = tl.camera("s", [0.34, -1.3, 0.12], finger.centre)
+    rig = dg.Rig({"a": tl.camera("a", above[0], np.asarray(above[0]) - [0.0, 0.0, 1.0], up=(1.0, 0.0, 0.0)),
+                  "b": tl.camera("b", above[1], np.asarray(above[1]) - [0.0, 0.0, 1.0], up=(1.0, 0.0, 0.0)),
+                  "s": side}, workspace=tl.WORKSPACE)
+    case = tl.Case("within the shell", tl.Q_HORIZONTAL, {"finger": finger}, [], rig,
+                   robot.control_point_positions(tl.Q_HORIZONTAL), len(robot.control_points))
+    case, futures, touching, references, joints, _ = judge(world, robot, case, np.random.default_rng(SEED + 3),
+                                                           None, spread=0.5, count=80)
+    assert case.pixels["a", "finger"] == case.pixels["b", "finger"] == 0 and case.pixels["s", "finger"] > 100
+    test = ImageCollisionTest(rig, robot, tl.WORKSPACE, tiles=(64, 64), images="depth")
+    test.set_reference(references["depth"], joints=joints)
+    frames = case.frames(TIME)
+    test.observe({n: frames[n].data for n in rig.cameras}, case.q)
+    missed = sum(not test.test(q).collision for q in futures[touching])
+    print(f"\nwithin the shell: {touching.sum()} touching, the default missed {missed}")
+    assert touching.sum() >= 5 and missed > 0
+    assert tl.in_shell(case, [side])[case.owner == "finger"].all()
