@@ -433,6 +433,7 @@ def test_the_whole_test_finds_a_box_in_a_future_configurations_way_and_nothing_w
     # Nothing in the workspace but the robot: its own tiles resolve to background, every configuration is free.
     test.observe(_draw(test, backgrounds, cameras, now), now)
     assert not test.test(now).collision
+    assert test.test(now).shell  # free, and it rests on the shell: its image is the current robot's in every camera
     assert not test.test(future).collision
     # A box where the future configuration's end-effector will be: that configuration collides, the current not.
     target = robot.control_point_positions(future)[robot.end_effector_index]

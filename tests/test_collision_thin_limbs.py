@@ -27,7 +27,7 @@ import pytest
 import depthguard as dg
 import pybullet_scenes as ps
 import thin_limbs as tl
-from depthguard.collision import DepthGridCollisionTest, ImageCollisionTest
+from depthguard.collision import ConfigurationTable, DepthGridCollisionTest, ImageCollisionTest
 from depthguard.robots import RobotModel
 
 TIME = 10.0
@@ -243,7 +243,15 @@ def test_a_finger_within_the_shell_the_robot_hides_from_the_other_cameras_is_mis
     test.set_reference(references["depth"], joints=joints)
     frames = case.frames(TIME)
     test.observe({n: frames[n].data for n in rig.cameras}, case.q)
-    missed = sum(not test.test(q).collision for q in futures[touching])
-    print(f"\nwithin the shell: {touching.sum()} touching, the default missed {missed}")
-    assert touching.sum() >= 5 and missed > 0
+    verdicts = [test.test(q) for q in futures]
+    missed = [v for v, t in zip(verdicts, touching) if t and not v.collision]
+    print(f"\nwithin the shell: {touching.sum()} touching, the default missed {len(missed)}")
+    assert touching.sum() >= 5 and missed
     assert tl.in_shell(case, [side])[case.owner == "finger"].all()
+    # each miss says what it rests on: its robot image meets the current one in every camera (Verdict.shell), and
+    # the table gives the same verdicts
+    assert all(v.shell for v in missed)
+    table = ConfigurationTable(test, futures)
+    collision, _ = table.verdicts()
+    assert [table.verdict(k) for k in range(len(futures))] == verdicts
+    assert not np.any(table.shell & collision)

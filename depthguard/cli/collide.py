@@ -214,7 +214,7 @@ def _verdict_json(test, v, **extra) -> dict:
         gain = test.gains[k] if k < len(test.gains) else 1.0
         cameras[name] = {"obstacle": v.obstacle[k], "possible": v.possible[k],
                          "light_gain": None if not math.isfinite(gain) else round(gain, 4)}
-    return {"collision": v.collision, "class": v.klass, **extra, "cameras": cameras}
+    return {"collision": v.collision, "class": v.klass, "robot_shell": v.shell, **extra, "cameras": cameras}
 
 
 def run(args) -> int:

@@ -131,12 +131,19 @@ class Verdict:
             cameras see an obstacle: free only if every obstacle is seen by C - theta cameras), "C" (at least
             C - theta but not all do: a collision is assumed), "D" (all C do).
         obstacle: (C,) Coll_RO per camera; possible: (C,) Coll_RP per camera.
+        shell: the concession it rests on (design §10): True on a verdict without a collision whose robot image meets
+            the current robot's tile image in every camera. A camera takes what lies within the robot's shell for
+            the robot (its tile image without the pixel rule; the padded hull + the self-filter's tolerance + the
+            noise margin with it), and an object the robot hides from the other cameras lies under its image there
+            too: such an object, unseen, could be hit. False otherwise (a robot image that leaves the current one in
+            some camera cannot meet it).
     """
 
     collision: bool
     klass: str
     obstacle: tuple
     possible: tuple
+    shell: bool = False
 
 
 def verdict(obstacle: Sequence[bool], possible: Sequence[bool], theta: int, unseen: str = "occupied") -> Verdict:

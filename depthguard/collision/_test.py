@@ -5,13 +5,14 @@ tested against them."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from depthguard import config
 from depthguard.cameras import Rig
-from depthguard.collision._boxes import box_corners, grid_bits
+from depthguard.collision._boxes import box_corners, grid_bits, moved_box
 from depthguard.collision._difference import (
     depth_metres,
     depth_difference_image,
@@ -24,7 +25,6 @@ from depthguard.collision._difference import (
     unexplained_intensity_tiles,
     unexplained_tiles,
 )
-from depthguard.collision._boxes import moved_box
 from depthguard.collision._epipolar import EpipolarBands, TileGrid
 from depthguard.collision._robot_image import RobotProjector
 from depthguard.collision._tables import (Verdict, camera_collisions, depth_ordered_collisions, obstacle_image,
@@ -123,6 +123,9 @@ class ImageCollisionTest:
         #: Per camera, the tiles of the last observed set whose change neither the robot nor its gripped piece
         #: explains ((rows, cols) bool; None without ``robot_pixels``).
         self.unexplained = None
+        #: Per camera, the current robot's tile image of the last observed set ((rows, cols) bool; with a gripped
+        #: piece, :class:`ReferenceUpdate` ORs its tiles in): what :attr:`Verdict.shell` compares with.
+        self.robot_now = None
         self.free = None  # per camera, (rows, cols) metres: the tiles' free depth of the last observed depth images
         self.classifier = classifier
         self.gains = []
@@ -205,6 +208,8 @@ class ImageCollisionTest:
         refused (bad images or joints) leaves no answer behind: :meth:`test` refuses until a set is observed."""
         self.revised = None  # no test answers from older images once a new set arrived
         self.free = None
+        self.robot_now = None
+        self.unexplained = None
         self.gains = []
         if self.reference is None:
             raise InputError("set_reference first: the difference images need the reference", field="reference")
@@ -242,6 +247,7 @@ class ImageCollisionTest:
         self.revised = revised
         self.gains = gains
         self.unexplained = unexplained if self.robot_pixels else None
+        self.robot_now = robot_now
         return self.revised
 
     def _robot_renders(self, joints) -> list[np.ndarray]:
@@ -302,7 +308,11 @@ class ImageCollisionTest:
         if self.revised is None:
             raise InputError("observe a set of images first", field="revised")
         flags = [camera_collisions(revised, robot) for revised, robot in zip(self.revised, robot_images)]
-        return verdict([f[0] for f in flags], [f[1] for f in flags], self.theta, self.unseen)
+        v = verdict([f[0] for f in flags], [f[1] for f in flags], self.theta, self.unseen)
+        # revised images set by hand carry no robot image of theirs: every free verdict then counts as resting on it
+        shell = not v.collision and (self.robot_now is None or all(
+            bool(np.any(np.asarray(image) & now)) for image, now in zip(robot_images, self.robot_now)))
+        return replace(v, shell=shell)
 
 
 class ConfigurationTable:
@@ -372,6 +382,15 @@ class ConfigurationTable:
         every = np.all(ro | rp, axis=0)
         klass = np.where(~every, "A", np.where(n_ro < c - test.theta, "B", np.where(n_ro < c, "C", "D")))
         collision = every if test.unseen == "occupied" else (klass == "C") | (klass == "D")
+        meets = np.ones(len(self.configurations), dtype=bool)  # the robot image meets the current one everywhere
+        for k, (grid, now) in enumerate(zip(test.grids, test.robot_now or [None] * c)):
+            if now is None:  # revised images set by hand: no robot image to compare with (flag every free verdict)
+                continue
+            current = np.zeros(words, dtype=np.uint64)
+            current[: grid.words] = grid.pack(np.asarray(now, dtype=bool))
+            meets &= np.any(self.bits[k] & current, axis=1)
+        #: (K,) bool: each configuration's :attr:`Verdict.shell` (after :meth:`verdicts`)
+        self.shell = ~collision & meets
         self._flags = (ro, rp)
         return collision, klass
 
@@ -380,4 +399,4 @@ class ConfigurationTable:
         collision, klass = self.verdicts()
         ro, rp = self._flags
         return Verdict(bool(collision[k]), str(klass[k]), tuple(bool(x) for x in ro[:, k]),
-                       tuple(bool(x) for x in rp[:, k]))
+                       tuple(bool(x) for x in rp[:, k]), bool(self.shell[k]))

@@ -34,10 +34,8 @@ from depthguard.collision._tables import (
     POSSIBLE,
     UNKNOWN,
     Verdict,
-    camera_collisions,
     obstacle_image,
     revised_obstacle_images,
-    verdict,
 )
 from depthguard.collision._test import ImageCollisionTest
 from depthguard.errors import InputError
@@ -189,6 +187,7 @@ class ReferenceUpdate:
                               np.where(fg, OBSTACLE, BACKGROUND)).astype(np.uint8)
                      for fg, robot, u in zip(seen, robot_now, odd)]
         test.revised = revised_obstacle_images(obstacles, test.bands, test.theta)
+        test.robot_now = robot_now
 
         # Per camera: the current image's reference content (tile features, or depth pixels in metres), and the
         # difference image against the reference as it would be with all of U updated (for O).
@@ -326,11 +325,9 @@ class ReferenceUpdate:
     # ------------------------------------------------------------------------------------ future configurations
 
     def _verdict(self, robot_images) -> Verdict:
-        test = self.collision_test
-        if test.revised is None:
+        if self.collision_test.revised is None:
             raise InputError("observe a set of images first (step)", field="revised")
-        flags = [camera_collisions(revised, robot) for revised, robot in zip(test.revised, robot_images)]
-        return verdict([f[0] for f in flags], [f[1] for f in flags], test.theta, test.unseen)
+        return self.collision_test._verdict(robot_images)  # the test's rule, its shell against the robot with the piece
 
     def test(self, joints) -> Verdict:
         """Step 6 for the configuration ``joints`` ((n,) radians) with the gripped piece (:meth:`robot_image`),
