@@ -46,7 +46,9 @@ class ImageCollisionTest:
         unseen: "occupied" (default, fail-safe): a configuration that meets obstacles or possible obstacles in every
             camera collides (classes B, C and D); "free": the paper's section 3.5, class B is collision-free
             (assumes every obstacle is seen by at least C - theta cameras: not so for a hand next to the robot).
-            Either way an obstacle that the current robot hides from every camera is not seen (its blind spot).
+            Either way an obstacle that the current robot hides from every camera is not seen (its blind spot), nor
+            one that lies within the robot's shell in the cameras that see it and is hidden from the others
+            (:attr:`Verdict.shell` marks the free verdicts that rest on that).
         classifier: a fitted :class:`BayesTileClassifier` that decides which intensity tiles are foreground instead
             of the thresholds.
         thresholds: per tile feature, the change that makes a tile foreground (:func:`difference_image`): for
