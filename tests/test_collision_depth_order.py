@@ -212,3 +212,22 @@ def test_the_pixel_rule_names_what_it_refuses():
     with pytest.raises(dg.InputError) as error:
         test.observe({"c": np.zeros(shape, dtype=np.uint8)}, np.zeros(7))
     assert error.value.field == "reference" and test.revised is None
+
+
+def test_the_reference_leaves_out_the_robots_pixels_when_given_them():
+    """reference_image(pixels=...): each pixel's median over the images whose robot does not cover it; over all of
+    them where every image's does (judged pixel by pixel)."""
+    from depthguard.collision import reference_image
+
+    grid = TileGrid(_camera(), 4, 5)
+    rng = np.random.default_rng(8)
+    images = [rng.uniform(0, 255, grid.camera.shape) for _ in range(5)]
+    masks = [rng.random(grid.camera.shape) < 0.6 for _ in range(5)]
+    got = reference_image(images, grid, pixels=masks)
+    stack, covered = np.stack(images), np.stack(masks)
+    for v, u in zip(*np.nonzero(np.ones(grid.camera.shape, dtype=bool))):
+        keep = ~covered[:, v, u] if not covered[:, v, u].all() else np.ones(5, dtype=bool)
+        assert got[v, u] == np.median(stack[keep, v, u])
+    with pytest.raises(dg.InputError) as error:
+        reference_image(images, grid, pixels=masks[:2])
+    assert error.value.field == "pixels"

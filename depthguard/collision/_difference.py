@@ -31,7 +31,7 @@ def _image(image, grid: TileGrid, name: str) -> np.ndarray:
     return array
 
 
-def reference_image(images: Sequence[np.ndarray], grid: TileGrid, robot=None) -> np.ndarray:
+def reference_image(images: Sequence[np.ndarray], grid: TileGrid, robot=None, pixels=None) -> np.ndarray:
     """Step 1: the per-pixel median of ``images`` (each (height, width), intensity or depth) taken with the robot in
     different configurations, so that its mobile parts, seen in fewer than half of them at any pixel, disappear.
     Returns (height, width) float64.
@@ -39,18 +39,29 @@ def reference_image(images: Sequence[np.ndarray], grid: TileGrid, robot=None) ->
     ``robot``: optionally, per image, the (rows, cols) bool tiles the robot covers in it (:class:`RobotProjector`).
     Then each pixel's median is taken over the images whose robot does not cover its tile, so that the robot
     disappears wherever at least one image shows the room behind it (however the configurations overlap); where
-    every image's robot covers the tile (the base, which never moves), over all of them."""
+    every image's robot covers the tile (the base, which never moves), over all of them.
+
+    ``pixels``: instead of ``robot``, per image the (height, width) bool pixels the robot may cover in it (its render,
+    grown by a pixel): the same rule pixel by pixel, so that a pixel next to the robot in every image (a tile it
+    always touches) still gets the room behind it."""
     stack = [_image(image, grid, f"images[{k}]") for k, image in enumerate(images)]
     if not stack:
         raise InputError("the reference needs at least one image", camera=grid.camera.name, field="images")
     values = np.stack(stack).astype(np.float64)
-    if robot is None:
+    if robot is None and pixels is None:
         return np.median(values, axis=0)
-    if len(robot) != len(stack):
-        raise InputError(f"{len(robot)} robot tile images for {len(stack)} images", camera=grid.camera.name,
-                         field="robot")
-    rows, cols = grid.tile_of_pixels()
-    covered = np.stack([np.asarray(tiles, dtype=bool)[rows][:, cols] for tiles in robot])
+    given, field = (robot, "robot") if pixels is None else (pixels, "pixels")
+    if len(given) != len(stack):
+        raise InputError(f"{len(given)} robot {field} images for {len(stack)} images", camera=grid.camera.name,
+                         field=field)
+    if pixels is None:
+        rows, cols = grid.tile_of_pixels()
+        covered = np.stack([np.asarray(tiles, dtype=bool)[rows][:, cols] for tiles in robot])
+    else:
+        covered = np.stack([np.asarray(mask, dtype=bool) for mask in pixels])
+        if covered.shape[1:] != grid.camera.shape:
+            raise InputError(f"robot pixels must be {grid.camera.shape} masks, got {covered.shape[1:]}",
+                             camera=grid.camera.name, field="pixels")
     covered &= ~np.all(covered, axis=0)  # a pixel covered in every image: its median over all of them
     values[covered] = np.nan
     return np.nanmedian(values, axis=0)

@@ -9,6 +9,7 @@ from dataclasses import replace
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+from scipy import ndimage
 
 from depthguard import config
 from depthguard.cameras import Rig
@@ -197,7 +198,14 @@ class ImageCollisionTest:
             bits = self.projector.bits(q)
             unpacked = [self.projector.unpack(bits[:, k]) for k in range(len(q))]
             robots = [[images[c] for images in unpacked] for c in range(len(self.grids))]
-        references = [reference_image(stack, grid, robot) for stack, grid, robot in zip(stacks, self.grids, robots)]
+        pixels = [None] * len(self.grids)
+        if joints is not None and self.robot_pixels:
+            # with the robot's render at hand, leave out its pixels (grown by one) rather than its tiles
+            renders = [self._robot_renders(joints_k) for joints_k in q]
+            pixels = [[ndimage.maximum_filter(render[c] > 0.0, size=3, mode="nearest") for render in renders]
+                      for c in range(len(self.grids))]
+        references = [reference_image(stack, grid, robot, mask)
+                      for stack, grid, robot, mask in zip(stacks, self.grids, robots, pixels)]
         self.reference_images = references  # per camera, (h, w) float64 medians: what robot_pixels compares
         # intensity: the reference's tile features; depth: the reference depth image itself (metres)
         self.reference = [tile_features(image, grid) if self.images == "intensity" else image
