@@ -90,7 +90,7 @@ def tile_features(image, grid: TileGrid) -> np.ndarray:
         image = image.astype(np.float64)
     cam = grid.camera
     tile_row, _ = grid.tile_of_pixels()
-    counts = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
+    counts = _tile_sizes(grid)
     # Each pixel row's position within its tile, 0 .. 1.
     first = grid.first_row[tile_row]
     last = grid.first_row[tile_row + 1] - 1
@@ -156,8 +156,7 @@ def depth_difference_image(image, reference, grid: TileGrid, thresholds=(0.05, 0
     k0, k1, k2 = cam.noise.coefficients()
     collision_kernels.depth_changes(_read_only(now), scale, _read_only(ref), thresholds[0], k0, k1, k2,
                                     grid.first_row, grid.first_col, changed)
-    counts = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
-    return _closed(changed / counts > thresholds[1])
+    return _closed(changed / _tile_sizes(grid) > thresholds[1])
 
 
 def unexplained_tiles(image, reference, near, grid: TileGrid, thresholds=(0.05, 0.25),
@@ -184,8 +183,7 @@ def unexplained_tiles(image, reference, near, grid: TileGrid, thresholds=(0.05, 
     collision_kernels.unexplained_changes(_read_only(now), scale, _read_only(ref), float(thresholds[0]), k0, k1, k2,
                                           near, float(tolerance), grid.first_row, grid.first_col,
                                           _wanted(tiles, grid), counts)
-    pixels = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
-    return counts / pixels > float(thresholds[1])
+    return counts / _tile_sizes(grid) > float(thresholds[1])
 
 
 def _near(near, grid: TileGrid) -> np.ndarray:
@@ -197,17 +195,19 @@ def _near(near, grid: TileGrid) -> np.ndarray:
 
 
 def _wanted(tiles, grid: TileGrid) -> np.ndarray:
+    """The tiles to look at: (rows, cols) bool, C-contiguous (all of them for None)."""
     if tiles is None:
         return np.ones((grid.rows, grid.cols), dtype=bool)
-    return np.ascontiguousarray(_tile_mask(tiles, grid))
-
-
-def _tile_mask(tiles, grid: TileGrid) -> np.ndarray:
     tiles = np.asarray(tiles)
     if tiles.dtype != np.bool_ or tiles.shape != (grid.rows, grid.cols):
         raise InputError(f"tiles must be a ({grid.rows}, {grid.cols}) bool tile image, got {tiles.dtype} "
                          f"{tiles.shape}", camera=grid.camera.name, field="tiles")
-    return tiles
+    return np.ascontiguousarray(tiles)
+
+
+def _tile_sizes(grid: TileGrid) -> np.ndarray:
+    """(rows, cols) float64: how many pixels each tile holds."""
+    return np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
 
 
 #: The intensity variant's pixel rule (:func:`unexplained_intensity_tiles`): a pixel changed when its grey value,
@@ -240,8 +240,7 @@ def unexplained_intensity_tiles(image, reference, gain: float, near, grid: TileG
     pixels = pixels if pixels.dtype == np.uint8 else pixels.astype(np.float64)  # 8 bits, else any as floats
     collision_kernels.unexplained_grey(_read_only(pixels), _read_only(ref), float(gain), float(grey), near,
                                        grid.first_row, grid.first_col, wanted, counts)
-    tiles = np.outer(np.diff(grid.first_row), np.diff(grid.first_col)).astype(np.float64)
-    return counts / tiles > fraction
+    return counts / _tile_sizes(grid) > fraction
 
 
 def light_gain(features, reference_features, darkest: float = 10.0) -> float:
@@ -317,7 +316,7 @@ def labelled_tiles(features, reference_features, truth, grid: TileGrid, gain: fl
     light gain (:func:`light_gain`)."""
     distances = feature_distances(features, reference_features, gain)
     truth = np.asarray(truth, dtype=bool)
-    share = _tile_sums(truth.astype(np.int64), grid) / np.outer(np.diff(grid.first_row), np.diff(grid.first_col))
+    share = _tile_sums(truth.astype(np.int64), grid) / _tile_sizes(grid)
     keep = (share >= 0.1) | (share == 0.0)
     if exclude is not None:
         keep &= ~np.asarray(exclude, dtype=bool)

@@ -97,9 +97,10 @@ class DepthGridCollisionTest:
         result = prepared.query(points, check=False)
         distance = result.distance if result.blind_distance is None else np.minimum(result.distance,
                                                                                    result.blind_distance)
-        gap = (distance - np.tile(self.radii, n) - slack).reshape(n, k)
+        extent = np.tile(self.radii, n) + slack  # each point's sphere and its slack
+        gap = (distance - extent).reshape(n, k)
         near = np.full(n * k, np.inf) if result.concession_distance is None else result.concession_distance
-        inside = (near - np.tile(self.radii, n) - slack <= 0.0).reshape(n, k)
+        inside = (near - extent <= 0.0).reshape(n, k)
         bits = np.array([int(f) for f in result.flags], dtype=np.int64).reshape(n, k)
         clearance = gap.min(axis=1)
         collision = clearance <= 0.0

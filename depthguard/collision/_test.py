@@ -13,7 +13,7 @@ from scipy import ndimage
 
 from depthguard import config
 from depthguard.cameras import Rig
-from depthguard.collision._boxes import box_corners, grid_bits, moved_box
+from depthguard.collision._boxes import box_corners, grid_bits
 from depthguard.collision._difference import (
     depth_metres,
     depth_difference_image,
@@ -120,6 +120,7 @@ class ImageCollisionTest:
             raise InputError(f"robot_pixels must be True or False, got {robot_pixels!r}", field="robot_pixels")
         self.robot_pixels = robot_pixels
         self._pixel_silhouette = None  # the robot's padded hulls, rendered per observed set (robot_pixels)
+        self._piece_meshes: dict = {}  # a gripped piece's shape -> its mesh in that renderer
         #: A gripped work piece (a :class:`~depthguard.scenes.Box` in the end-effector link's frame, or None), part of
         #: the robot's render for ``robot_pixels`` (:class:`ReferenceUpdate` sets it when the robot grips one).
         self.piece = None
@@ -195,15 +196,16 @@ class ImageCollisionTest:
             if q.ndim != 2 or any(len(stack) != len(q) for stack in stacks):
                 raise InputError(f"joints must be (K, n), one configuration per reference image (K = "
                                  f"{[len(stack) for stack in stacks]}), got shape {q.shape}", field="joints")
-            bits = self.projector.bits(q)
-            unpacked = [self.projector.unpack(bits[:, k]) for k in range(len(q))]
-            robots = [[images[c] for images in unpacked] for c in range(len(self.grids))]
         pixels = [None] * len(self.grids)
         if joints is not None and self.robot_pixels:
             # with the robot's render at hand, leave out its pixels (grown by one) rather than its tiles
             renders = [self._robot_renders(joints_k) for joints_k in q]
             pixels = [[ndimage.maximum_filter(render[c] > 0.0, size=3, mode="nearest") for render in renders]
                       for c in range(len(self.grids))]
+        elif joints is not None:
+            bits = self.projector.bits(q)
+            unpacked = [self.projector.unpack(bits[:, k]) for k in range(len(q))]
+            robots = [[images[c] for images in unpacked] for c in range(len(self.grids))]
         references = [reference_image(stack, grid, robot, mask)
                       for stack, grid, robot, mask in zip(stacks, self.grids, robots, pixels)]
         self.reference_images = references  # per camera, (h, w) float64 medians: what robot_pixels compares
@@ -268,17 +270,25 @@ class ImageCollisionTest:
 
             self._pixel_silhouette = RobotSilhouette(self.robot, geometry="hulls")
         q = self.robot.joint_vector(joints)
-        renders = [self._pixel_silhouette.render(grid.camera, q) for grid in self.grids]
-        if self.piece is not None:
-            from depthguard.scenes import render_depth
+        silhouette = self._pixel_silhouette
+        instances = silhouette.instances(q)
+        if self.piece is not None:  # drawn with the robot, in the end-effector link's frame
+            from depthguard.rendering import MeshInstance
 
             link = self.robot.control_points[self.robot.end_effector_index].link
-            piece = moved_box(self.piece, self.robot.link_poses(q)[link])
-            for c, grid in enumerate(self.grids):
-                drawn = render_depth(grid.camera, [piece])
-                renders[c] = np.where((drawn > 0) & ((renders[c] == 0) | (drawn < renders[c])), drawn,
-                                      renders[c]).astype(np.float32)
-        return renders
+            instances.append(MeshInstance(self._piece_mesh(self.piece), self.robot.link_poses(q)[link]))
+        return [silhouette.renderer.render_depth(grid.camera, instances) for grid in self.grids]
+
+    def _piece_mesh(self, piece) -> int:
+        """The renderer's mesh of a gripped piece (its :class:`Box` in the end-effector link's frame), uploaded once
+        per shape."""
+        key = (tuple(piece.center), tuple(piece.half_extents), np.asarray(piece.R_world_box).tobytes())
+        if key not in self._piece_meshes:
+            from depthguard.rendering import primitive_mesh
+
+            vertices, faces = primitive_mesh(piece)
+            self._piece_meshes[key] = self._pixel_silhouette.renderer.add_mesh(vertices, faces, closed=True)
+        return self._piece_meshes[key]
 
     def test(self, joints) -> Verdict:
         """Step 6 for the configuration ``joints`` against the last observed images (with the depth order when

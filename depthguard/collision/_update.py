@@ -29,10 +29,8 @@ from depthguard.collision._difference import (
 )
 from depthguard.collision._boxes import box_corners, grid_bits, moved_box
 from depthguard.collision._tables import (
-    BACKGROUND,
     OBSTACLE,
     POSSIBLE,
-    UNKNOWN,
     Verdict,
     obstacle_image,
     revised_obstacle_images,
@@ -180,12 +178,11 @@ class ReferenceUpdate:
         q = test.robot.joint_vector(joints)
         test.observe(images, q)
         robot_now = self.robot_image(q)
-        seen = [revised == OBSTACLE for revised in test.revised]  # foreground outside the bare robot's tiles
-        # ... and, with robot_pixels, tiles whose change neither the robot nor the piece explains: obstacles anyway
+        # Table I again over the robot with the piece: foreground outside the bare robot's tiles, and with
+        # robot_pixels the tiles whose change neither the robot nor the piece explains, stay obstacles
+        seen = [revised == OBSTACLE for revised in test.revised]
         odd = test.unexplained or [None] * len(seen)
-        obstacles = [np.where(robot & ~(fg & (u if u is not None else np.zeros_like(fg))), UNKNOWN,
-                              np.where(fg, OBSTACLE, BACKGROUND)).astype(np.uint8)
-                     for fg, robot, u in zip(seen, robot_now, odd)]
+        obstacles = [obstacle_image(fg, robot, u) for fg, robot, u in zip(seen, robot_now, odd)]
         test.revised = revised_obstacle_images(obstacles, test.bands, test.theta)
         test.robot_now = robot_now
 
@@ -218,17 +215,15 @@ class ReferenceUpdate:
             if not math.isfinite(test.gains[c]):  # no trustworthy light estimate: the camera updates nothing
                 absorb[:] = False
             reference = np.array(test.reference[c], dtype=np.float64, copy=True)
+            rows, cols = grid.tile_of_pixels()
+            pixels = absorb[rows[:, None], cols[None, :]]  # the absorbed tiles' pixels
             if test.images == "intensity":
                 reference[absorb] = currents[c][absorb]
                 if test.reference_images is not None:  # the pixels robot_pixels compares, at the same brightness
-                    rows, cols = grid.tile_of_pixels()
-                    pixels = absorb[rows[:, None], cols[None, :]]
                     image = np.array(test.reference_images[c], dtype=np.float64, copy=True)
                     image[pixels] = np.asarray(images[test.names[c]], dtype=np.float64)[pixels] / test.gains[c]
                     test.reference_images[c] = image
             else:
-                rows, cols = grid.tile_of_pixels()
-                pixels = absorb[rows[:, None], cols[None, :]]
                 reference[pixels] = currents[c][pixels]
             references.append(reference)
             self.absorbed[c] = absorb
