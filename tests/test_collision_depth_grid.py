@@ -133,6 +133,13 @@ def test_no_usable_frame_means_every_configuration_collides_and_bad_input_is_nam
     with pytest.raises(dg.InputError) as error:
         test.verdicts(prepared, Q)
     assert error.value.field == "configurations"
+    for bad in ([["a"] * robot.n_joints], [[0.0] * robot.n_joints, [0.0]], None):  # words, ragged rows, nothing
+        with pytest.raises(dg.InputError) as error:
+            test.verdicts(prepared, bad)
+        assert error.value.field == "configurations"
+    for bad in (np.nan, np.inf, 9.0, 1e300):  # not finite, beyond the joint limits
+        with pytest.raises(dg.InputError):
+            test.verdicts(prepared, np.full((1, robot.n_joints), bad))
     with pytest.raises(dg.InputError) as error:
         test.verdicts(prepared, np.full((1, robot.n_joints), 9.0))  # beyond the joint limits
     with pytest.raises(dg.InputError) as error:

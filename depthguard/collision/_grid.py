@@ -80,7 +80,10 @@ class DepthGridCollisionTest:
         if not isinstance(prepared, PreparedSet):
             raise InputError(f"prepared must be a depthguard.PreparedSet (DistanceMonitor.prepare_set), got "
                              f"{short_repr(prepared)}", field="prepared")
-        qs = np.asarray(configurations, dtype=np.float64) if not isinstance(configurations, str) else None
+        try:
+            qs = np.asarray(configurations, dtype=np.float64) if not isinstance(configurations, str) else None
+        except (TypeError, ValueError):  # words, ragged rows
+            qs = None
         if qs is None or qs.ndim != 2 or qs.shape[1] != self.robot.n_joints:
             raise InputError(f"configurations must be (n, {self.robot.n_joints}) joint vectors, got "
                              f"{short_repr(configurations)}", field="configurations")
