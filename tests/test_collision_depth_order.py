@@ -199,6 +199,22 @@ def test_the_pixel_rule_names_what_it_refuses():
     with pytest.raises(dg.InputError) as error:
         unexplained_intensity_tiles(np.zeros(shape, dtype=np.uint8), np.zeros((2, 2)), 1.0, near, grid)
     assert error.value.field == "reference"
+    for thresholds in ((np.nan, 0.25), (0.05, np.inf), (-0.1, 0.25), (0.05,), "ab"):
+        with pytest.raises(dg.InputError) as error:
+            unexplained_tiles(depth, depth, near, grid, thresholds)
+        assert error.value.field == "thresholds"
+    for tolerance in (np.nan, np.inf, -0.01, 1e300, "2 cm", True):
+        with pytest.raises(dg.InputError) as error:
+            unexplained_tiles(depth, depth, near, grid, tolerance=tolerance)
+        assert error.value.field == "tolerance"
+    grey_image = np.zeros(shape, dtype=np.uint8)
+    for grey, fraction, field in ((np.nan, 0.25, "grey"), (-1.0, 0.25, "grey"), (12.0, np.nan, "fraction"),
+                                  (12.0, 1.5, "fraction"), (12.0, "a", "fraction")):
+        with pytest.raises(dg.InputError) as error:
+            unexplained_intensity_tiles(grey_image, np.zeros(shape), 1.0, near, grid, grey, fraction)
+        assert error.value.field == field
+    # a gain that is not a number: no estimate of the light, every tile counts (the conservative answer)
+    assert unexplained_intensity_tiles(grey_image, np.zeros(shape), "bright", near, grid).all()
     # no estimate of the light: every tile asked for counts (the conservative answer)
     assert unexplained_intensity_tiles(np.zeros(shape, dtype=np.uint8), np.zeros(shape), float("nan"), near,
                                        grid).all()

@@ -16,6 +16,7 @@ from depthguard.kernels import collision as collision_kernels
 from depthguard.collision._epipolar import TileGrid
 from depthguard import config
 from depthguard.errors import InputError
+from depthguard.validation import check_real
 
 #: The 4-neighbourhood of the morphological closing (section 3.2).
 FOUR_NEIGHBOURS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=bool)
@@ -147,10 +148,7 @@ def depth_difference_image(image, reference, grid: TileGrid, thresholds=(0.05, 0
     ref = np.asarray(reference)
     if ref.shape != cam.shape or ref.dtype != np.float64:  # the reference_image median is used as it is
         ref = depth_metres(reference, grid, "reference")
-    thresholds = np.asarray(thresholds, dtype=np.float64)
-    if thresholds.shape != (2,) or not np.all(np.isfinite(thresholds)) or not np.all(thresholds >= 0.0):
-        raise InputError(f"thresholds must be two finite numbers >= 0 (metres, fraction of a tile), got "
-                         f"{thresholds.tolist()}", camera=cam.name, field="thresholds")
+    thresholds = _thresholds(thresholds, cam)
     scale = cam.depth_scale if now.dtype == np.uint16 else 1.0
     changed = np.empty((grid.rows, grid.cols))
     k0, k1, k2 = cam.noise.coefficients()
@@ -177,13 +175,28 @@ def unexplained_tiles(image, reference, near, grid: TileGrid, thresholds=(0.05, 
     if ref.shape != cam.shape or ref.dtype != np.float64:
         ref = depth_metres(reference, grid, "reference")
     near = _near(near, grid)
+    thresholds = _thresholds(thresholds, cam)
+    tolerance = check_real(tolerance, "tolerance", minimum=0.0, maximum=config.SELF_FILTER_TOLERANCE_MAX,
+                           unit="metres", camera=cam.name, field="tolerance")
     scale = cam.depth_scale if now.dtype == np.uint16 else 1.0
     counts = np.empty((grid.rows, grid.cols))
     k0, k1, k2 = cam.noise.coefficients()
-    collision_kernels.unexplained_changes(_read_only(now), scale, _read_only(ref), float(thresholds[0]), k0, k1, k2,
-                                          near, float(tolerance), grid.first_row, grid.first_col,
-                                          _wanted(tiles, grid), counts)
-    return counts / _tile_sizes(grid) > float(thresholds[1])
+    collision_kernels.unexplained_changes(_read_only(now), scale, _read_only(ref), thresholds[0], k0, k1, k2,
+                                          near, tolerance, grid.first_row, grid.first_col, _wanted(tiles, grid),
+                                          counts)
+    return counts / _tile_sizes(grid) > thresholds[1]
+
+
+def _thresholds(thresholds, cam) -> np.ndarray:
+    """The depth variant's (metres, fraction of a tile) as two finite numbers >= 0, else a named refusal."""
+    try:
+        thresholds = np.asarray(thresholds, dtype=np.float64)
+    except (TypeError, ValueError):  # words
+        thresholds = np.full(1, np.nan)
+    if thresholds.shape != (2,) or not np.all(np.isfinite(thresholds)) or not np.all(thresholds >= 0.0):
+        raise InputError(f"thresholds must be two finite numbers >= 0 (metres, fraction of a tile), got "
+                         f"{thresholds.tolist()}", camera=cam.name, field="thresholds")
+    return thresholds
 
 
 def _near(near, grid: TileGrid) -> np.ndarray:
@@ -234,11 +247,16 @@ def unexplained_intensity_tiles(image, reference, gain: float, near, grid: TileG
                          field="reference")
     near = _near(near, grid)
     wanted = _wanted(tiles, grid)
+    grey = check_real(grey, "grey", minimum=0.0, unit="grey levels", camera=grid.camera.name, field="grey")
+    fraction = check_real(fraction, "fraction", minimum=0.0, maximum=1.0, camera=grid.camera.name,
+                          field="fraction")
+    gain = float(gain) if isinstance(gain, (int, float, np.floating, np.integer)) and not isinstance(gain, bool) \
+        else math.nan  # anything but a number: no estimate of the light, every tile counts
     if not math.isfinite(gain) or gain <= 0.0:
         return wanted.copy()
     counts = np.empty((grid.rows, grid.cols))
     pixels = pixels if pixels.dtype == np.uint8 else pixels.astype(np.float64)  # 8 bits, else any as floats
-    collision_kernels.unexplained_grey(_read_only(pixels), _read_only(ref), float(gain), float(grey), near,
+    collision_kernels.unexplained_grey(_read_only(pixels), _read_only(ref), gain, grey, near,
                                        grid.first_row, grid.first_col, wanted, counts)
     return counts / _tile_sizes(grid) > fraction
 
