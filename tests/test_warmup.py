@@ -72,6 +72,13 @@ for aggregate in ("min", "hybrid"):
         monitor.query(frames, pts)
         monitor.query({"principal": floats["principal"]}, pts)
         monitor.query(floats, pts)
+# A hole that invalid="neighbors" fills: every answer measures how near the filled space comes to each point
+# (Concessions.fills, a single-camera query of its own; the demo compiled it at run time before).
+holed = frames["principal"].data.copy()
+holed[30:33, 44:47] = 0
+filling = dg.DistanceMonitor(rig, invalid="neighbors")
+for pts in (points[:1], points):
+    filling.query({**frames, "principal": dg.depth_image(holed, rig.cameras["principal"])}, pts)
 dg.frustum_distance([0.0, 0.0, 1.0], [[-0.1, 0.1, -0.1, 0.1]], [0.5, np.inf])
 # The collision test's difference images (depthguard collide), intensity and depth.
 from depthguard.collision import TileGrid, depth_difference_image, tile_features

@@ -183,9 +183,13 @@ def filled_space(occupancy: OccupancyImage) -> OccupancyImage | None:
     block_min = np.empty(shape, dtype=np.float32)
     depth_kernels.block_minimum(z_start, block, block_min)
     none = np.full((h, w), np.inf, dtype=np.float32)
-    return OccupancyImage(camera=camera, z_start=z_start, z_end=z_end, blind=none,
-                          invalid=np.zeros((h, w), dtype=np.uint8), block_min=block_min,
-                          blind_block_min=np.full(shape, np.inf, dtype=np.float32), invalid_policy="occupied",
+    invalid = np.zeros((h, w), dtype=np.uint8)
+    blind_block_min = np.full(shape, np.inf, dtype=np.float32)
+    # read-only, as prepare_depth's: the kernels see the same argument types (one compile, which the warm-up makes)
+    for array in (z_start, z_end, none, invalid, block_min, blind_block_min):
+        array.setflags(write=False)
+    return OccupancyImage(camera=camera, z_start=z_start, z_end=z_end, blind=none, invalid=invalid,
+                          block_min=block_min, blind_block_min=blind_block_min, invalid_policy="occupied",
                           timestamp=occupancy.timestamp, invalid_pixels=0)
 
 

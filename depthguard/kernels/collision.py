@@ -276,7 +276,7 @@ def capsule_tile_bits_parallel(ends, radii, R, t, fx, fy, cx, cy, col_edges, row
         _capsule_set_bits(ends, k, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out)
 
 
-@kernel()
+@kernel(parallel=True)
 def tile_moments(image, first_row, first_col, row_weight, out):
     """Per tile, the sum of the pixel values and of the values times their row's weight: out (rows, cols, 2) float64
     (written). image: (height, width) numbers (uint8, uint16, float32 or float64 grey values, indexed [v, u]);
@@ -285,7 +285,7 @@ def tile_moments(image, first_row, first_col, row_weight, out):
     last, 0.5 in a tile of one row)."""
     rows = first_row.shape[0] - 1
     cols = first_col.shape[0] - 1
-    for r in range(rows):
+    for r in prange(rows):  # each tile row writes its own row of out
         for c in range(cols):
             out[r, c, 0] = 0.0
             out[r, c, 1] = 0.0
@@ -378,7 +378,7 @@ def unexplained_grey(image, reference, gain, grey, near, first_row, first_col, w
                 out[r, c] += count
 
 
-@kernel()
+@kernel(parallel=True)
 def depth_changes(now, scale, reference, threshold, k0, k1, k2, first_row, first_col, out):
     """Per tile, the number of pixels whose depth changed: out (rows, cols) float64 (written). now: (height, width)
     depth in units of ``scale`` metres (uint16 with the camera's depth_scale, or float32 / float64 metres with scale
@@ -389,7 +389,7 @@ def depth_changes(now, scale, reference, threshold, k0, k1, k2, first_row, first
     first_col: the tiles' first pixels."""
     rows = first_row.shape[0] - 1
     cols = first_col.shape[0] - 1
-    for r in range(rows):
+    for r in prange(rows):  # each tile row writes its own row of out
         for c in range(cols):
             out[r, c] = 0.0
         for v in range(first_row[r], first_row[r + 1]):
