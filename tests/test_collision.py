@@ -445,6 +445,54 @@ def test_the_whole_test_finds_a_box_in_a_future_configurations_way_and_nothing_w
     assert not test.test(now).collision
 
 
+@pytest.mark.parametrize("images", ["intensity", "depth"])
+@pytest.mark.parametrize("robot_pixels", [True, False])
+def test_an_object_where_the_robot_stood_in_every_reference_image_is_not_taken_for_the_room(iiwa_scene, images,
+                                                                                           robot_pixels):
+    """Where the robot covered a pixel in every reference image, the reference holds the robot (nothing else was
+    seen there). Once the robot has left such pixels, whatever they show counts as a change: here an object of the
+    robot's shape, grey level and depth standing exactly where it stood, which matches the reference pixel for pixel.
+    Without that rule (``unreferenced`` cleared) the configuration the robot stood in tests free. With or without
+    the robot's render (``robot_pixels``: its pixels; else its projected tiles)."""
+    from depthguard.collision import ImageCollisionTest
+
+    _, robot, cameras, backgrounds = iiwa_scene
+    rig = dg.Rig(cameras)
+    stood = np.array([0.0, 0.5, 0.0, -1.4, 0.0, 0.8, 0.0])
+    now = np.array([2.2, 0.5, 0.0, -1.4, 0.0, 0.8, 0.0])
+    meshes = _silhouette(robot, "meshes")
+
+    def picture(*poses):
+        """Per camera, the room with the robot's meshes drawn at each of ``poses`` (grey 235, or their depth)."""
+        out = {}
+        for name, camera in cameras.items():
+            if images == "intensity":
+                image = backgrounds[name].astype(np.uint8)
+                for q in poses:
+                    image[meshes.render(camera, q) > 0] = 235
+            else:
+                image = np.full(camera.shape, 4.0, dtype=np.float32)
+                for q in poses:
+                    depth = meshes.render(camera, q)
+                    image = np.where((depth > 0) & (depth < image), depth, image).astype(np.float32)
+            out[name] = image
+        return out
+
+    def verdict_where_it_stood(rule: bool):
+        test = ImageCollisionTest(rig, robot, [[-1.0, -1.0, -0.1], [1.2, 1.0, 1.5]], tiles=(32, 32), images=images,
+                                  robot_pixels=robot_pixels)
+        reference = picture(stood)
+        test.set_reference({name: [reference[name]] * 3 for name in cameras}, joints=[stood] * 3)
+        assert all(mask is not None and mask.sum() > 100 for mask in test.unreferenced)
+        if not rule:
+            test.unreferenced = None
+        test.observe(picture(stood, now), now)  # the robot has moved on; the object stands where it stood
+        return test.test(stood)
+
+    assert verdict_where_it_stood(True).collision
+    assert not verdict_where_it_stood(False).collision  # what the rule is for: the reference matches the object
+
+
 @pytest.mark.parametrize("workspace", [
     [[0, 0, 0], [1, 1]], [[0, 0, 0], [np.nan, 1, 1]], [[0, 0, 0], [np.inf, 1, 1]], [[1, 0, 0], [0, 1, 1]], "box", None,
     [[-1e300, 0, 0], [1e300, 1, 1]],

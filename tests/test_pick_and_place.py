@@ -391,21 +391,54 @@ def test_a_camera_whose_light_cannot_be_estimated_holds_the_update(scene):
     assert update.step(images, s.home)
 
 
+def _depth_images(s, joints, boxes) -> dict:
+    """Per camera, float32 depth images (metres, 0: nothing) of the robot's render at ``joints``, a floor under
+    everything and ``boxes``."""
+    floor = Box((0.0, 0.0, -0.05), (3.0, 3.0, 0.05))
+    out = {}
+    for name, camera in s.cameras.items():
+        layers = [s.silhouette.render(camera, joints), render_depth(camera, [floor] + boxes)]
+        stack = np.stack([np.where(d > 0, d, np.inf) for d in layers])
+        nearest = stack.min(axis=0)
+        out[name] = np.where(np.isfinite(nearest), nearest, 0.0).astype(np.float32)
+    return out
+
+
+def test_the_update_takes_what_the_robot_always_hid_into_the_reference(scene):
+    """Reference images with the robot reaching A in every one: the pixels it covered are unreferenced
+    (``ImageCollisionTest.unreferenced``: any change there counts). An update area round the whole arm there (a
+    region the user declares, as a piece's): once the robot has left and the update absorbs a tile, its pixels hold
+    the room and are referenced again; the others stay unreferenced."""
+    s = scene
+    test = ImageCollisionTest(s.rig, s.robot, WORKSPACE, tiles=(32, 32), images="depth")
+    drawn = _depth_images(s, s.q_A, [s.A])
+    test.set_reference({name: [drawn[name]] * 3 for name in s.cameras}, joints=[s.q_A] * 3)
+    before = [mask.copy() for mask in test.unreferenced]
+    update = ReferenceUpdate(test)
+    arm = s.robot.control_point_positions(s.q_A)
+    update.start(Box.from_bounds(arm.min(axis=0) - 0.2, arm.max(axis=0) + 0.2), s.q_A)
+    absorbed = [np.zeros((grid.rows, grid.cols), dtype=bool) for grid in test.grids]  # absorbed over the steps
+    for _ in range(3):
+        update.step(_depth_images(s, s.home, []), s.home)  # the piece taken away, the robot home
+        absorbed = [a | b for a, b in zip(absorbed, update.absorbed)]
+    cleared = 0
+    for c, grid in enumerate(test.grids):
+        rows, cols = grid.tile_of_pixels()
+        pixels = absorbed[c][rows[:, None], cols[None, :]]
+        now = test.unreferenced[c] if test.unreferenced[c] is not None else np.zeros_like(before[c])
+        assert np.array_equal(now, before[c] & ~pixels)
+        cleared += int(np.count_nonzero(before[c] & pixels))
+    assert cleared > 0  # the robot stood over A's tiles in the reference, and the update cleared them
+
+
 def test_the_depth_variant_updates_the_reference_depth_image(scene):
     """images="depth": the reference is a depth image (metres) and the update replaces the pixels of its tiles. The
     piece moved from A to B (a floor under everything); once updated, the configurations reaching A and B are free;
     a hand next to B is not absorbed."""
     s = scene
-    floor = Box((0.0, 0.0, -0.05), (3.0, 3.0, 0.05))
 
     def depth(joints, boxes):
-        out = {}
-        for name, camera in s.cameras.items():
-            layers = [s.silhouette.render(camera, joints), render_depth(camera, [floor] + boxes)]
-            stack = np.stack([np.where(d > 0, d, np.inf) for d in layers])
-            nearest = stack.min(axis=0)
-            out[name] = np.where(np.isfinite(nearest), nearest, 0.0).astype(np.float32)
-        return out
+        return _depth_images(s, joints, boxes)
 
     poses = [np.array([a, 1.2 * (-1) ** k, 0.0, 0.9 * (-1) ** k, 0.0, 0.8, 0.0])
              for k, a in enumerate(np.linspace(-2.9, 2.9, 5))]

@@ -143,6 +143,12 @@ class ImageCollisionTest:
             self.silhouette = RobotSilhouette(robot, geometry=geometry)
         self.reference = None
         self.reference_images = None
+        #: Per camera, the (height, width) bool pixels that the robot covered in every reference image (the room
+        #: behind them never seen, so the reference holds the robot there), or None (no joints given to
+        #: :meth:`set_reference`, or no such pixel). Where the robot has left such a pixel, :meth:`observe` counts
+        #: its tile changed whatever it shows: an object standing where the robot stood is not taken for the room.
+        self.unreferenced = None
+        self._unreferenced_boxes = None  # per camera, (first row, end row, first col, end col) around them, or None
         self.revised = None
 
     def _per_camera(self, images: Mapping, field: str) -> list:
@@ -208,11 +214,55 @@ class ImageCollisionTest:
             robots = [[images[c] for images in unpacked] for c in range(len(self.grids))]
         references = [reference_image(stack, grid, robot, mask)
                       for stack, grid, robot, mask in zip(stacks, self.grids, robots, pixels)]
+        self._set_unreferenced(None if joints is None else [
+            np.logical_and.reduce(mask) if mask is not None else _tile_pixels(np.logical_and.reduce(robot), grid)
+            for mask, robot, grid in zip(pixels, robots, self.grids)])
         self.reference_images = references  # per camera, (h, w) float64 medians: what robot_pixels compares
         # intensity: the reference's tile features; depth: the reference depth image itself (metres)
         self.reference = [tile_features(image, grid) if self.images == "intensity" else image
                           for image, grid in zip(references, self.grids)]
         self.revised = None
+
+    def _set_unreferenced(self, masks) -> None:
+        """Keep ``masks`` (per camera, (height, width) bool or None; or None for every camera) as
+        :attr:`unreferenced`, each with the box round its pixels grown by one pixel (what :meth:`_with_unreferenced`
+        looks at)."""
+        if masks is None:
+            self.unreferenced, self._unreferenced_boxes = None, None
+            return
+        self.unreferenced, self._unreferenced_boxes = [], []
+        for mask in masks:
+            rows, cols = np.nonzero(mask) if mask is not None else (np.zeros(0), np.zeros(0))
+            if rows.size == 0:
+                self.unreferenced.append(None)
+                self._unreferenced_boxes.append(None)
+                continue
+            h, w = mask.shape
+            self.unreferenced.append(mask)
+            self._unreferenced_boxes.append((max(int(rows.min()) - 1, 0), min(int(rows.max()) + 2, h),
+                                             max(int(cols.min()) - 1, 0), min(int(cols.max()) + 2, w)))
+
+    def _with_unreferenced(self, foreground: np.ndarray, c: int, near, robot) -> np.ndarray:
+        """Camera ``c``'s difference image ``foreground`` ((rows, cols) bool) with every tile holding a pixel of
+        :attr:`unreferenced` that the current robot no longer covers (its render ``near`` grown by one pixel, as the
+        reference's masks, or without a render its tile image ``robot``) set: the reference there is the robot, so
+        nothing tells the room from an object standing where it stood (Table I makes such a tile an obstacle, or
+        under the robot's image unknown unless the pixel rule finds it one)."""
+        if self.unreferenced is None or self.unreferenced[c] is None:
+            return foreground
+        r0, r1, c0, c1 = self._unreferenced_boxes[c]
+        grid = self.grids[c]
+        rows, cols = grid.tile_of_pixels()
+        if near is not None:
+            here = ndimage.maximum_filter(near[r0:r1, c0:c1] > 0.0, size=3, mode="nearest")
+        else:
+            here = robot[rows[r0:r1, None], cols[None, c0:c1]]
+        left_r, left_c = np.nonzero(self.unreferenced[c][r0:r1, c0:c1] & ~here)
+        if left_r.size == 0:
+            return foreground
+        foreground = foreground.copy()
+        foreground[rows[left_r + r0], cols[left_c + c0]] = True
+        return foreground
 
     def observe(self, images: Mapping[str, np.ndarray], joints) -> list[np.ndarray]:
         """Steps 2-5 for one set of images (camera name -> (height, width) image) captured at ``joints``: the revised
@@ -234,7 +284,8 @@ class ImageCollisionTest:
         for c, (frame, grid, reference, robot) in enumerate(zip(frames, self.grids, self.reference, robot_now)):
             if self.images == "depth":
                 gains.append(1.0)
-                foreground = depth_difference_image(frame, reference, grid, self.thresholds)
+                foreground = self._with_unreferenced(
+                    depth_difference_image(frame, reference, grid, self.thresholds), c, near[c], robot)
                 odd = None if near[c] is None else \
                     unexplained_tiles(frame, reference, near[c], grid, self.thresholds, tiles=foreground & robot)
             else:
@@ -243,7 +294,8 @@ class ImageCollisionTest:
                 if not (math.isfinite(gain) and config.LIGHT_GAIN_RANGE[0] <= gain <= config.LIGHT_GAIN_RANGE[1]):
                     gain = math.nan  # no trustworthy estimate: every tile of this camera is foreground
                 gains.append(gain)
-                foreground = difference_image(features, reference, self.thresholds, gain, self.classifier)
+                foreground = self._with_unreferenced(
+                    difference_image(features, reference, self.thresholds, gain, self.classifier), c, near[c], robot)
                 odd = None
                 if near[c] is not None:
                     if self.reference_images is None:
@@ -420,3 +472,9 @@ class ConfigurationTable:
         ro, rp = self._flags
         return Verdict(bool(collision[k]), str(klass[k]), tuple(bool(x) for x in ro[:, k]),
                        tuple(bool(x) for x in rp[:, k]), bool(self.shell[k]))
+
+
+def _tile_pixels(tiles: np.ndarray, grid: TileGrid) -> np.ndarray:
+    """(height, width) bool: each pixel of ``grid``'s camera takes its tile's value in ``tiles`` ((rows, cols))."""
+    rows, cols = grid.tile_of_pixels()
+    return np.asarray(tiles, dtype=bool)[rows[:, None], cols[None, :]]

@@ -210,6 +210,7 @@ class ReferenceUpdate:
         self.blocked = self.possible_obstacles(after, robot_now)
 
         references = []
+        unreferenced = [None] * len(test.grids)
         for c, grid in enumerate(test.grids):
             absorb = self.pending[c] & ~robot_now[c] & ~self.blocked[c]
             if not math.isfinite(test.gains[c]):  # no trustworthy light estimate: the camera updates nothing
@@ -228,7 +229,11 @@ class ReferenceUpdate:
             references.append(reference)
             self.absorbed[c] = absorb
             self.pending[c] = self.pending[c] & ~absorb
+            if test.unreferenced is not None and test.unreferenced[c] is not None:
+                unreferenced[c] = test.unreferenced[c] & ~pixels  # the room behind them is in the reference now
         test.reference = references
+        if test.unreferenced is not None:
+            test._set_unreferenced(unreferenced)
         if test.images == "depth":  # the reference is the image itself
             test.reference_images = references
         return self.done
