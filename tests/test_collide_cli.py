@@ -94,7 +94,9 @@ def test_collide_answers_each_future_configuration_and_the_motion_in_order(recor
     assert not now["collision"] and now["class"] in "AB"
     assert not motion["collision"] and motion["samples"] > 2  # swinging away from the box
     assert set(through["cameras"]) == {"c0", "c1", "c2", "c3"}
-    assert all(set(c) == {"obstacle", "possible", "light_gain"} for c in through["cameras"].values())
+    assert all(set(c) == {"obstacle", "possible", "light_gain", "unreferenced_pixels"}
+               for c in through["cameras"].values())
+    assert all(c["unreferenced_pixels"] > 0 for c in through["cameras"].values())  # the base, in every image
     if kind == "grey":
         assert all(abs(c["light_gain"] - 1.0) < 0.02 for c in through["cameras"].values())
 

@@ -212,8 +212,12 @@ def _verdict_json(test, v, **extra) -> dict:
     cameras = {}
     for k, name in enumerate(test.names):
         gain = test.gains[k] if k < len(test.gains) else 1.0
+        # pixels the robot covered in every reference image (its base at least; null without --reference-joints)
+        unreferenced = None if test.unreferenced is None else \
+            int(np.count_nonzero(test.unreferenced[k])) if test.unreferenced[k] is not None else 0
         cameras[name] = {"obstacle": v.obstacle[k], "possible": v.possible[k],
-                         "light_gain": None if not math.isfinite(gain) else round(gain, 4)}
+                         "light_gain": None if not math.isfinite(gain) else round(gain, 4),
+                         "unreferenced_pixels": unreferenced}
     return {"collision": v.collision, "class": v.klass, "robot_shell": v.shell, **extra, "cameras": cameras}
 
 
