@@ -6,15 +6,7 @@
 # and the folders .gl/ and .devsite/ of benchmarks/device/thread_scaling.sh beside the sources; .devsite/pybullet_data/
 # holds xarm/ (scenario C's xArm 6) beside kuka_iiwa/. Its outputs are kept in docs/figures/collision_16_cores.md.
 set -u
-for f in .gl/*.deb; do dpkg -x $f /; done; ldconfig
-mkdir -p /tmp/site && tar -xJf .devsite/site312.tar.xz -C /tmp/site
-export PYTHONPATH=$PWD:$PWD/lab:$PWD/.devsite:/tmp/site:/tmp/site/cmeel.prefix/lib/python3.12/site-packages
-export NUMBA_CACHE_DIR=/tmp/nc PYTHONUNBUFFERED=1
-[ -e /usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json ] && export __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
-nproc; lscpu > $OUT/lscpu.txt; grep -m1 "model name" /proc/cpuinfo
-python3 -c "import numba, numpy, scipy; print('numba', numba.__version__, 'numpy', numpy.__version__, 'scipy', scipy.__version__)"
-python3 -c "from depthguard.rendering import Renderer; r = Renderer(); print('GL', r._gl.renderer_name)" 2>&1 | tail -3
-T0=$(date +%s)
+source benchmarks/device/_env.sh
 # the first run compiles the kernels (an empty cache); the figures come from the runs after it
 NUMBA_NUM_THREADS=16 timeout 240 python3 benchmarks/bench_collision.py --repeats 5 > $OUT/compile.txt 2>&1; echo "compile rc $? $(( $(date +%s) - T0 )) s"
 tail -5 $OUT/compile.txt

@@ -11,15 +11,7 @@
 # The device's own numba, numpy and scipy are used; the sources run from the checkout (PYTHONPATH), not installed.
 # Its outputs are kept in docs/figures/thread_scaling_16_cores.md.
 set -u
-for f in .gl/*.deb; do dpkg -x $f /; done; ldconfig
-mkdir -p /tmp/site && tar -xJf .devsite/site312.tar.xz -C /tmp/site
-export PYTHONPATH=$PWD:$PWD/lab:$PWD/.devsite:/tmp/site:/tmp/site/cmeel.prefix/lib/python3.12/site-packages
-export NUMBA_CACHE_DIR=/tmp/nc PYTHONUNBUFFERED=1
-[ -e /usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json ] && export __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
-nproc; lscpu > $OUT/lscpu.txt; grep -m1 "model name" /proc/cpuinfo
-python3 -c "import numba, numpy, scipy; print('numba', numba.__version__, 'numpy', numpy.__version__, 'scipy', scipy.__version__)"
-python3 -c "from depthguard.rendering import Renderer; r = Renderer(); print('GL', r._gl.renderer_name)" 2>&1 | tail -3
-T0=$(date +%s)
+source benchmarks/device/_env.sh
 NUMBA_NUM_THREADS=16 timeout 200 python3 benchmarks/bench_frame_budget.py --only budget --repeats 15 > $OUT/budget16.txt 2>&1; echo "budget16 rc $? $(( $(date +%s) - T0 )) s"
 tail -30 $OUT/budget16.txt
 for t in 16 1 4; do NUMBA_NUM_THREADS=$t timeout 120 python3 benchmarks/bench_detectable_space.py --sets 12 > $OUT/detect$t.txt 2>&1; echo "detect$t rc $? $(( $(date +%s) - T0 )) s"; done
