@@ -321,6 +321,32 @@ def zoned_cells(u, v, k_a, k_b, grid):
     fy = zone_params[ZONE_INTRINSICS + 1]
     tx = (u - zone_params[ZONE_INTRINSICS + 2]) / fx
     ty = (v - zone_params[ZONE_INTRINSICS + 3]) / fy
+    # The capsules that can hold a cell of the run at all (bit c; all of them beyond 64): every cell's centre lies
+    # within half the run's length of the run's middle on the ray, so a capsule whose axis is farther than that plus
+    # its grown radius from the middle holds none of them (the cells' own radii only make it less likely).
+    near = _ALL
+    if zone.shape[0] <= 64:
+        near = np.uint64(0)
+        z_first = d_min + (k_a + 0.5) * delta_d
+        z_last = d_min + (k_b + 0.5) * delta_d
+        zm = 0.5 * (z_first + z_last)
+        half = 0.5 * (z_last - z_first) * np.sqrt(1.0 + tx * tx + ty * ty)
+        for c in range(zone.shape[0]):
+            ax = zone[c, 3] - zone[c, 0]
+            ay = zone[c, 4] - zone[c, 1]
+            az = zone[c, 5] - zone[c, 2]
+            px = tx * zm - zone[c, 0]
+            py = ty * zm - zone[c, 1]
+            pz = zm - zone[c, 2]
+            length2 = ax * ax + ay * ay + az * az
+            t = 0.0 if length2 <= 0.0 else min(max((px * ax + py * ay + pz * az) / length2, 0.0), 1.0)
+            dx = px - t * ax
+            dy = py - t * ay
+            dz = pz - t * az
+            if np.sqrt(dx * dx + dy * dy + dz * dz) - half <= zone[c, 6] + grow:
+                near |= np.uint64(1) << np.uint64(c)
+        if near == np.uint64(0):
+            return np.uint64(0)
     bits = np.uint64(0)
     for i in range(k_b - k_a + 1):
         z0 = d_min + (k_a + i) * delta_d
@@ -334,6 +360,8 @@ def zoned_cells(u, v, k_a, k_b, grid):
         hy = 0.5 * z1 / fy + abs(ty) * 0.5 * delta_d
         radius = np.sqrt(hx * hx + hy * hy + 0.25 * delta_d * delta_d)
         for c in range(zone.shape[0]):
+            if c < 64 and (near & (np.uint64(1) << np.uint64(c))) == np.uint64(0):
+                continue
             ax = zone[c, 3] - zone[c, 0]
             ay = zone[c, 4] - zone[c, 1]
             az = zone[c, 5] - zone[c, 2]
