@@ -13,7 +13,7 @@ from depthguard import config
 from depthguard.depthspace import single_camera_distances
 from depthguard.errors import InputError
 from depthguard.results import DetectableResult, DistanceResult, Flag
-from depthguard.validation import check_points, check_real
+from depthguard.validation import check_points, check_real, short_repr
 
 
 @dataclass(frozen=True)
@@ -131,14 +131,22 @@ class PreparedSet:
         rests = voxels_within(self.free_now[2], self.free_now[1], points, np.minimum(distance, rho))
         return [f | Flag.REMEMBERED if r else f for f, r in zip(flags, rests)]
 
-    def query(self, points_world, check: bool = True, now: float | None = None) -> DistanceResult:
+    def query(self, points_world, check: bool = True, now: float | None = None,
+              aggregate: str | None = None) -> DistanceResult:
         """Distances of control points ((n, 3) float64, metres, world frame) on these frames, as
         :meth:`DistanceMonitor.query` gives them. ``now`` (seconds, the frames' clock): when a usable frame is stale
         at ``now`` (older than the monitor's ``max_age``), every point gets distance 0 and ``stale_camera``; the
-        result's ages are taken at ``now`` (default: the set's own clock)."""
+        result's ages are taken at ``now`` (default: the set's own clock). ``aggregate``: "min", "mean" or "hybrid"
+        for this query (default: the monitor's): a controller asks "hybrid" for the end-effector's direction and
+        "min" for the other control points (design §9), whose distances are the same."""
         points = check_points(points_world) if check else points_world
         if now is not None:
             now = check_real(now, "now", unit="seconds", field="now")
+        if aggregate is None:
+            aggregate = self.aggregate
+        elif not isinstance(aggregate, str) or aggregate not in config.AGGREGATES:
+            raise InputError(f"aggregate must be one of {config.AGGREGATES}, got {short_repr(aggregate)}",
+                             field="aggregate")
         plan = self.plan
         if plan.kind == "blind":
             return DistanceResult.blind(len(points), plan.absent, plan.stale)
@@ -148,12 +156,12 @@ class PreparedSet:
         ages = self.ages(now)
         if plan.kind == "single":
             (name,) = plan.principals
-            result = single_camera_distances(self.usable[name].occupancy, points, self.rho, self.aggregate,
+            result = single_camera_distances(self.usable[name].occupancy, points, self.rho, aggregate,
                                              self.unseen, self.method, check=False)
             flags = [f | plan.absent for f in result.flags]
             flags, near = self.concessions.flag(points, result.distance, self.rho, flags, query=True)
             return replace(result, flags=tuple(flags), ages=ages, concession_distance=near)
-        results = [frames.distances(points, self.rho, self.aggregate, self.unseen, check=False)
+        results = [frames.distances(points, self.rho, aggregate, self.unseen, check=False)
                    for frames in self.fused]
         timestamps = {name: state.occupancy.timestamp for name, state in self.usable.items()}
         invalid_pixels = {n: s.occupancy.invalid_pixels for n, s in self.usable.items()}

@@ -402,3 +402,42 @@ def test_ssms_distances_between_asks_are_lower_bounds_and_only_moved_points_are_
         assert np.all(got >= np.minimum(truth, rho) - 2 * 0.005 - 1e-12)  # at most twice the tolerance below
     assert asked[0] == 9 and 9 in asked[1:]  # the first and the new set asked all nine
     assert sum(asked) < 400 * 9 / 2  # most steps asked no point or only a few
+
+
+def test_the_avoidance_bounds_the_other_points_towards_the_nearest_obstacle_and_repels_the_end_effector_along_the_mean():
+    """design §9: the loop's query gives each control point the distance and direction of "min" (the direction to
+    the nearest obstacle, along which the other points' joints are bounded) and the end-effector the direction of
+    "hybrid" (its repulsion); "min" and "hybrid" report the same distances. Here the hand reaches for the
+    end-effector, so both are within rho and their directions differ somewhere."""
+    from depthguard_lab.simulation import simulate
+    from depthguard_lab.simulation._closed_loop import _avoidance_query
+    from depthguard import DistanceMonitor
+    from depthguard.errors import InputError
+
+    workcell = load_workcell(_packaged("scenario_b_reach.yaml"))
+    (frame,) = simulate(workcell, frames=[88])  # about 2.9 s: the hand next to the end-effector
+    robot = workcell.robot
+    points_robot = robot.with_surface_points(LoopSettings().surface_tolerance)
+    points = points_robot.control_point_positions(frame.joints)
+    ee = points_robot.end_effector_index
+    options = dict(LoopSettings().monitor, rho=LoopSettings().avoidance.rho, robot=robot)
+    answers = {}
+    for aggregate in ("min", "hybrid"):
+        monitor = DistanceMonitor(workcell.rig, **{**options, "aggregate": aggregate})
+        prepared = monitor.prepare_set(frame.depth, joints=frame.joints, now=frame.time)
+        answers[aggregate] = prepared.query(points)
+        if aggregate == "min":
+            loop = _avoidance_query(prepared, points, ee)
+            per_call = prepared.query(points, aggregate="hybrid")  # as a monitor that aggregates so answers
+            with pytest.raises(InputError) as caught:
+                prepared.query(points, aggregate="nearest")
+            assert caught.value.field == "aggregate"
+    minimum, hybrid = answers["min"], answers["hybrid"]
+    assert np.isfinite(minimum.distance[ee])
+    assert np.array_equal(minimum.distance, hybrid.distance) and np.array_equal(loop.distance, minimum.distance)
+    others = np.arange(len(points)) != ee
+    assert np.array_equal(loop.direction[others], minimum.direction[others])
+    assert np.allclose(loop.direction[ee], hybrid.direction[ee])
+    assert not np.allclose(minimum.direction[ee], hybrid.direction[ee])  # the two rules differ here, for both
+    assert not np.allclose(minimum.direction[others], hybrid.direction[others])
+    assert np.array_equal(per_call.distance, hybrid.distance) and np.allclose(per_call.direction, hybrid.direction)

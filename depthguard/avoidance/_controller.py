@@ -166,8 +166,11 @@ class AvoidanceController:
 
         Args:
             result: the :class:`~depthguard.DistanceResult` of the robot's control points at ``q`` (its rows in
-                ``robot.control_points`` order; hybrid aggregation for the papers' direction). A flagged result is
-                taken as it is: its distances are already conservative (0 for a blind camera).
+                ``robot.control_points`` order). Design §9: the end-effector is pushed along its row's direction
+                (the papers': "hybrid") and the other points are bounded along theirs (the papers': "min", the
+                direction to the nearest obstacle); ``PreparedSet.query(..., aggregate=)`` gives both from one set
+                (the lab's loop: ``_avoidance_query``). A flagged result is taken as it is: its distances are already
+                conservative (0 for a blind camera).
             q: (n,) joint positions, rad.
             task_velocity: (3,) m/s, world frame: the desired end-effector velocity (the task, with its feedback).
             dq_previous: (n,) rad/s, the previous step's command (the acceleration limits act from it).

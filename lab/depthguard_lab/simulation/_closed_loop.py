@@ -95,7 +95,9 @@ class LoopSettings:
         monitor: keyword arguments of :class:`~depthguard.DistanceMonitor` besides rig and robot. The default robot
             zone is ``config.LOOP_ROBOT_ZONE`` (the shell round the links that no depth camera can tell from them; see
             there): a stated tolerance (a distance may exceed the truth by up to its thickness), added to the
-            avoidance's ``tolerance`` and to SSM's Z_d.
+            avoidance's ``tolerance`` and to SSM's Z_d. The default aggregate is "min": the avoidance bounds the
+            control points other than the end-effector along the direction to the nearest obstacle (design §9), and
+            asks "hybrid" for the end-effector alone (``_avoidance_query``).
     """
 
     control_rate: float = 500.0
@@ -113,7 +115,7 @@ class LoopSettings:
     known_solids: bool = False
     cover_surface: bool = True
     surface_tolerance: float = config.SSM_ROBOT_UNCERTAINTY
-    monitor: dict = field(default_factory=lambda: dict(aggregate="hybrid", invalid="neighbors",
+    monitor: dict = field(default_factory=lambda: dict(aggregate="min", invalid="neighbors",
                                                        robot_zone=config.LOOP_ROBOT_ZONE))
 
     def __post_init__(self):
@@ -300,7 +302,7 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
                 result = replace(nothing, distance=ssm_distances(current[0], points))
                 age = t - current[1]
             else:
-                result = current[0].query(points, check=False)
+                result = _avoidance_query(current[0], points, ee)
                 age = t - current[1]
             (x_ref, q_ref), upcoming = upcoming, reference(t + dt)  # each reference computed once
             x_next = upcoming[0]
@@ -415,6 +417,18 @@ def _detectable(prepared, points, rho) -> np.ndarray:
     rho (as the monitor's "nothing within rho")."""
     distance = prepared.detectable_distances(points, limit=rho, check=False).distance
     return np.where(distance >= rho, np.inf, distance)
+
+
+def _avoidance_query(prepared, points, ee: int) -> DistanceResult:
+    """The distances the avoidance takes (design §9): every control point's (the monitor's aggregate, "min" by
+    default: the other points are bounded along the direction to the nearest obstacle), with the end-effector's
+    direction from "hybrid" (its repulsion follows the mean direction; the distance is the same)."""
+    result = prepared.query(points, check=False)
+    if prepared.aggregate == "hybrid" or not np.isfinite(result.distance[ee]):
+        return result
+    direction = np.array(result.direction, copy=True)
+    direction[ee] = prepared.query(points[ee: ee + 1], check=False, aggregate="hybrid").direction[0]
+    return replace(result, direction=direction)
 
 
 def _query(prepared, points) -> np.ndarray:
