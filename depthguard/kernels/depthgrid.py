@@ -305,6 +305,24 @@ ZONE_THICKNESS, ZONE_INTRINSICS, ZONE_PARAMS = 0, 1, 5
 
 
 @kernel(inline=True)
+def _to_axis(x, y, z, zone, c):
+    """Metres from the point (x, y, z) (float64, metres, the principal's optical frame) to the axis segment of the
+    zone's capsule c (``zone`` rows: p0 (3), p1 (3), radius)."""
+    ax = zone[c, 3] - zone[c, 0]
+    ay = zone[c, 4] - zone[c, 1]
+    az = zone[c, 5] - zone[c, 2]
+    px = x - zone[c, 0]
+    py = y - zone[c, 1]
+    pz = z - zone[c, 2]
+    length2 = ax * ax + ay * ay + az * az
+    t = 0.0 if length2 <= 0.0 else min(max((px * ax + py * ay + pz * az) / length2, 0.0), 1.0)
+    dx = px - t * ax
+    dy = py - t * ay
+    dz = pz - t * az
+    return np.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+@kernel(inline=True)
 def zoned_cells(u, v, k_a, k_b, grid):
     """Bit i set when cell k_a + i of principal pixel (u, v) lies wholly in the robot zone: within the zone's
     thickness of one of the robot's padded capsules (``zone`` rows: p0 (3), p1 (3) in the principal's optical frame,
@@ -332,18 +350,7 @@ def zoned_cells(u, v, k_a, k_b, grid):
         zm = 0.5 * (z_first + z_last)
         half = 0.5 * (z_last - z_first) * np.sqrt(1.0 + tx * tx + ty * ty)
         for c in range(zone.shape[0]):
-            ax = zone[c, 3] - zone[c, 0]
-            ay = zone[c, 4] - zone[c, 1]
-            az = zone[c, 5] - zone[c, 2]
-            px = tx * zm - zone[c, 0]
-            py = ty * zm - zone[c, 1]
-            pz = zm - zone[c, 2]
-            length2 = ax * ax + ay * ay + az * az
-            t = 0.0 if length2 <= 0.0 else min(max((px * ax + py * ay + pz * az) / length2, 0.0), 1.0)
-            dx = px - t * ax
-            dy = py - t * ay
-            dz = pz - t * az
-            if np.sqrt(dx * dx + dy * dy + dz * dz) - half <= zone[c, 6] + grow:
+            if _to_axis(tx * zm, ty * zm, zm, zone, c) - half <= zone[c, 6] + grow:
                 near |= np.uint64(1) << np.uint64(c)
         if near == np.uint64(0):
             return np.uint64(0)
@@ -362,18 +369,7 @@ def zoned_cells(u, v, k_a, k_b, grid):
         for c in range(zone.shape[0]):
             if c < 64 and (near & (np.uint64(1) << np.uint64(c))) == np.uint64(0):
                 continue
-            ax = zone[c, 3] - zone[c, 0]
-            ay = zone[c, 4] - zone[c, 1]
-            az = zone[c, 5] - zone[c, 2]
-            px = cx - zone[c, 0]
-            py = cy - zone[c, 1]
-            pz = zc - zone[c, 2]
-            length2 = ax * ax + ay * ay + az * az
-            t = 0.0 if length2 <= 0.0 else min(max((px * ax + py * ay + pz * az) / length2, 0.0), 1.0)
-            dx = px - t * ax
-            dy = py - t * ay
-            dz = pz - t * az
-            if np.sqrt(dx * dx + dy * dy + dz * dz) + radius <= zone[c, 6] + grow:
+            if _to_axis(cx, cy, zc, zone, c) + radius <= zone[c, 6] + grow:
                 bits |= np.uint64(1) << np.uint64(i)
                 break
     return bits
