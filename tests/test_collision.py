@@ -863,3 +863,14 @@ def test_a_motion_needing_more_samples_than_the_cap_is_refused(iiwa_scene, monke
     monkeypatch.setattr(config, "MAX_MOTION_SAMPLES", n - 2)
     with pytest.raises(InputError, match="at most"):
         test.projector.samples(path)
+
+
+def test_a_tile_images_pixels_take_their_tiles_values():
+    """TileGrid.pixels against a pixel loop over tile_of_pixels, on uneven tiles."""
+    from depthguard.collision import TileGrid
+
+    grid = TileGrid(_camera("c", (2.0, 0.0, 1.0), width=37, height=23), 5, 7)
+    tiles = np.random.default_rng(3).random((5, 7)) < 0.5
+    rows, cols = grid.tile_of_pixels()
+    expected = np.array([[tiles[rows[v], cols[u]] for u in range(37)] for v in range(23)])
+    assert np.array_equal(grid.pixels(tiles), expected) and expected.any() and not expected.all()

@@ -56,8 +56,7 @@ def reference_image(images: Sequence[np.ndarray], grid: TileGrid, robot=None, pi
         raise InputError(f"{len(given)} robot {field} images for {len(stack)} images", camera=grid.camera.name,
                          field=field)
     if pixels is None:
-        rows, cols = grid.tile_of_pixels()
-        covered = np.stack([np.asarray(tiles, dtype=bool)[rows][:, cols] for tiles in robot])
+        covered = np.stack([grid.pixels(tiles) for tiles in robot])
     else:
         covered = np.stack([np.asarray(mask, dtype=bool) for mask in pixels])
         if covered.shape[1:] != grid.camera.shape:

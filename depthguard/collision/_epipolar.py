@@ -71,6 +71,11 @@ class TileGrid:
         cols = np.searchsorted(self.first_col, np.arange(cam.width), side="right") - 1
         return rows, cols
 
+    def pixels(self, tiles: np.ndarray) -> np.ndarray:
+        """(rows, cols) tile image -> (height, width) bool: each pixel takes its tile's value."""
+        rows, cols = self.tile_of_pixels()
+        return np.asarray(tiles, dtype=bool)[rows[:, None], cols[None, :]]
+
     def pack(self, mask: np.ndarray) -> np.ndarray:
         """(rows, cols) bool -> (words,) uint64 bitset (tile index order)."""
         flat = np.zeros(self.words * 64, dtype=bool)

@@ -215,7 +215,7 @@ class ImageCollisionTest:
         references = [reference_image(stack, grid, robot, mask)
                       for stack, grid, robot, mask in zip(stacks, self.grids, robots, pixels)]
         self._set_unreferenced(None if joints is None else [
-            np.logical_and.reduce(mask) if mask is not None else _tile_pixels(np.logical_and.reduce(robot), grid)
+            np.logical_and.reduce(mask) if mask is not None else grid.pixels(np.logical_and.reduce(robot))
             for mask, robot, grid in zip(pixels, robots, self.grids)])
         self.reference_images = references  # per camera, (h, w) float64 medians: what robot_pixels compares
         # intensity: the reference's tile features; depth: the reference depth image itself (metres)
@@ -472,9 +472,3 @@ class ConfigurationTable:
         ro, rp = self._flags
         return Verdict(bool(collision[k]), str(klass[k]), tuple(bool(x) for x in ro[:, k]),
                        tuple(bool(x) for x in rp[:, k]), bool(self.shell[k]))
-
-
-def _tile_pixels(tiles: np.ndarray, grid: TileGrid) -> np.ndarray:
-    """(height, width) bool: each pixel of ``grid``'s camera takes its tile's value in ``tiles`` ((rows, cols))."""
-    rows, cols = grid.tile_of_pixels()
-    return np.asarray(tiles, dtype=bool)[rows[:, None], cols[None, :]]

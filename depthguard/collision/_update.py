@@ -198,8 +198,7 @@ class ReferenceUpdate:
                 where = pending
             else:  # the reference: (height, width) depth image, metres
                 current = depth_metres(images[name], grid)
-                rows, cols = grid.tile_of_pixels()
-                where = pending[rows[:, None], cols[None, :]]
+                where = grid.pixels(pending)
             future = np.array(reference, dtype=np.float64, copy=True)
             future[where] = current[where]
             if test.images == "intensity":
@@ -216,8 +215,7 @@ class ReferenceUpdate:
             if not math.isfinite(test.gains[c]):  # no trustworthy light estimate: the camera updates nothing
                 absorb[:] = False
             reference = np.array(test.reference[c], dtype=np.float64, copy=True)
-            rows, cols = grid.tile_of_pixels()
-            pixels = absorb[rows[:, None], cols[None, :]]  # the absorbed tiles' pixels
+            pixels = grid.pixels(absorb)  # the absorbed tiles' pixels
             if test.images == "intensity":
                 reference[absorb] = currents[c][absorb]
                 if test.reference_images is not None:  # the pixels robot_pixels compares, at the same brightness
