@@ -42,9 +42,7 @@ def run_lengths(path: Path, frame_step: int = 25, pixel_step: int = 7) -> np.nda
         prepared = monitor.prepare_set(dict(frame.depth), joints=frame.joints)
         fused = prepared.fused[0]
         grid = fused.grid
-        state = grid_kernels.GridState(grid.d_min, grid.delta_d, grid.n_cells, fused._corners, fused._offsets,
-                                   fused._eroded, fused._sizes, fused._z_near, fused._margin, fused._cells,
-                                   *fused._memory, fused._free_run, fused._behind_run, *fused._zone)
+        state = fused.kernel_state()
         vs, us = np.nonzero(np.isfinite(fused._blind_from))
         for v, u in zip(vs[::pixel_step], us[::pixel_step]):
             k0 = int((fused._blind_from[v, u] - grid.d_min) / grid.delta_d)

@@ -523,7 +523,7 @@ class DistanceMonitor:
                     margin=self.fusion_margin, pad=self.fusion_pixels,
                     robot_tolerance=self.self_filter_tolerance, check=False, robot_near=state.robot_near,
                     robot_exit=state.robot_exit, remembered=self._remembered_free(usable),
-                    robot_zone=self._robot_zone(state)))
+                    robot_zone=self._robot_zone(state), robot_shell=self._robot_shell(state)))
             out.append(cached[1])
         return tuple(out)
 
@@ -535,6 +535,16 @@ class DistanceMonitor:
             return None
         capsules = self.robot.capsules_world(state.joints, check=False)
         return np.array([c.p0 + c.p1 + (c.radius,) for c in capsules]), self.robot_zone
+
+    def _robot_shell(self, state: "_CameraFrame"):
+        """(n, 7) world frame, metres: capsules that hold the robot as rendered when ``state``'s frame was captured
+        (the padded capsules, grown by how far the rendered geometry reaches beyond them), for FusedFrames' shell
+        round the links a ray meets after its first; None without a robot."""
+        if self.robot is None or state.joints is None:
+            return None
+        capsules = self.robot.capsules_world(state.joints, check=False)
+        grow = self._silhouette.beyond_capsules
+        return np.array([c.p0 + c.p1 + (c.radius + grow,) for c in capsules])
 
     def _remembered_free(self, usable: dict):
         """(free voxels, box) for FusedFrames: what the memory certifies free at the latest capture time of the

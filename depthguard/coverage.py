@@ -20,8 +20,8 @@ asks the monitor itself, through the depth grid, which space near the robot it c
   - *occupied*: ``distance < spacing``, space the monitor counts as possibly occupied because no secondary camera
     sees through it (design §8). This is what makes control points' distances small: false alarms.
   - *unchecked*: only ``blind_distance < spacing``, space hidden behind the robot that the monitor does not check
-    and flags ``robot_blind_spot``. With one camera, everything behind the robot as it sees it; with several, the
-    space between two links along a principal pixel, which the depth grid takes for the robot (docs/design.md, "Several
+    and flags ``robot_blind_spot``. With one camera, everything behind the robot as it sees it; with several, none:
+    the depth grid checks the space behind the robot and between its links (docs/design.md, "Several
     cameras"). It depends on the principal camera's view only, not on where the other cameras are.
 
   The fractions are of the samples, per pose and over all poses.

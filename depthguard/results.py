@@ -95,8 +95,7 @@ class DistanceResult:
         blind_distance: (n,) float64 metres, the distance to the space hidden behind the robot (single camera:
             from the robot's rendered surface on), inf when it is farther than rho or there is no robot. The fully
             conservative distance is ``min(distance, blind_distance)``. With several cameras the depth grid checks
-            that space with the other cameras; this is then the distance to what it could not check: space along a
-            principal pixel that may lie between two links of the robot, which it takes for the robot.
+            that space, between two links included, with the other cameras and the memory: inf.
         principal: per point, the camera whose image the answer was computed in: the single camera, or the
             principal camera of the depth grid whose fused answer is reported; ``""`` when no camera could answer
             (:meth:`blind`).

@@ -331,9 +331,7 @@ def test_nearest_by_run_equals_the_walk_on_random_pixels():
         frames._cells[v, u] = cells
         runs = np.full(camera.shape, K.NO_FREE_RUN, dtype=np.int64)
         runs[v, u] = (run_lo << 32) | run_hi
-        state = K.GridState(d_min, delta_d, n, frames._corners, frames._offsets, frames._eroded, frames._sizes,
-                            frames._z_near, frames._margin, frames._cells, *frames._memory, runs, runs.copy(),
-                            *frames._zone)
+        state = frames.kernel_state(runs, runs.copy())
         a0, a1 = (u - 0.5 - camera.cx) / camera.fx, (u + 0.5 - camera.cx) / camera.fx
         b0, b1 = (v - 0.5 - camera.cy) / camera.fy, (v + 0.5 - camera.cy) / camera.fy
         z_run = d_min + delta_d * (rng.uniform(run_lo, run_hi + 1) if rng.random() < 0.7 else rng.uniform(0, n))
@@ -409,36 +407,66 @@ def test_fused_kernel_equals_twin_with_robot_far_and_holes():
             assert_equals_twin(result, reference[aggregate])
 
 
-def test_space_between_two_links_is_flagged_not_checked():
+def test_space_between_two_links_is_checked():
     """Two links one behind the other along the principal camera's rays, a ball in the gap between them, which the
-    second camera sees. The depth grid takes the space up to where the robot's padded geometry ends for the robot,
-    so it misses the ball (a known gap, docs/design.md); with robot_exit (where each ray first leaves the geometry) the
-    result says so: robot_blind_spot, and blind_distance no farther than the ball."""
+    second camera sees. Without robot_exit (where each ray first leaves the robot's padded geometry) the depth grid
+    takes the space up to where the geometry ends for the robot and misses the ball; with it, the gap is checked like
+    the space behind the robot (design §11a): the ball is found. With the links' capsules (robot_shell), the second
+    link's shell counts as that link, so that the link itself is no obstacle to a point beside it."""
     links = [Capsule((0.5, 0.0, 0.3), (0.5, 0.0, 1.0), 0.06), Capsule((-0.3, 0.0, 0.3), (-0.3, 0.0, 1.0), 0.06)]
     ball = Sphere((0.1, 0.0, 0.62), 0.035)  # in the gap, hidden from p by the nearer link
     r = rig(160, 120)
     p, s = r.cameras["p"], r.cameras["s"]
     padded = [Capsule(c.p0, c.p1, c.radius + 0.02) for c in links]
+    shell = np.array([c.p0 + c.p1 + (c.radius,) for c in padded])
     with Renderer() as renderer:
         instances = [MeshInstance(renderer.add_mesh(*primitive_mesh(c, 32), closed=True), np.eye(4)) for c in padded]
         near = renderer.render_depth(p, instances)
         far = renderer.render_depth_max(p, instances)
         exit_ = renderer.render_depth_first_exit(p, instances)
-    scene = ROOM + links + [ball]
-    principal = dg.prepare_depth(dg.depth_image(render_depth(p, scene), p), p, robot_near=near, robot_far=far)
-    frees = {"s": free_image(dg.depth_image(render_depth(s, scene), s), s)}
     grid = build_map(r)
     assert np.all(exit_[far > 0] <= far[far > 0] + 1e-6) and np.any(exit_ < far - 0.3)  # the rays leave A first
+
+    def fused(scene, P, **robot):
+        principal = dg.prepare_depth(dg.depth_image(render_depth(p, scene), p), p, robot_near=near, robot_far=far)
+        frees = {"s": free_image(dg.depth_image(render_depth(s, scene), s), s)}
+        return fused_distances(grid, r, principal, frees, P, 0.4, "min", robot_far=far, robot_near=near, **robot)
+
     P = np.array([[0.1, 0.0, 0.75]])
     truth = scene_distance([ball], P)[0]
     tolerance = 2.5 * (p.world_to_camera(P)[0, 2] + 0.4) / p.fx
-    kept_for_robot = fused_distances(grid, r, principal, frees, P, 0.4, "min", robot_far=far, robot_near=near)
-    assert kept_for_robot.distance[0] > truth + tolerance  # the gap, unchecked
-    flagged = fused_distances(grid, r, principal, frees, P, 0.4, "min", robot_far=far, robot_near=near,
-                              robot_exit=exit_)
-    assert flagged.distance[0] == kept_for_robot.distance[0]
-    assert dg.Flag.ROBOT_BLIND_SPOT in flagged.flags[0]
-    assert flagged.blind_distance[0] <= truth + tolerance
+    with_ball = ROOM + links + [ball]
+    assert fused(with_ball, P).distance[0] > truth + tolerance  # without robot_exit: the gap taken for the robot
+    for robot in ({"robot_exit": exit_}, {"robot_exit": exit_, "robot_shell": shell}):
+        checked = fused(with_ball, P, **robot)
+        assert checked.distance[0] <= truth + tolerance, robot.keys()
+        assert dg.Flag.ROBOT_BLIND_SPOT not in checked.flags[0]
+    # Without the ball: the cells of a ray through both links' axes that lie inside B's shell (its padded capsule
+    # grown by the tolerance) count as B with its capsule, and stay occupied without it (the second camera sees B's
+    # surface, not through it); the cells of the gap outside every shell are cleared by the second camera either way.
+    from depthguard.kernels import depthgrid as K
+
+    uu, vv, _ = p.project(p.world_to_camera(np.array([[-0.3, 0.0, 0.65]])))
+    u, v = int(round(float(uu[0]))), int(round(float(vv[0])))
+    principal = dg.prepare_depth(dg.depth_image(render_depth(p, ROOM + links), p), p, robot_near=near, robot_far=far)
+    frees = {"s": free_image(dg.depth_image(render_depth(s, ROOM + links), s), s)}
+    classes = {}
+    for name, robot in (("alone", {}), ("shell", {"robot_shell": shell})):
+        frames = FusedFrames(grid, r, principal, frees, robot_far=far, robot_near=near, robot_exit=exit_, **robot)
+        k_lo = int((exit_[v, u] + 0.02 - grid.d_min) / grid.delta_d) + 1
+        k_hi = int((far[v, u] - grid.d_min) / grid.delta_d) - 1
+        for k in range(k_lo, k_hi + 1, 32):
+            K.classify_run(u, v, k, min(k + 31, k_hi), frames.kernel_state())
+        depths = grid.d_min + (np.arange(k_lo, k_hi + 1) + 0.5) * grid.delta_d
+        classes[name] = frames._cells[v, u, k_lo:k_hi + 1]
+    ray = p.T_world_camera[:3, :3] @ np.array([(u - p.cx) / p.fx, (v - p.cy) / p.fy, 1.0])
+    points = p.T_world_camera[:3, 3] + depths[:, None] * ray  # the cells' centres, world frame
+    to_b = np.hypot(points[:, 0] + 0.3, points[:, 1]) - 0.08  # from B's padded surface (its axis is vertical)
+    inside_b = to_b < -0.01
+    assert inside_b.sum() >= 5
+    assert np.all(classes["shell"][inside_b] == 1) and np.all(classes["alone"][inside_b] == 2)
+    gap = (to_b > 0.1) & (np.hypot(points[:, 0] - 0.5, points[:, 1]) - 0.08 > 0.1)
+    assert gap.sum() >= 10 and np.all(classes["alone"][gap] == 1) and np.all(classes["shell"][gap] == 1)
 
 
 def test_seen_free_fills_edge_dropouts_and_nothing_else():

@@ -11,7 +11,6 @@ from numba import parallel_chunksize
 from depthguard import config
 from depthguard.cameras import PinholeCamera, Rig
 from depthguard.depth import DepthImage, OccupancyImage
-from depthguard.depth import block_minimum
 from depthguard.kernels import depthgrid as grid_kernels
 from depthguard.depthgrid._map import DepthGridMap
 from depthguard.depthspace import query_arrays
@@ -49,12 +48,13 @@ def fused_distances(grid: DepthGridMap, rig: Rig, principal: OccupancyImage, sec
                     unseen: str = config.DEFAULT_UNSEEN, robot_far: np.ndarray | None = None,
                     margin: float = config.DEFAULT_FUSION_MARGIN, pad: int = config.DEFAULT_FUSION_PIXELS,
                     robot_tolerance: float = config.SELF_FILTER_TOLERANCE, check: bool = True,
-                    robot_near: np.ndarray | None = None, robot_exit: np.ndarray | None = None) -> DistanceResult:
+                    robot_near: np.ndarray | None = None, robot_exit: np.ndarray | None = None,
+                    robot_shell: np.ndarray | None = None) -> DistanceResult:
     """Distances from control points to what the principal camera says is possibly occupied and no other camera
     clears (design §8, cases i-iv, with the corrected confirmation rule): one query of a :class:`FusedFrames`.
     To query the same frames again (a controller faster than its cameras), keep the :class:`FusedFrames`."""
     frames = FusedFrames(grid, rig, principal, secondaries, robot_far, margin, pad, robot_tolerance, check,
-                         robot_near, robot_exit)
+                         robot_near, robot_exit, robot_shell=robot_shell)
     return frames.distances(points_world, rho, aggregate, unseen, check)
 
 
@@ -81,9 +81,14 @@ class FusedFrames:
             the robot, which none of them can.
         robot_exit: (h, w) float32 metres, where each pixel's ray first leaves the robot's padded geometry
             (:meth:`depthguard.self_filter.RobotSilhouette.render_first_exit`). Optional: with it, the space
-            between that and robot_far, which may lie between two links and which fusion takes for the robot, is
-            reported: ``blind_distance`` and the flag ``robot_blind_spot`` when it comes nearer than the
-            distance.
+            between that and robot_far, which may lie between two links, is checked cell by cell like the space
+            behind the robot (design §11a); without it, fusion takes all of it for the robot.
+        robot_shell: (n, 7) float64, world frame, metres: capsules (p0 (3), p1 (3), radius) that hold the rendered
+            robot when the principal frame was captured (the padded capsules, their radii grown by how far the
+            rendered geometry reaches beyond them). With robot_exit, a cell between the links that lies wholly
+            within ``robot_tolerance`` plus the principal's noise margin of one of them counts as that link, as
+            much as the principal takes behind a link for it (the self-filter's shell; the caller flags it
+            ``robot_shell``). Without it, the links a ray meets after its first are obstacles to it.
         margin: metres a secondary camera must have seen beyond a cell (calibration error; on top of its noise
             margin). pad: pixels by which a cell's footprint grows in a secondary camera.
         robot_tolerance: the self-filter's tolerance. Self-filtering counts a measurement up to this (plus the noise
@@ -106,7 +111,7 @@ class FusedFrames:
                  robot_far: np.ndarray | None = None, margin: float = config.DEFAULT_FUSION_MARGIN,
                  pad: int = config.DEFAULT_FUSION_PIXELS, robot_tolerance: float = config.SELF_FILTER_TOLERANCE,
                  check: bool = True, robot_near: np.ndarray | None = None,
-                 robot_exit: np.ndarray | None = None, remembered=None, robot_zone=None):
+                 robot_exit: np.ndarray | None = None, remembered=None, robot_zone=None, robot_shell=None):
         if check:
             if not isinstance(grid, DepthGridMap) or not isinstance(rig, Rig) or \
                     not isinstance(principal, OccupancyImage):
@@ -166,7 +171,8 @@ class FusedFrames:
         self._certain = np.empty(camera.shape, dtype=np.uint8)
         self._z_end = np.empty(camera.shape, dtype=np.float32)
         self._blind_from = np.empty(camera.shape, dtype=np.float32)
-        self._unchecked_from = np.empty(camera.shape, dtype=np.float32)
+        self._shell_lo = np.empty(camera.shape, dtype=np.float32)
+        self._shell_hi = np.empty(camera.shape, dtype=np.float32)
         none = np.zeros(camera.shape, dtype=np.float32)
         far = none if robot_far is None else np.ascontiguousarray(robot_far, dtype=np.float32)
         near = none if robot_near is None else np.ascontiguousarray(robot_near, dtype=np.float32)
@@ -174,11 +180,7 @@ class FusedFrames:
         grid_kernels.principal_arrays(principal.z_start, principal.z_end, principal.invalid,
                                   np.float32(camera.depth_range[0]), principal.blind, near, far, exit_,
                                   float(robot_tolerance), *camera.noise.coefficients(), self._certain, self._z_end,
-                                  self._blind_from, self._unchecked_from)
-        block = config.BLOCK_SIZE
-        blocks = ((camera.height + block - 1) // block, (camera.width + block - 1) // block)
-        self._unchecked_block_min = np.empty(blocks, dtype=np.float32)
-        block_minimum(self._unchecked_from, block, self._unchecked_block_min)
+                                  self._blind_from, self._shell_lo, self._shell_hi)
         # The cells' classes so far, a byte each: 0 unknown, 1 free, 2 occupied. The zeroed pages come from the
         # operating system as they are first touched, so memory grows with the cells looked at, not with the grid.
         self._cells = np.zeros(camera.shape + (grid.n_cells,), dtype=np.uint8)
@@ -188,6 +190,8 @@ class FusedFrames:
         self._behind_run = np.full(camera.shape, grid_kernels.NO_FREE_RUN, dtype=np.int64)
         self._memory = _NO_MEMORY if remembered is None else _memory_tuple(remembered, camera)
         self._zone = _zone_arrays(robot_zone, camera)
+        self._shell = NO_ZONE if robot_shell is None else \
+            _capsule_arrays(robot_shell, robot_tolerance, camera, camera.noise.coefficients(), "robot_shell")
 
     def distances(self, points_world, rho: float = config.DEFAULT_RHO, aggregate: str = config.DEFAULT_AGGREGATE,
                   unseen: str = config.DEFAULT_UNSEEN, check: bool = True) -> DistanceResult:
@@ -208,19 +212,15 @@ class FusedFrames:
         if timestamp is not None and not math.isfinite(timestamp):  # design §8 "Time": stale, never fresh
             return DistanceResult.blind(len(points_world), Flag.STALE_CAMERA, {camera.name: timestamp})
         points_camera, distance, direction_camera, count, invalid_count, flags = query_arrays(camera, points_world)
-        unchecked = np.full(len(points_world), np.inf)
         if len(points_world):
             z_min, z_max = camera.depth_range
             view = grid_kernels.PrincipalView(principal.z_start, self._z_end, self._certain, self._blind_from,
-                                          self._unchecked_from, self._unchecked_block_min, config.BLOCK_SIZE,
-                                          camera.fx, camera.fy, camera.cx, camera.cy, z_min, z_max)
+                                              camera.fx, camera.fy, camera.cx, camera.cy, z_min, z_max)
             options = grid_kernels.QueryOptions(config.AGGREGATES.index(aggregate), unseen == "occupied",
                                             config.NEAR_PLANE_EPSILON, config.INSIDE_TOLERANCE,
                                             config.MIN_DIRECTION_NORM, config.FUSION_ROW_CHUNKS)
-            state = grid_kernels.GridState(grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets,
-                                       self._eroded, self._sizes, self._z_near, self._margin, self._cells,
-                                       *self._memory, self._free_run, self._behind_run, *self._zone)
-            out = grid_kernels.FusedOutput(distance, direction_camera, count, invalid_count, flags, unchecked)
+            state = self.kernel_state()
+            out = grid_kernels.FusedOutput(distance, direction_camera, count, invalid_count, flags)
             with parallel_chunksize(1):
                 grid_kernels.fused_query_points(points_camera, float(rho), view, options, state, out)
         stale = Flag.STALE_CAMERA if self._stale else Flag(0)
@@ -239,12 +239,23 @@ class FusedFrames:
             timestamps={camera.name: principal.timestamp},
             cameras=(camera.name,) + self.secondaries,
             invalid_pixels={camera.name: principal.invalid_pixels},
-            blind_distance=unchecked,
         )
 
 
+    def kernel_state(self, free_run=None, behind_run=None) -> grid_kernels.GridState:
+        """The fused kernels' :class:`~depthguard.kernels.depthgrid.GridState` of these frames (their cells' classes
+        so far included); ``free_run``, ``behind_run``: (H, W) int64 runs in place of the frames' own (for tests and
+        probes)."""
+        grid = self.grid
+        return grid_kernels.GridState(grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets,
+                                      self._eroded, self._sizes, self._z_near, self._margin, self._cells,
+                                      *self._memory, self._free_run if free_run is None else free_run,
+                                      self._behind_run if behind_run is None else behind_run, *self._zone,
+                                      *self._shell, self._shell_lo, self._shell_hi)
+
+
 _NO_MEMORY = (np.zeros((0, 0, 0), dtype=np.uint8), np.zeros(grid_kernels.MEM_GEOMETRY_SIZE))
-NO_ZONE = (np.zeros((0, 7)), np.zeros(grid_kernels.ZONE_PARAMS))
+NO_ZONE = (np.zeros((0, 7)), np.zeros(grid_kernels.CAPSULE_PARAMS))
 
 
 def _zone_arrays(robot_zone, camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
@@ -256,21 +267,29 @@ def _zone_arrays(robot_zone, camera: PinholeCamera) -> tuple[np.ndarray, np.ndar
         capsules, thickness = robot_zone
     except (TypeError, ValueError):
         raise InputError("robot_zone must be (capsules, thickness)", field="robot_zone") from None
-    thickness = check_real(thickness, "robot_zone thickness", minimum=0.0, unit="metres", field="robot_zone")
+    return _capsule_arrays(capsules, thickness, camera, (0.0, 0.0, 0.0), "robot_zone")
+
+
+def _capsule_arrays(capsules, thickness, camera: PinholeCamera, margin, field: str) -> tuple[np.ndarray, np.ndarray]:
+    """The kernels' form of capsules ((n, 7) world frame: p0, p1, radius, metres) grown by ``thickness`` (metres) plus
+    the noise margin with coefficients ``margin`` (m0, m1, m2) for principal ``camera``: ((n, 7) capsules in its
+    optical frame, (CAPSULE_PARAMS,) parameters). Errors name ``field``."""
+    thickness = check_real(thickness, f"{field} thickness", minimum=0.0, unit="metres", field=field)
     capsules = np.asarray(capsules, dtype=np.float64)
     if capsules.ndim != 2 or capsules.shape[1] != 7 or not np.all(np.isfinite(capsules)) or \
             np.any(capsules[:, 6] < 0.0):
-        raise InputError(f"robot_zone's capsules must be an (n, 7) array of finite capsules (p0, p1, radius >= 0), "
-                         f"got {short_repr(capsules)}", field="robot_zone")
+        raise InputError(f"{field}'s capsules must be an (n, 7) array of finite capsules (p0, p1, radius >= 0), "
+                         f"got {short_repr(capsules)}", field=field)
     T_camera_world = np.linalg.inv(camera.T_world_camera)
     R, t = T_camera_world[:3, :3], T_camera_world[:3, 3]
     zone = np.empty_like(capsules)
     zone[:, 0:3] = capsules[:, 0:3] @ R.T + t
     zone[:, 3:6] = capsules[:, 3:6] @ R.T + t
     zone[:, 6] = capsules[:, 6]
-    params = np.empty(grid_kernels.ZONE_PARAMS)
-    params[grid_kernels.ZONE_THICKNESS] = thickness
-    params[grid_kernels.ZONE_INTRINSICS:] = (camera.fx, camera.fy, camera.cx, camera.cy)
+    params = np.empty(grid_kernels.CAPSULE_PARAMS)
+    params[grid_kernels.CAPSULE_THICKNESS] = thickness
+    params[grid_kernels.CAPSULE_MARGIN:grid_kernels.CAPSULE_MARGIN + 3] = margin
+    params[grid_kernels.CAPSULE_INTRINSICS:] = (camera.fx, camera.fy, camera.cx, camera.cy)
     return np.ascontiguousarray(zone), params
 
 

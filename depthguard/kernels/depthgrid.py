@@ -8,7 +8,8 @@ Along each principal pixel's frustum, what the principal camera says is possibly
   the grid's depth span;
 - candidate cells, which the other cameras may clear: the gray area behind a surface in front of the control point
   (case iii), the frustum of a pixel without a measurement (design §3), and the space behind the robot from
-  where its body ends (case iv).
+  where the ray first leaves its body (case iv), the space between two links included: there a cell within the
+  self-filter's shell of a later link counts as that link (:func:`shell_cells`).
 
 A candidate cell is occupied only if every secondary camera confirms it. Camera j declares it free only if the
 cell's whole footprint (its 8 corners projected into j, grown by ``pad`` pixels) lies inside j's image and every
@@ -66,11 +67,9 @@ from numba import prange
 from depthguard.kernels.frustum import (
     contribution,
     AGG_MIN,
-    FLAG_ROBOT_BLIND_SPOT,
     finish_min_at_pixel,
     finish_sum,
     guess_piece_row,
-    nearest_in_blocks,
     clamped_index,
     frustum_nearest,
     noise_margin,
@@ -90,17 +89,18 @@ from depthguard.kernels.jit import kernel
 #: numba's parallel loops do not take); free_run, behind_run (H, W) int64: per pixel, one run of cells known free in
 #: its gray area (or, without a measurement, its frustum) and one in the space behind the robot (two, so that the
 #: two runs of a pixel that shows the robot behind a surface do not replace each other).
-#: zone (n_caps, 7) float64 and zone_params (ZONE_PARAMS,) float64: the robot zone (:func:`zoned_cells`; zero rows for
-#: none).
+#: zone (n_caps, 7) float64 and zone_params (CAPSULE_PARAMS,) float64: the robot zone (:func:`zoned_cells`; zero rows
+#: for none). shell (n_caps, 7) float64, shell_params (CAPSULE_PARAMS,) float64 and shell_lo, shell_hi (H, W) float32
+#: metres: the self-filter's shell round the links that a principal pixel's ray meets after it first left the robot
+#: (:func:`shell_cells`; zero rows for none).
 GridState = namedtuple("GridState", "d_min delta_d n_cells corners offsets eroded sizes z_near margin cells mem_free "
-                                    "mem_geometry free_run behind_run zone zone_params")
+                                    "mem_geometry free_run behind_run zone zone_params shell shell_params shell_lo "
+                                    "shell_hi")
 
 #: What the fused kernels need of the principal camera's frame, one record: its per-pixel arrays ((h, w) each, from
-#: :func:`principal_arrays`: z_start float32, z_end float32, certain uint8, blind_from float32, unchecked_from
-#: float32, and unchecked_block_min, their minima over blocks of ``block`` pixels), its intrinsics fx, fy, cx, cy
-#: (pixels) and its valid depth range z_min, z_max (metres).
-PrincipalView = namedtuple("PrincipalView", "z_start z_end certain blind_from unchecked_from unchecked_block_min block "
-                                            "fx fy cx cy z_min z_max")
+#: :func:`principal_arrays`: z_start float32, z_end float32, certain uint8, blind_from float32), its intrinsics fx,
+#: fy, cx, cy (pixels) and its valid depth range z_min, z_max (metres).
+PrincipalView = namedtuple("PrincipalView", "z_start z_end certain blind_from fx fy cx cy z_min z_max")
 
 #: A fused query's options: aggregate (AGG_*), unseen_occupied (bool), near_eps, inside_tol, min_direction (the
 #: kernels' numerical tolerances, config.NEAR_PLANE_EPSILON, INSIDE_TOLERANCE, MIN_DIRECTION_NORM), row_chunks (each
@@ -108,8 +108,8 @@ PrincipalView = namedtuple("PrincipalView", "z_start z_end certain blind_from un
 QueryOptions = namedtuple("QueryOptions", "aggregate unseen_occupied near_eps inside_tol min_direction row_chunks")
 
 #: Where a fused query writes, for n points: distance (n,), direction (n, 3), count (n,), invalid_count (n,), flags
-#: (n,), unchecked (n,).
-FusedOutput = namedtuple("FusedOutput", "distance direction count invalid_count flags unchecked")
+#: (n,).
+FusedOutput = namedtuple("FusedOutput", "distance direction count invalid_count flags")
 
 
 @kernel(inline=True)
@@ -168,27 +168,31 @@ def seen_free_depths(raw, scale, z_min, z_max, m0, m1, m2, z_start, invalid, inv
 
 @kernel(parallel=True)
 def principal_arrays(z_start, z_end, invalid, invalid_start, blind, robot_near, robot_far, robot_exit, slack, m0, m1,
-                     m2, certain, z_end_fused, blind_from, unchecked_from):
+                     m2, certain, z_end_fused, blind_from, shell_lo, shell_hi):
     """Per pixel of the principal frame, what fusion starts from:
 
     - certain = 1 where the possibly-occupied segment starts at a measured surface (a valid pixel, or an invalid one
       whose segment starts elsewhere than the invalid start depth);
-    - blind_from: where the space behind the robot starts, past the robot's body (robot_far) by the self-filter's
-      slack plus the noise margin there, never before ``blind``; inf where no robot is seen;
+    - blind_from: where the space behind the robot starts: past the robot's body by the self-filter's slack plus the
+      noise margin there, never before ``blind``; inf where no robot is seen. The body ends where the ray first
+      leaves the robot (robot_exit) when it is given, else where it last leaves it (robot_far): the space between two
+      links along the ray is checked like the rest of the space behind the robot (design §11a: no default
+      concession), not taken for the robot;
+    - shell_lo, shell_hi: the depths between that first exit's end and where the space behind the last link the ray
+      meets starts (robot_far plus the slack and the noise margin), in which a cell that lies wholly within the
+      self-filter's shell of a link counts as that link (:func:`shell_cells`): the same shell the self-filter takes
+      for the robot in front of a link and the principal behind it. inf, inf for none;
     - z_end_fused: z_end, except that a surface in front of the robot does not hide the robot's own body from
       fusion: its gray area stops where the rendered robot starts (robot_near), and the space behind the body is
       blind space again (blind_from). The body is the robot, whatever hides it; a secondary camera that sees the
-      robot's surface could never clear the space inside it;
-    - unchecked_from: where, along a pixel whose ray may leave one link and meet another (robot_exit, where it first
-      leaves the padded geometry, is nearer than robot_far), the space between them starts; it ends at
-      blind_from. Fusion takes it for the robot and does not check it, but flags it. inf for none.
+      robot's surface could never clear the space inside it.
 
     Inputs: the principal's prepared frame (:class:`OccupancyImage`), z_start, z_end and blind: (h, w) float32,
     metres, and invalid: (h, w) uint8; invalid_start: float32, metres, the camera's z_min (where the invalid-pixel
     policy starts a pixel without a measurement); robot_near, robot_far, robot_exit: (h, w) float32, metres, the
     rendered robot's nearest surface, where it ends, and where a ray first leaves it (0 where the robot is not
     rendered, all 0 when not given); slack: float, metres, the self-filter's tolerance. Writes certain (h, w) uint8
-    and z_end_fused, blind_from, unchecked_from (h, w) float32, metres.
+    and z_end_fused, blind_from, shell_lo, shell_hi (h, w) float32, metres.
     """
     h, w = z_start.shape
     for v in prange(h):
@@ -206,12 +210,17 @@ def principal_arrays(z_start, z_end, invalid, invalid_start, blind, robot_near, 
                 blind_from[v, u] = behind
             else:
                 blind_from[v, u] = np.inf
-            unchecked_from[v, u] = np.inf
+            shell_lo[v, u] = np.inf
+            shell_hi[v, u] = np.inf
             exit_ = np.float64(robot_exit[v, u])
             if exit_ > 0.0 and np.isfinite(blind_from[v, u]):
                 start = max(exit_ + slack + noise_margin(exit_, m0, m1, m2), np.float64(robot_near[v, u]))
+                if np.isfinite(b):
+                    start = max(start, b)
                 if start < blind_from[v, u]:
-                    unchecked_from[v, u] = start
+                    shell_lo[v, u] = start
+                    shell_hi[v, u] = blind_from[v, u]
+                    blind_from[v, u] = start
 
 
 @kernel(parallel=True)
@@ -300,8 +309,10 @@ def box_seen_through(eroded, width, height, x_lo, x_hi, y_lo, y_hi, need):
     return True
 
 
-#: Layout of ``zone_params``: the zone's thickness (metres) and the principal's intrinsics fx, fy, cx, cy.
-ZONE_THICKNESS, ZONE_INTRINSICS, ZONE_PARAMS = 0, 1, 5
+#: Layout of a capsule set's parameters (``zone_params``, ``shell_params``): the thickness it is grown by (metres),
+#: the noise margin's coefficients m0, m1, m2 added to it at each cell's near depth (0, 0, 0 for the robot zone) and
+#: the principal's intrinsics fx, fy, cx, cy.
+CAPSULE_THICKNESS, CAPSULE_MARGIN, CAPSULE_INTRINSICS, CAPSULE_PARAMS = 0, 1, 4, 8
 
 
 @kernel(inline=True)
@@ -323,25 +334,26 @@ def _to_axis(x, y, z, zone, c):
 
 
 @kernel(inline=True)
-def zoned_cells(u, v, k_a, k_b, grid):
-    """Bit i set when cell k_a + i of principal pixel (u, v) lies wholly in the robot zone: within the zone's
-    thickness of one of the robot's padded capsules (``zone`` rows: p0 (3), p1 (3) in the principal's optical frame,
-    metres, and the radius with the padding). It is the self-filter's rule (a measurement up to its tolerance in front
-    of the robot is the robot; the principal takes as much behind a link for the robot, ``principal_arrays``), made
-    the same in every direction: the space right beside a link lies within every camera's noise margin of the link it
-    sees, and no camera can clear it. The test is conservative: the cell's bounding sphere (centre on the pixel's
-    central ray at mid-depth, radius reaching its corners) must fit in one capsule grown by the thickness."""
-    d_min, delta_d, zone, zone_params = grid.d_min, grid.delta_d, grid.zone, grid.zone_params
+def capsule_cells(u, v, k_a, k_b, d_min, delta_d, zone, params, z_lo, z_hi):
+    """Bit i set when cell k_a + i of principal pixel (u, v) meets the depths (z_lo, z_hi) (float64, metres) and lies
+    wholly within one of the capsules ``zone`` ((n, 7) float64 rows: p0 (3), p1 (3) in the principal's optical frame,
+    metres, and the radius) grown by params' thickness plus the noise margin at the cell's near depth (``params``:
+    (CAPSULE_PARAMS,) float64, laid out as the CAPSULE_* constants say). The test is conservative: the cell's
+    bounding sphere (centre on the pixel's central ray at mid-depth, radius reaching its corners) must fit in the
+    grown capsule."""
     if zone.shape[0] == 0:
         return np.uint64(0)
-    grow = zone_params[ZONE_THICKNESS]
-    fx = zone_params[ZONE_INTRINSICS]
-    fy = zone_params[ZONE_INTRINSICS + 1]
-    tx = (u - zone_params[ZONE_INTRINSICS + 2]) / fx
-    ty = (v - zone_params[ZONE_INTRINSICS + 3]) / fy
+    grow = params[CAPSULE_THICKNESS]
+    m0 = params[CAPSULE_MARGIN]
+    m1 = params[CAPSULE_MARGIN + 1]
+    m2 = params[CAPSULE_MARGIN + 2]
+    fx = params[CAPSULE_INTRINSICS]
+    fy = params[CAPSULE_INTRINSICS + 1]
+    tx = (u - params[CAPSULE_INTRINSICS + 2]) / fx
+    ty = (v - params[CAPSULE_INTRINSICS + 3]) / fy
     # The capsules that can hold a cell of the run at all (bit c; all of them beyond 64): every cell's centre lies
     # within half the run's length of the run's middle on the ray, so a capsule whose axis is farther than that plus
-    # its grown radius from the middle holds none of them (the cells' own radii only make it less likely).
+    # its most grown radius from the middle holds none of them (the cells' own radii only make it less likely).
     near = _ALL
     if zone.shape[0] <= 64:
         near = np.uint64(0)
@@ -349,8 +361,10 @@ def zoned_cells(u, v, k_a, k_b, grid):
         z_last = d_min + (k_b + 0.5) * delta_d
         zm = 0.5 * (z_first + z_last)
         half = 0.5 * (z_last - z_first) * np.sqrt(1.0 + tx * tx + ty * ty)
+        grow_most = grow + max(noise_margin(d_min + k_a * delta_d, m0, m1, m2),
+                               noise_margin(d_min + k_b * delta_d, m0, m1, m2))
         for c in range(zone.shape[0]):
-            if _to_axis(tx * zm, ty * zm, zm, zone, c) - half <= zone[c, 6] + grow:
+            if _to_axis(tx * zm, ty * zm, zm, zone, c) - half <= zone[c, 6] + grow_most:
                 near |= np.uint64(1) << np.uint64(c)
         if near == np.uint64(0):
             return np.uint64(0)
@@ -358,6 +372,8 @@ def zoned_cells(u, v, k_a, k_b, grid):
     for i in range(k_b - k_a + 1):
         z0 = d_min + (k_a + i) * delta_d
         z1 = z0 + delta_d
+        if z1 <= z_lo or z0 >= z_hi:
+            continue
         zc = 0.5 * (z0 + z1)
         cx = tx * zc
         cy = ty * zc
@@ -366,13 +382,36 @@ def zoned_cells(u, v, k_a, k_b, grid):
         hx = 0.5 * z1 / fx + abs(tx) * 0.5 * delta_d
         hy = 0.5 * z1 / fy + abs(ty) * 0.5 * delta_d
         radius = np.sqrt(hx * hx + hy * hy + 0.25 * delta_d * delta_d)
+        grown = grow + noise_margin(z0, m0, m1, m2)
         for c in range(zone.shape[0]):
             if c < 64 and (near & (np.uint64(1) << np.uint64(c))) == np.uint64(0):
                 continue
-            if _to_axis(cx, cy, zc, zone, c) + radius <= zone[c, 6] + grow:
+            if _to_axis(cx, cy, zc, zone, c) + radius <= zone[c, 6] + grown:
                 bits |= np.uint64(1) << np.uint64(i)
                 break
     return bits
+
+
+@kernel(inline=True)
+def zoned_cells(u, v, k_a, k_b, grid):
+    """Bit i set when cell k_a + i of principal pixel (u, v) lies wholly in the robot zone: within the zone's
+    thickness of one of the robot's padded capsules (``grid``'s zone and zone_params, :func:`capsule_cells`). It is
+    the self-filter's rule (a measurement up to its tolerance in front of the robot is the robot; the principal takes
+    as much behind a link for the robot, ``principal_arrays``), made the same in every direction: the space right
+    beside a link lies within every camera's noise margin of the link it sees, and no camera can clear it."""
+    return capsule_cells(u, v, k_a, k_b, grid.d_min, grid.delta_d, grid.zone, grid.zone_params, -np.inf, np.inf)
+
+
+@kernel(inline=True)
+def shell_cells(u, v, k_a, k_b, grid):
+    """Bit i set when cell k_a + i of principal pixel (u, v) lies between the links its ray meets (within
+    ``grid``'s shell_lo[v, u], shell_hi[v, u]) and wholly within the self-filter's shell of a link: its capsule
+    (``grid``'s shell, the rendered geometry's reach beyond the padded capsules included) grown by the self-filter's
+    tolerance plus the principal's noise margin at the cell's depth (shell_params), as the principal takes that much
+    behind a link for the robot (:func:`principal_arrays`). The space between two links is checked cell by cell; only
+    this shell round the second link, a concession stated and flagged with ``robot_shell``, is not."""
+    return capsule_cells(u, v, k_a, k_b, grid.d_min, grid.delta_d, grid.shell, grid.shell_params,
+                         np.float64(grid.shell_lo[v, u]), np.float64(grid.shell_hi[v, u]))
 
 
 _ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
@@ -382,7 +421,7 @@ CLASSIFY_RUN = 8  # cells classified together: neighbours share a face, projecte
 @kernel()
 def classify_run(u, v, k_a, k_b, grid):
     """Classify cells k_a..k_b (at most 64) of principal pixel (u, v) into cells[v, u, k]: 1 when the cell lies in
-    the robot zone (:func:`zoned_cells`) or some secondary camera saw through the whole cell, else 3 when the
+    the robot zone (:func:`zoned_cells`), in the shell of a link behind the first (:func:`shell_cells`), or some secondary camera saw through the whole cell, else 3 when the
     free-space memory (``memory``, :func:`remembered_cells`) certifies every voxel the cell touches, else 2 (occupied,
     or hidden from every camera). Each face between two cells
     is projected once per camera.
@@ -395,7 +434,7 @@ def classify_run(u, v, k_a, k_b, grid):
     eroded, sizes, z_near, margin, cells = grid.eroded, grid.sizes, grid.z_near, grid.margin, grid.cells
     n = k_b - k_a + 1
     everything = _ALL if n == 64 else (np.uint64(1) << np.uint64(n)) - np.uint64(1)
-    cleared = zoned_cells(u, v, k_a, k_b, grid)
+    cleared = zoned_cells(u, v, k_a, k_b, grid) | shell_cells(u, v, k_a, k_b, grid)
     for j in range(corners.shape[0]):
         if cleared == everything:
             break
@@ -975,23 +1014,12 @@ def fused_region(X, Y, Z, rho, view, unseen_occupied, near_eps, inside_tol, span
     """The first step of one control point P = (X, Y, Z)'s fused query: its surveillance region (``spans``, (height,
     2) int64, as :func:`surveillance_region` fills it) in the principal camera's ``view``, written into region (8,)
     float64: flags, P unseen?, unseen_d, nx, ny, nz, v_lo, v_hi (v_hi < v_lo: no rows to visit). Clears
-    out_direction (3,). Returns the distance to the space between links that fusion takes for the robot and does not
-    check (inf beyond rho)."""
+    out_direction (3,)."""
     height, width = view.z_start.shape
     fx, fy, cx, cy, z_min, z_max = view.fx, view.fy, view.cx, view.cy, view.z_min, view.z_max
     f, unseen_here, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi = surveillance_region(
         X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_max, unseen_occupied, near_eps, inside_tol, spans,
         out_direction)
-    unchecked = np.inf
-    if v_lo <= v_hi and not unseen_here:
-        # The space between links: the nearest of it, as the single camera finds its blind spot (blocks in rings
-        # round P's pixel, skipped by their nearest start depth). (``certain`` stands in for its per-pixel "invalid"
-        # array, whose answer is not used here.)
-        u2 = nearest_in_blocks(X, Y, Z, rho, view.unchecked_from, view.blind_from, np.bool_(True), view.certain,
-                                view.unchecked_block_min, view.block, fx, fy, cx, cy, u_lo, u_hi, v_lo, v_hi, near_eps,
-                                spans)[0]
-        if u2 < rho_squared(rho):
-            unchecked = np.sqrt(u2)
     region[0] = f
     region[1] = 1.0 if unseen_here else 0.0
     region[2] = unseen_d
@@ -1000,7 +1028,6 @@ def fused_region(X, Y, Z, rho, view, unseen_occupied, near_eps, inside_tol, span
     region[5] = nz
     region[6] = v_lo
     region[7] = v_hi if not unseen_here else v_lo - 1
-    return unchecked
 
 
 @kernel()
@@ -1041,9 +1068,7 @@ def fused_query_points(points_camera, rho, view, options, grid, out):
     ``aggregate``; the fused counterpart of :func:`depthguard.kernels.depthspace.query_points`. ``view``:
     :class:`PrincipalView`; ``options``: :class:`QueryOptions`; ``grid``: :class:`GridState`. Writes into ``out``
     (:class:`FusedOutput`) distance (n,) float64 metres, the unit direction (n, 3) float64 (from the obstacle towards
-    P, principal optical frame), count, invalid_count and flags ((n,) int64 each), and into unchecked (n,) float64
-    the distance to the space between links fusion did not check (inf beyond rho); ROBOT_BLIND_SPOT flags it when it
-    comes nearer than the distance.
+    P, principal optical frame), count, invalid_count and flags ((n,) int64 each).
 
     Each point's region is split into ``row_chunks`` interleaved sets of rows, and the n * row_chunks tasks run in
     parallel: a point near much clutter does not leave the other threads idle. Their sums are then added in a fixed
@@ -1053,13 +1078,13 @@ def fused_query_points(points_camera, rho, view, options, grid, out):
     n = points_camera.shape[0]
     height, width = view.z_start.shape
     aggregate, unseen_occupied, near_eps, inside_tol, min_direction, row_chunks = options
-    distance, direction, count, invalid_count, flags, unchecked = out
+    distance, direction, count, invalid_count, flags = out
     rho = usable_rho(rho)
     spans = np.empty((n, height, 2), dtype=np.int64)
     region = np.empty((n, 8))
     for i in prange(n):
-        unchecked[i] = fused_region(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, view,
-                                    unseen_occupied, near_eps, inside_tol, spans[i], region[i], direction[i])
+        fused_region(points_camera[i, 0], points_camera[i, 1], points_camera[i, 2], rho, view, unseen_occupied,
+                     near_eps, inside_tol, spans[i], region[i], direction[i])
     acc = np.empty((n, row_chunks, N_ACC))
     scratch = np.empty((n * row_chunks, 5, width))
     for t in prange(n * row_chunks):
@@ -1073,4 +1098,4 @@ def fused_query_points(points_camera, rho, view, options, grid, out):
         distance[i] = d
         count[i] = k
         invalid_count[i] = m
-        flags[i] = g | (FLAG_ROBOT_BLIND_SPOT if unchecked[i] < d else 0)
+        flags[i] = g
