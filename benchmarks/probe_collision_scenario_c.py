@@ -16,10 +16,10 @@ false alarm.
 With depth images, more rules (issue 27): ``+ depth order`` (ImageCollisionTest(depth_order=True), class B
 colliding), and ``depth grid``: the library's DepthGridCollisionTest (a configuration collides unless every
 sphere over its moving links, ``with_surface_points(0.01)``, lies farther than its radius plus 2.5 pixel footprints
-+ 1 mm from possibly occupied space, the space between links the grid takes for the robot included; a
-DistanceMonitor with its defaults but rho = 0.3 m, the free-space memory on; unmeasured pixels occupied, and again
-filled from their neighbours). ``no links`` is a diagnosis, not a rule: the same without the space between links
-(``blind_distance``) and without the slack, as the previous probe counted it; it can miss a hand between two links.
++ 1 mm from possibly occupied space, the space between links checked like the rest; a DistanceMonitor with its
+defaults but rho = 0.3 m, the free-space memory on; unmeasured pixels occupied, and again filled from their
+neighbours). ``no slack`` is a diagnosis, not a rule: the same without the slack of 2.5 pixel footprints + 1 mm; it
+can miss what the pixel grid places beyond the truth.
 ``disagree`` counts the configurations on which a rule and the default image rule differ.
 """
 
@@ -147,7 +147,7 @@ def depth_grid_rule(workcell, frames, observed, futures, clearances, invalid: st
     monitor = dg.DistanceMonitor(workcell.rig, robot=robot, rho=0.3, invalid=invalid, robot_zone=robot_zone)
     holes = ("holes occ." if invalid == "occupied" else "holes filled") + \
         (f", zone {robot_zone * 100:g} cm" if robot_zone else "")
-    rows = {"grid, " + holes: [0] * 5, "no links, " + holes: [0] * 5}  # touching, missed, free, alarms, disagree
+    rows = {"grid, " + holes: [0] * 5, "no slack, " + holes: [0] * 5}  # touching, missed, free, alarms, disagree
     times, conceded = [], {}
     for i in observed:
         frame = frames[i]

@@ -459,14 +459,19 @@ class DistanceMonitor:
                and state.occupancy.timestamp is not None and state.occupancy.timestamp >= last]
         if not new:
             return
-        from depthguard.freespace import remember_frames, surface_voxels
+        from depthguard.freespace import remember_frames, robot_inside_voxels, surface_voxels
 
         box = self.memory.box
+        t = min(state.occupancy.timestamp for state in new)
+        robot = None
+        if self.robot is not None:  # Robot_k: inside the links at the joints of the frames captured at t
+            joints = [state.joints for state in new if state.occupancy.timestamp == t and state.joints is not None]
+            if joints:
+                robot = robot_inside_voxels(box, [self.robot.inner_capsules_world(q, check=False) for q in joints])
         self._seen_now = remember_frames(
-            self.memory, min(state.occupancy.timestamp for state in new), [state.camera for state in new],
-            [state.free for state in new],
+            self.memory, t, [state.camera for state in new], [state.free for state in new],
             [functools.partial(surface_voxels, box, state.camera, state.image, state.occupancy) for state in new],
-            margin=self.fusion_margin, pad=self.fusion_pixels)
+            margin=self.fusion_margin, pad=self.fusion_pixels, robot=robot)
         self._remembered = {id(state) for state in usable.values()}
 
     def plan(self, usable, stale) -> "QueryPlan":

@@ -97,6 +97,9 @@ CAPSULE_GAP_CONFIGURATIONS = 4
 CAPSULE_GAP_MESH_SAMPLES = 300_000
 CAPSULE_GAP_SURFACE_SAMPLES = 4000
 CAPSULE_GAP_SEED = 20261126
+#: Metres between the samples of a link's capsule axis at which the robot's inner volume is found (balls inside the
+#: link's mesh, RobotModel.inner_capsules_world; design §8a's Robot_k).
+INNER_CAPSULE_STEP = 0.01
 
 #: The default robot's 9 control points (the papers' count: Flacco et al. 2015 section 5, 2016 section VIII), as
 #: (name, link, offset (3,) metres in the link frame). They lie on the arm's centre line about 0.1 m apart: three on

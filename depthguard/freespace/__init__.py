@@ -11,6 +11,7 @@ from depthguard.freespace._memory import (
     FreeSpaceMemory,
     VoxelBox,
     remember_frames,
+    robot_inside_voxels,
     seen_free_voxels,
     squared_distance_transform,
 )
@@ -24,6 +25,7 @@ __all__ = [
     "closed_faces",
     "or_coarse",
     "remember_frames",
+    "robot_inside_voxels",
     "robot_voxels",
     "seen_free_voxels",
     "solid_voxels",

@@ -341,7 +341,7 @@ def capsule_cells(u, v, k_a, k_b, d_min, delta_d, zone, params, z_lo, z_hi):
     (CAPSULE_PARAMS,) float64, laid out as the CAPSULE_* constants say). The test is conservative: the cell's
     bounding sphere (centre on the pixel's central ray at mid-depth, radius reaching its corners) must fit in the
     grown capsule."""
-    if zone.shape[0] == 0:
+    if zone.shape[0] == 0 or d_min + (k_b + 1) * delta_d <= z_lo or d_min + k_a * delta_d >= z_hi:
         return np.uint64(0)
     grow = params[CAPSULE_THICKNESS]
     m0 = params[CAPSULE_MARGIN]

@@ -589,6 +589,35 @@ class RobotModel:
         data = self._forward(q, check)
         return self._capsule_anchors.positions(data, self.T_world_base).reshape(-1, 2, 3)
 
+    def inner_capsules_world(self, q, *, check: bool = True) -> np.ndarray:
+        """(k, 7) float64, metres, world frame: capsules (p0 (3), p1 (3), radius) that lie inside the robot's collision
+        meshes at ``q``, never in their padding: the robot's own volume, where no person can be (design §8a's
+        Robot_k). Along each link's capsule axis, every ``config.INNER_CAPSULE_STEP`` metres, the balls and capsules
+        that fit in the link's mesh with its open ends closed (:mod:`depthguard.robots._inner`); found once per model
+        and cached. A link whose mesh they cannot close adds none."""
+        radii, anchors = self._inner_capsules()
+        out = np.empty((len(radii), 7))
+        if len(radii):
+            ends = anchors.positions(self._forward(q, check), self.T_world_base)
+            out[:, 0:3] = ends[0::2]
+            out[:, 3:6] = ends[1::2]
+            out[:, 6] = radii
+        return out
+
+    def _inner_capsules(self) -> tuple[np.ndarray, "_Anchors"]:
+        from depthguard.robots._inner import inner_capsules
+
+        key = (str(self.urdf_path), tuple((c.link, tuple(c.p0), tuple(c.p1), c.radius) for c in self.capsules))
+        with _GAP_LOCK:
+            if key not in _INNER_CAPSULES:
+                pieces = [piece for capsule in self.capsules
+                          for piece in inner_capsules(self.collision_meshes[capsule.link], capsule,
+                                                      config.INNER_CAPSULE_STEP)]
+                anchors = self._kinematics.anchors([c.link for c in pieces for _ in (0, 1)],
+                                                   [end for c in pieces for end in (c.p0, c.p1)])
+                _INNER_CAPSULES[key] = (np.array([c.radius for c in pieces], dtype=np.float64), anchors)
+            return _INNER_CAPSULES[key]
+
     def reach(self) -> float:
         """Metres: a radius about the base's origin (``T_world_base``) that holds every capsule of the robot at every
         configuration: for the links a joint moves, the longest chain of rigid offsets from the base to their
@@ -707,6 +736,7 @@ class RobotModel:
 
 _CAPSULE_GAPS: dict = {}  # (urdf, padding, base) -> metres, RobotModel.capsule_gap
 _GAP_LOCK = threading.Lock()
+_INNER_CAPSULES: dict = {}  # (urdf, capsules) -> (radii, anchors), RobotModel.inner_capsules_world
 
 
 def _control_point(item) -> ControlPoint:
