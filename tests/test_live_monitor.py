@@ -76,7 +76,8 @@ def test_a_robot_is_filtered_out_on_the_worker_thread():
         live.submit(frames, joints=q, now=0.0)
         assert live.wait(120)
         same(live.query(POINTS, now=0.0), reference)
-    assert np.any(np.isfinite(reference.blind_distance))  # the robot was rendered: it hides space
+    # The robot was filtered: its self-filter's shell comes within rho of some points.
+    assert any(dg.Flag.ROBOT_SHELL in f for f in reference.flags) and np.any(np.isfinite(reference.concession_distance))
 
 
 def test_a_query_never_waits_for_the_set_being_prepared(monkeypatch):
