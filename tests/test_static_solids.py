@@ -129,8 +129,7 @@ def test_the_space_a_robot_hides_above_a_known_solid_still_counts():
         monitor = dg.DistanceMonitor(rig, rho=0.3, aggregate="min", robot=robot, self_filter="capsules",
                                      static=static)
         result = monitor.query(frames, points, joints=q)
-        # the distance itself (not only blind_distance, the space between links left unchecked): nothing here lies
-        # between two links
+        # the distance itself, not only blind_distance
         assert np.all(result.distance <= truth + 1e-6), (static is not None, result.distance, truth)
 
 
