@@ -11,7 +11,10 @@ fused tolerance (2.5 principal footprints + 1 mm; exact geometry by coal; positi
 time per set, and, with the memory, the share of its voxels it certifies free at each queried frame, by the voxel
 centre's distance from the robot's padded capsules (mean over the frames): where next to the robot it clears space. Monitors: rho 0.4 m, hybrid, invalid "neighbors", the robot self-filtered (as ``fusion-workcell``).
 
-    .venv/bin/python benchmarks/probe_memory_robot.py [--step 3] [--scene scenario_b.yaml ...]
+    .venv/bin/python benchmarks/probe_memory_robot.py [--step 3] [--scene scenario_b.yaml ...] [--exact]
+
+``--exact`` is a diagnosis, not a layout: the simulation's noise-free frames, cameras without a noise margin (and
+without the sensor's dropouts), to show what the noise margin alone costs the memory next to the robot.
 """
 
 from __future__ import annotations
@@ -32,13 +35,22 @@ CONFIGURATIONS = {"no memory": dict(memory=False), "memory 4 cm": dict(memory=Tr
                   "memory 2 cm": dict(memory=True, memory_voxel=0.02)}
 
 
-def probe(path, step: int) -> dict:
+def noise_free(rig) -> dg.Rig:
+    """``rig`` with every camera's noise model none (margin 0), for the simulation's exact frames."""
+    from dataclasses import replace
+
+    cameras = {name: replace(camera, noise=dg.NoiseModel.none()) for name, camera in rig.cameras.items()}
+    return dg.Rig(cameras, principal=rig.principal, workspace=rig.workspace)
+
+
+def probe(path, step: int, exact: bool = False) -> dict:
     """configuration -> (far pairs, below rho, end-effector far, below rho, remembered answers, largest excess in
     metres, seconds per set, per measured frame the memory's certified shares by band (:func:`certified_by_band`))."""
     workcell = load_workcell(path)
     robot = workcell.robot
     options = dict(rho=fw.RHO, aggregate="hybrid", invalid="neighbors", robot=robot)
-    monitors = {name: dg.DistanceMonitor(workcell.rig, **options, **extra) for name, extra in CONFIGURATIONS.items()}
+    rig = noise_free(workcell.rig) if exact else workcell.rig
+    monitors = {name: dg.DistanceMonitor(rig, **options, **extra) for name, extra in CONFIGURATIONS.items()}
     background = workcell.background_parts()
     principal = workcell.rig.cameras[workcell.rig.principal]
     cases = fw.case_frames(workcell)
@@ -47,6 +59,8 @@ def probe(path, step: int) -> dict:
     for frame in simulate(workcell, seed=0, frames=range(max(cases) + 1)):
         points = robot.control_point_positions(frame.joints)
         ask = frame.index in measured
+        frames = {name: dg.depth_image(depth, rig.cameras[name], timestamp=frame.time)
+                  for name, depth in frame.depth_exact.items()} if exact else dict(frame.depth)
         if ask:
             truth = np.minimum(frame.truth.distance, scene_distance(background, points))
             depth = np.maximum(principal.world_to_camera(points)[:, 2], 0.1)
@@ -54,7 +68,7 @@ def probe(path, step: int) -> dict:
             far = truth >= fw.RHO + USEFUL_MARGIN
         for name, monitor in monitors.items():
             start = time.perf_counter()
-            prepared = monitor.prepare_set(dict(frame.depth), joints=frame.joints, now=frame.time)
+            prepared = monitor.prepare_set(frames, joints=frame.joints, now=frame.time)
             if not ask:
                 continue
             result = prepared.query(points)
@@ -97,6 +111,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", action="append", help="scene YAML (default: scenario_b and scenario_b_four)")
     parser.add_argument("--step", type=int, default=3, help="query every step-th frame of the two cases")
+    parser.add_argument("--exact", action="store_true",
+                        help="the simulation's noise-free frames and cameras without a noise margin (a diagnosis)")
     args = parser.parse_args()
     names = args.scene or ["scenario_b.yaml", "scenario_b_four.yaml"]
     bands = "  ".join(f"{lo * 100:g}-{hi * 100:g} cm" for lo, hi in zip(BANDS[:-1], BANDS[1:]))
@@ -104,13 +120,16 @@ def main() -> None:
           f"{'remembered':>10s} {'largest excess':>15s} {'ms per set':>10s}   certified free by distance from the "
           f"padded capsules: {bands}")
     for path in fw.scene_paths(tuple(names)):
-        for name, (far, below, ee_far, ee_below, kept, excess, seconds, shares) in probe(path, args.step).items():
+        rows = probe(path, args.step, args.exact).items()
+        for name, (far, below, ee_far, ee_below, kept, excess, seconds, shares) in rows:
             certified = "  ".join(f"{share:9.1%}" for share in np.mean(shares, axis=0)) if shares else "-"
-            print(f"{path.stem:22s} {name:14s} {below:>6d}/{far:<5d} {below / max(far, 1):6.1%} "
+            print(f"{path.stem + (' exact' if args.exact else ''):22s} {name:14s} {below:>6d}/{far:<5d} {below / max(far, 1):6.1%} "
                   f"{ee_below:>5d}/{ee_far:<5d} {kept:10d} {excess * 1e3:+11.1f} mm "
                   f"{np.median(seconds) * 1e3:10.1f}   {certified}", flush=True)
 
 
 if __name__ == "__main__":
-    with report(__file__):
+    import sys
+
+    with report(__file__, name="probe_memory_robot_exact" if "--exact" in sys.argv else None):
         main()
