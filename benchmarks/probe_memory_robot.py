@@ -9,12 +9,15 @@ share of the (frame, control point) pairs truly farther than rho + 5 cm that rea
 end-effector alone, how many answers carry ``remembered``, the largest excess of a distance over the truth plus the
 fused tolerance (2.5 principal footprints + 1 mm; exact geometry by coal; positive is optimistic), the median
 time per set, and, with the memory, the share of its voxels it certifies free at each queried frame, by the voxel
-centre's distance from the robot's padded capsules (mean over the frames): where next to the robot it clears space. Monitors: rho 0.4 m, hybrid, invalid "neighbors", the robot self-filtered (as ``fusion-workcell``).
+centre's distance from the robot's padded capsules (mean over the frames): where next to the robot it clears space;
+under each row, how many of the far pairs read below rho carry each flag (why they could be small). Monitors: rho 0.4 m, hybrid, invalid "neighbors", the robot self-filtered (as ``fusion-workcell``).
 
     .venv/bin/python benchmarks/probe_memory_robot.py [--step 3] [--scene scenario_b.yaml ...] [--exact]
 
 ``--exact`` is a diagnosis, not a layout: the simulation's noise-free frames, cameras without a noise margin (and
-without the sensor's dropouts), to show what the noise margin alone costs the memory next to the robot.
+without the sensor's dropouts), to show what the noise margin alone costs the memory next to the robot; with
+``--calibrated`` also without the calibration margin (``fusion_margin`` 0, no pad): the nearest this code comes to
+the issue's ideal memory (exact ray casts), but for its voxels and the robot's inner capsules.
 """
 
 from __future__ import annotations
@@ -43,19 +46,22 @@ def noise_free(rig) -> dg.Rig:
     return dg.Rig(cameras, principal=rig.principal, workspace=rig.workspace)
 
 
-def probe(path, step: int, exact: bool = False) -> dict:
+def probe(path, step: int, exact: bool = False, calibrated: bool = False) -> dict:
     """configuration -> (far pairs, below rho, end-effector far, below rho, remembered answers, largest excess in
-    metres, seconds per set, per measured frame the memory's certified shares by band (:func:`certified_by_band`))."""
+    metres, seconds per set, per measured frame the memory's certified shares by band (:func:`certified_by_band`),
+    and how many of the far pairs read below rho carry each flag)."""
     workcell = load_workcell(path)
     robot = workcell.robot
     options = dict(rho=fw.RHO, aggregate="hybrid", invalid="neighbors", robot=robot)
+    if calibrated:  # no calibration margin: a camera clears what it sees beyond, to the pixel
+        options.update(fusion_margin=0.0, fusion_pixels=0)
     rig = noise_free(workcell.rig) if exact else workcell.rig
     monitors = {name: dg.DistanceMonitor(rig, **options, **extra) for name, extra in CONFIGURATIONS.items()}
     background = workcell.background_parts()
     principal = workcell.rig.cameras[workcell.rig.principal]
     cases = fw.case_frames(workcell)
     measured = set(cases[::step])
-    out = {name: [0, 0, 0, 0, 0, -np.inf, [], []] for name in monitors}
+    out = {name: [0, 0, 0, 0, 0, -np.inf, [], [], {}] for name in monitors}
     for frame in simulate(workcell, seed=0, frames=range(max(cases) + 1)):
         points = robot.control_point_positions(frame.joints)
         ask = frame.index in measured
@@ -81,6 +87,9 @@ def probe(path, step: int, exact: bool = False) -> dict:
             row[3] += int(far[-1] and reported[-1] < fw.RHO)
             row[4] += sum(dg.Flag.REMEMBERED in f for f in result.flags)
             row[5] = max(row[5], float(np.max(np.minimum(reported, fw.RHO) - (truth + tolerance))))
+            for i in np.flatnonzero(far & (reported < fw.RHO)):  # why a far pair reads below rho: its flags
+                for flag in result.flags[i]:
+                    row[8][flag.name.lower()] = row[8].get(flag.name.lower(), 0) + 1
             if monitor.memory is not None:
                 row[7].append(certified_by_band(monitor, frame))
     return out
@@ -113,6 +122,8 @@ def main() -> None:
     parser.add_argument("--step", type=int, default=3, help="query every step-th frame of the two cases")
     parser.add_argument("--exact", action="store_true",
                         help="the simulation's noise-free frames and cameras without a noise margin (a diagnosis)")
+    parser.add_argument("--calibrated", action="store_true",
+                        help="with --exact: no calibration margin either (fusion_margin 0, fusion_pixels 0)")
     args = parser.parse_args()
     names = args.scene or ["scenario_b.yaml", "scenario_b_four.yaml"]
     bands = "  ".join(f"{lo * 100:g}-{hi * 100:g} cm" for lo, hi in zip(BANDS[:-1], BANDS[1:]))
@@ -120,16 +131,20 @@ def main() -> None:
           f"{'remembered':>10s} {'largest excess':>15s} {'ms per set':>10s}   certified free by distance from the "
           f"padded capsules: {bands}")
     for path in fw.scene_paths(tuple(names)):
-        rows = probe(path, args.step, args.exact).items()
-        for name, (far, below, ee_far, ee_below, kept, excess, seconds, shares) in rows:
+        rows = probe(path, args.step, args.exact, args.calibrated).items()
+        for name, (far, below, ee_far, ee_below, kept, excess, seconds, shares, flags) in rows:
             certified = "  ".join(f"{share:9.1%}" for share in np.mean(shares, axis=0)) if shares else "-"
-            print(f"{path.stem + (' exact' if args.exact else ''):22s} {name:14s} {below:>6d}/{far:<5d} {below / max(far, 1):6.1%} "
+            label = path.stem + (" exact" if args.exact else "") + (" calibrated" if args.calibrated else "")
+            print(f"{label:22s} {name:14s} {below:>6d}/{far:<5d} {below / max(far, 1):6.1%} "
                   f"{ee_below:>5d}/{ee_far:<5d} {kept:10d} {excess * 1e3:+11.1f} mm "
                   f"{np.median(seconds) * 1e3:10.1f}   {certified}", flush=True)
+            print(f"{'':37s} flags of those below rho: "
+                  f"{', '.join(f'{k} {v}' for k, v in sorted(flags.items(), key=lambda x: -x[1])) or 'none'}")
 
 
 if __name__ == "__main__":
     import sys
 
-    with report(__file__, name="probe_memory_robot_exact" if "--exact" in sys.argv else None):
+    diagnosis = "_exact" * ("--exact" in sys.argv) + "_calibrated" * ("--calibrated" in sys.argv)
+    with report(__file__, name=f"probe_memory_robot{diagnosis}" if diagnosis else None):
         main()
