@@ -523,33 +523,27 @@ class DistanceMonitor:
             if cached is None or len(cached[0]) != len(key) or any(a is not b for a, b in zip(cached[0], key)):
                 secondaries = {other: (usable[other].free if other in usable else None) for other in grid.secondaries}
                 state = usable[name]
+                zone, shell = self._robot_zone_and_shell(state)
                 cached = self._fused_frames[name] = (key, FusedFrames(
                     grid, self.rig, state.occupancy, secondaries, robot_far=state.robot_far,
                     margin=self.fusion_margin, pad=self.fusion_pixels,
                     robot_tolerance=self.self_filter_tolerance, check=False, robot_near=state.robot_near,
                     robot_exit=state.robot_exit, remembered=self._remembered_free(usable),
-                    robot_zone=self._robot_zone(state), robot_shell=self._robot_shell(state)))
+                    robot_zone=zone, robot_shell=shell))
             out.append(cached[1])
         return tuple(out)
 
-    def _robot_zone(self, state: "_CameraFrame"):
-        """(capsules, thickness) for FusedFrames' robot zone: the robot's capsules when ``state``'s frame was
-        captured ((n, 7) world frame: p0, p1, radius with the padding) and ``robot_zone``; None without a robot or
-        with ``robot_zone=0``."""
-        if not self.robot_zone or self.robot is None or state.joints is None:
-            return None
-        capsules = self.robot.capsules_world(state.joints, check=False)
-        return np.array([c.p0 + c.p1 + (c.radius,) for c in capsules]), self.robot_zone
-
-    def _robot_shell(self, state: "_CameraFrame"):
-        """(n, 7) world frame, metres: capsules that hold the robot as rendered when ``state``'s frame was captured
-        (the padded capsules, grown by how far the rendered geometry reaches beyond them), for FusedFrames' shell
-        round the links a ray meets after its first; None without a robot."""
+    def _robot_zone_and_shell(self, state: "_CameraFrame") -> tuple:
+        """(zone, shell) for FusedFrames, from the robot's capsules when ``state``'s frame was captured ((n, 7) world
+        frame: p0, p1, radius with the padding): the robot zone, (capsules, ``robot_zone``), None with
+        ``robot_zone=0``; and the shell round the links a ray meets after its first, the capsules grown by how far
+        the rendered geometry reaches beyond them. (None, None) without a robot or joints."""
         if self.robot is None or state.joints is None:
-            return None
-        capsules = self.robot.capsules_world(state.joints, check=False)
-        grow = self._silhouette.beyond_capsules
-        return np.array([c.p0 + c.p1 + (c.radius + grow,) for c in capsules])
+            return None, None
+        capsules = np.array([c.p0 + c.p1 + (c.radius,) for c in self.robot.capsules_world(state.joints, check=False)])
+        shell = capsules.copy()
+        shell[:, 6] += self._silhouette.beyond_capsules
+        return ((capsules, self.robot_zone) if self.robot_zone else None), shell
 
     def _remembered_free(self, usable: dict):
         """(free voxels, box) for FusedFrames: what the memory certifies free at the latest capture time of the

@@ -137,7 +137,7 @@ def answers(case, robot):
                                **robot_exit)
 
     old = fused()
-    checked = fused(robot_exit=principal.robot_exit, robot_shell=monitor._robot_shell(principal))
+    checked = fused(robot_exit=principal.robot_exit, robot_shell=monitor._robot_zone_and_shell(principal)[1])
     return result, old, checked, tl.expect(case, robot, rig, RHO)
 
 

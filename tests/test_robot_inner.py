@@ -12,7 +12,7 @@ import pytest
 import trimesh
 
 import depthguard as dg
-from depthguard.freespace import VoxelBox, robot_inside_voxels
+from depthguard.freespace import robot_inside_voxels
 from depthguard.rendering import Renderer
 from depthguard.robots import RobotModel
 from depthguard.robots._capsules import LinkCapsule

@@ -5,9 +5,9 @@ possibly occupied, the space hidden behind and between the robot's links include
 Sound by construction, up to the concessions the monitor was built with (each flagged per configuration): the spheres
 (:meth:`RobotModel.with_surface_points`) cover every moving link's padded capsule; each sphere's distance is the
 monitor's fully conservative distance, ``min(distance, blind_distance)`` (with one camera, the space behind the
-robot counts; the depth grid checks it, between two links included); and the pixel grid's discretisation, up to 2.5 pixel footprints at the
-sphere's depth in the coarsest camera plus 1 mm (the judges' tolerance, ``tests/thin_limbs.py``), is added to every
-radius. A configuration judged free therefore has nothing possibly occupied inside its padded capsules, except space a
+robot counts; the depth grid checks it, between two links included); and the pixel grid's discretisation, up to 2.5
+pixel footprints at the sphere's depth in the coarsest camera plus 1 mm (the judges' tolerance,
+``tests/thin_limbs.py``), is added to every radius. A configuration judged free therefore has nothing possibly occupied inside its padded capsules, except space a
 concession counted free, and that concession's flag is on it.
 """
 

@@ -241,7 +241,6 @@ class FusedFrames:
             invalid_pixels={camera.name: principal.invalid_pixels},
         )
 
-
     def kernel_state(self, free_run=None, behind_run=None) -> grid_kernels.GridState:
         """The fused kernels' :class:`~depthguard.kernels.depthgrid.GridState` of these frames (their cells' classes
         so far included); ``free_run``, ``behind_run``: (H, W) int64 runs in place of the frames' own (for tests and

@@ -3,7 +3,14 @@ could next be in each voxel, so that space seen free a moment ago stays free whi
 for speed and separation monitoring, where in the possibly occupied space a ball the size of the cameras' detection
 capability fits."""
 
-from depthguard.freespace._detectable import closed_faces, DetectableSpace, FreeSources, robot_voxels, solid_voxels
+from depthguard.freespace._detectable import (
+    closed_faces,
+    DetectableSpace,
+    FreeSources,
+    robot_inside_voxels,
+    robot_voxels,
+    solid_voxels,
+)
 from depthguard.kernels.detectable import or_coarse
 from depthguard.freespace._near import surface_voxels, voxels_within
 from depthguard.freespace._memory import (
@@ -11,7 +18,6 @@ from depthguard.freespace._memory import (
     FreeSpaceMemory,
     VoxelBox,
     remember_frames,
-    robot_inside_voxels,
     seen_free_voxels,
     squared_distance_transform,
 )

@@ -88,13 +88,8 @@ class FreeSources:
             detectable_kernels.or_coarse(free, self.remembered[0], int(self.remembered[1]))
         if self.robot is not None:
             capsules, zone = self.robot
-            robot = None
-            for pose in capsules:
-                mask = np.zeros(box.shape, dtype=bool)
-                robot_voxels(box, pose, zone, mask)
-                robot = mask if robot is None else robot & mask
-            if robot is not None:
-                free |= robot
+            if len(capsules):
+                free |= robot_voxels_at_every(box, capsules, zone)
         return free
 
 
@@ -282,6 +277,26 @@ def robot_voxels(box: VoxelBox, capsules: np.ndarray, zone: float, out: np.ndarr
     segment."""
     capsules = np.ascontiguousarray(capsules, dtype=np.float64).reshape(-1, 7)
     mark_capsule_voxels(np.asarray(box.lo, dtype=np.float64), float(box.voxel), capsules, float(zone), out)
+
+
+def robot_voxels_at_every(box: VoxelBox, poses, zone: float) -> np.ndarray:
+    """(nx, ny, nz) bool: the voxels that :func:`robot_voxels` marks for every one of ``poses`` (each an (n, 7)
+    capsule array, world frame, metres) with ``zone`` metres: the space the robot holds at all of those moments. All
+    False for no pose."""
+    out = None
+    for capsules in poses:
+        marked = np.zeros(box.shape, dtype=bool)
+        robot_voxels(box, capsules, zone, marked)
+        out = marked if out is None else out & marked
+    return np.zeros(box.shape, dtype=bool) if out is None else out
+
+
+def robot_inside_voxels(box: VoxelBox, inner) -> np.ndarray:
+    """(nx, ny, nz) bool: the voxels of ``box`` that lie wholly inside the robot at each of several moments: for each
+    (k, 7) array of ``inner`` (capsules inside the links, world frame, metres: p0, p1, radius;
+    :meth:`depthguard.robots.RobotModel.inner_capsules_world`), the voxels wholly within one of its capsules, and of
+    those the voxels marked at every moment. All False for no moment."""
+    return robot_voxels_at_every(box, inner, 0.0)
 
 
 def solid_voxels(box: VoxelBox, solids, out: np.ndarray, grow: float = 0.0) -> None:

@@ -367,8 +367,8 @@ def remember_frames(memory: "FreeSpaceMemory", t: float, cameras: Sequence[Pinho
     not give to the robot (:func:`depthguard.freespace.surface_voxels`). A surface measured where the memory
     remembers free space moved faster than v_max: the memory forgets that voxel, and these frames do not clear it. A
     measurement of the robot neither clears nor forgets. ``robot``: (nx, ny, nz) bool or None, the voxels wholly
-    inside the robot's links at t (Robot_k: no person is there; :func:`robot_inside_voxels`). Returns the voxels
-    these frames saw free ((nx, ny, nz) bool)."""
+    inside the robot's links at t (Robot_k: no person is there; :func:`depthguard.freespace.robot_inside_voxels`).
+    Returns the voxels these frames saw free ((nx, ny, nz) bool)."""
     seen = seen_free_voxels(memory.box, cameras, free_images, margin=margin, pad=pad, check=False)
     surfaces = np.zeros(memory.box.shape, dtype=bool)
     for mark in surfaces_of:
@@ -378,18 +378,3 @@ def remember_frames(memory: "FreeSpaceMemory", t: float, cameras: Sequence[Pinho
     memory.update(t, seen, robot, check=False)
     return seen
 
-
-def robot_inside_voxels(box: VoxelBox, inner: Sequence[np.ndarray]) -> np.ndarray:
-    """(nx, ny, nz) bool: the voxels of ``box`` that lie wholly inside the robot at each of several moments: for each
-    (k, 7) array of ``inner`` (capsules inside the links, world frame, metres: p0, p1, radius;
-    :meth:`depthguard.robots.RobotModel.inner_capsules_world`), the voxels wholly within one of its capsules, and of
-    those the voxels marked at every moment. All False for no moment."""
-    from depthguard.kernels.detectable import mark_capsule_voxels
-
-    out = None
-    for capsules in inner:
-        marked = np.zeros(box.shape, dtype=bool)
-        mark_capsule_voxels(np.asarray(box.lo, dtype=np.float64), float(box.voxel),
-                            np.ascontiguousarray(capsules, dtype=np.float64).reshape(-1, 7), 0.0, marked)
-        out = marked if out is None else out & marked
-    return np.zeros(box.shape, dtype=bool) if out is None else out

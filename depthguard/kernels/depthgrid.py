@@ -421,10 +421,10 @@ CLASSIFY_RUN = 8  # cells classified together: neighbours share a face, projecte
 @kernel()
 def classify_run(u, v, k_a, k_b, grid):
     """Classify cells k_a..k_b (at most 64) of principal pixel (u, v) into cells[v, u, k]: 1 when the cell lies in
-    the robot zone (:func:`zoned_cells`), in the shell of a link behind the first (:func:`shell_cells`), or some secondary camera saw through the whole cell, else 3 when the
-    free-space memory (``memory``, :func:`remembered_cells`) certifies every voxel the cell touches, else 2 (occupied,
-    or hidden from every camera). Each face between two cells
-    is projected once per camera.
+    the robot zone (:func:`zoned_cells`), in the shell of a link behind the first (:func:`shell_cells`), or some
+    secondary camera saw through the whole cell, else 3 when the free-space memory (``memory``,
+    :func:`remembered_cells`) certifies every voxel the cell touches, else 2 (occupied, or hidden from every camera).
+    Each face between two cells is projected once per camera.
 
     A camera is first asked about the whole run at once: the run's footprint lies within the box of its two end
     faces' corners and its largest depth at one of them (depth is linear along each corner ray), so if the camera
@@ -1017,7 +1017,7 @@ def fused_region(X, Y, Z, rho, view, unseen_occupied, near_eps, inside_tol, span
     out_direction (3,)."""
     height, width = view.z_start.shape
     fx, fy, cx, cy, z_min, z_max = view.fx, view.fy, view.cx, view.cy, view.z_min, view.z_max
-    f, unseen_here, unseen_d, nx, ny, nz, u_lo, u_hi, v_lo, v_hi = surveillance_region(
+    f, unseen_here, unseen_d, nx, ny, nz, _, _, v_lo, v_hi = surveillance_region(
         X, Y, Z, rho, width, height, fx, fy, cx, cy, z_min, z_max, unseen_occupied, near_eps, inside_tol, spans,
         out_direction)
     region[0] = f

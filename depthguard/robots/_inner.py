@@ -34,14 +34,15 @@ _CLEARANCE = 1e-3
 
 #: Three ray directions for the inside test (irrational-looking, so that no ray runs along an edge of a regular mesh).
 _RAYS = np.array([[0.5773, 0.5774, 0.5775], [-0.8017, 0.2673, 0.5345], [0.1231, -0.9847, 0.1231]])
+_RAYS = _RAYS / np.linalg.norm(_RAYS, axis=1)[:, None]
 
 
 def inner_capsules(mesh: trimesh.Trimesh, capsule: LinkCapsule, step: float) -> list[LinkCapsule]:
     """Capsules inside ``mesh`` (link frame, metres) along the axis of ``capsule`` (the link's enclosing capsule,
     same frame), sampled every ``step`` metres at most: for each sample inside the closed mesh, the ball of its
-    distance to the mesh less 1 mm, and for each two neighbouring samples inside it, the capsule between them whose radius is
-    the smaller of their distances less half their spacing (when positive). Their union lies inside the mesh (see
-    the module docstring); empty when no sample is inside. Each has ``padding`` 0."""
+    distance to the mesh less 1 mm, and for each two neighbouring samples inside it, the capsule between them whose
+    radius is the smaller of their distances less half their spacing (when positive). Their union lies inside the
+    mesh (see the module docstring); empty when no sample is inside. Each has ``padding`` 0."""
     triangles = closed_triangles(mesh)
     if triangles is None:
         return []
@@ -117,8 +118,7 @@ def _loops(edges: np.ndarray) -> list[list[int]]:
 def points_inside(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """(n,) bool: whether each of the (n, 3) points lies inside the closed surface of (m, 3, 3) triangles: an odd
     number of crossings along each of three rays (all three must agree)."""
-    votes = np.stack([_crossings(points, triangles, ray) % 2 == 1 for ray in _RAYS / np.linalg.norm(_RAYS, axis=1)[:,
-                                                                                                          None]])
+    votes = np.stack([_crossings(points, triangles, ray) % 2 == 1 for ray in _RAYS])
     return votes.all(axis=0)
 
 
