@@ -103,6 +103,8 @@ class DistanceMonitor:
 
             self.memory = FreeSpaceMemory(VoxelBox(rig.workspace[0], rig.workspace[1], settings.memory_voxel),
                                           settings.v_max)
+            if robot is not None:  # the robot's inside (Robot_k) is found once per model: here, not on a first frame
+                robot.inner_capsules_world(np.zeros(robot.n_joints), check=False)
         self.detectable = None
         self.hidden_band = 0.0  # metres (detection_capability only): see _hidden_band
         self._static_voxels = None
