@@ -20,7 +20,6 @@ from depthguard.scenes import Box, render_depth
 from depthguard_lab.simulation import standing_person
 from depthguard.transforms import look_at
 
-SQRT3 = math.sqrt(3.0)
 
 
 # ------------------------------------------------------------------------------------------------------- the judges
@@ -286,12 +285,9 @@ def test_memory_steps_against_brute_force_box_distances():
         memory.update(t, seen, robot)
         exact, u = exact_arrival(box, v_max, old, t, seen, no_robot)
         ours = memory.arrival
+        # Exactly the recursion with box-to-box distances (never later, so never optimistic; float rounding only).
         assert np.all(ours <= exact)
-        assert np.all(ours >= exact - box.voxel * SQRT3 / v_max - 1e-9)
-        # What the memory computes, with scipy's distance transform: the U_k voxels get t_k.
-        d = box.voxel * np.sqrt(scipy_squared(u))
-        np.testing.assert_allclose(ours, np.maximum(old, t + np.maximum(d - box.voxel * SQRT3, 0) / v_max),
-                                   rtol=0, atol=1e-9)
+        np.testing.assert_allclose(ours, exact, rtol=0, atol=1e-9)
         assert np.all(ours[u] == t)
         judge, _ = exact_arrival(box, v_max, judge, t, seen, no_robot)
         assert np.all(ours <= judge)
@@ -321,10 +317,10 @@ def test_never_seen_voxels_stay_not_free():
 
 
 @pytest.mark.parametrize("t0", [100.0, 1.7e9])
-def test_a_voxel_seen_with_clearance_r_stays_free_until_r_minus_the_diagonal(t0):
-    """Everything seen at t0 except one voxel: a voxel whose centre lies r from the nearest unseen voxel centre (or
-    the layer outside the box) stays free exactly while t < t0 + (r - s sqrt(3)) / v_max; never beyond (at epoch
-    times too, where the float sum rounds)."""
+def test_a_voxel_seen_with_clearance_r_stays_free_until_r_over_v_max(t0):
+    """Everything seen at t0 except one voxel: a voxel whose cube lies r from the unseen voxel's cube (or from the
+    outside of the box) stays free exactly while t < t0 + r / v_max; never beyond (at epoch times too, where the
+    float sum rounds)."""
     box = VoxelBox([0, 0, 0], [0.6, 0.6, 0.6], 0.05)  # 12^3
     s, v_max = box.voxel, config.FREESPACE_V_MAX
     seen = np.ones(box.shape, bool)
@@ -333,10 +329,11 @@ def test_a_voxel_seen_with_clearance_r_stays_free_until_r_minus_the_diagonal(t0)
     memory.update(t0, seen)
     idx = np.indices(box.shape)
     n = np.array(box.shape)[:, None, None, None]
-    to_outside = np.minimum(idx + 1, n - idx).min(axis=0)
-    to_hole = np.sqrt((idx[0] - 4) ** 2 + (idx[1] - 6) ** 2 + (idx[2] - 5) ** 2)
+    to_outside = np.minimum(idx, n - 1 - idx).min(axis=0)  # voxels between the cube and the box's face
+    gaps = np.maximum(np.abs(idx - np.array([4, 6, 5])[:, None, None, None]) - 1, 0)
+    to_hole = np.sqrt((gaps ** 2).sum(axis=0))
     r = s * np.minimum(to_outside, to_hole)
-    until = np.maximum(r - s * SQRT3, 0.0) / v_max  # seconds after t0
+    until = r / v_max  # seconds after t0
     arrival = memory.arrival
     assert np.all(arrival - t0 <= until)  # exact subtraction: arrival and t0 are close
     np.testing.assert_allclose(arrival - t0, until, rtol=0, atol=1e-9 if t0 < 1e6 else 1e-6)
@@ -413,7 +410,7 @@ def test_memory_refuses_bad_arguments():
             call()
         assert info.value.field == "t"
     assert memory.time == 2.0
-    assert memory.nbytes == box.size * 12
+    assert memory.nbytes == box.size * 14
     with pytest.raises(ValueError):
         memory.arrival[0, 0, 0] = 1e9  # read-only
 

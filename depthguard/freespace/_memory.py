@@ -22,7 +22,6 @@ from depthguard.validation import check_real, short_repr
 from depthguard.kernels import freespace as freespace_kernels
 from depthguard.freespace._buffers import reusable
 
-_SQRT3 = math.sqrt(3.0)
 
 
 class VoxelBox:
@@ -257,21 +256,23 @@ class FreeSpaceMemory:
     time t_k with the voxels seen entirely free now and those entirely inside the robot makes
 
         U_k = (arrival <= t_k) & ~seen & ~robot                     (where a person may be now)
-        arrival[x] = max(arrival[x], t_k + max(0, D(x, U_k) - voxel * sqrt(3)) / v_max)
+        arrival[x] = max(arrival[x], t_k + D(x, U_k) / v_max)
 
-    with D the Euclidean distance between voxel centres to the nearest voxel of U_k or of the layer just outside the
-    box (a person may come from outside). Two voxels' boxes are at least their centres' distance minus voxel *
-    sqrt(3) apart, so the new term is a lower bound of the true arrival from U_k; the old arrival time stays a lower
-    bound too (what is seen later only rules out more), so the larger of the two is kept. Keeping it means a frame
-    that adds nothing (a stale camera) leaves the memory as it was instead of costing another voxel * sqrt(3) of
-    free space. U_k voxels get t_k.
+    with D the distance from voxel x's cube to the nearest cube of U_k or to the outside of the box (a person may come
+    from outside): the exact box-to-box distance, found as the distance between voxel centres to the nearest voxel of
+    U_k grown by one voxel in every direction (along each axis, two cubes |d| voxels apart are max(|d| - 1, 0) apart;
+    the exact Euclidean distance transform of that grown set, in integers). So the new term is the true arrival from
+    U_k; the old arrival time stays a lower bound too (what is seen later only rules out more), so the larger of the
+    two is kept. Keeping it means a frame that adds nothing (a stale camera) leaves the memory as it was. U_k voxels
+    and their neighbours get t_k.
 
     Args:
         box: the voxels (:class:`VoxelBox`).
         v_max: the fastest a person may move, metres/second, finite and > 0 (``config.FREESPACE_V_MAX``). A body part
             moving faster is outside the guarantee.
 
-    Memory: 8 bytes a voxel for ``arrival`` and 4 for the distance transform's work space (``nbytes``).
+    Memory: 8 bytes a voxel for ``arrival``, 4 for the distance transform's work space and 2 for the grown set
+    (``nbytes``).
     """
 
     def __init__(self, box: VoxelBox, v_max: float = config.FREESPACE_V_MAX):
@@ -280,6 +281,8 @@ class FreeSpaceMemory:
                                 field="v_max")
         self._arrival = np.full(box.shape, -np.inf)
         self._d2 = np.empty(box.shape, dtype=np.int32)
+        self._grown = np.empty(box.shape, dtype=bool)  # U grown by one voxel (the distance transform's sites)
+        self._scratch = np.empty(box.shape, dtype=bool)
         self._time: float | None = None
         self._no_robot = np.zeros((1, 1, 1), dtype=bool)
 
@@ -298,7 +301,7 @@ class FreeSpaceMemory:
     @property
     def nbytes(self) -> int:
         """Bytes the memory holds: the arrival times and the distance transform's work space."""
-        return self._arrival.nbytes + self._d2.nbytes
+        return self._arrival.nbytes + self._d2.nbytes + self._grown.nbytes + self._scratch.nbytes
 
     def update(self, t: float, seen: np.ndarray, robot: np.ndarray | None = None, check: bool = True) -> None:
         """Take in the frames of time ``t``.
@@ -326,12 +329,13 @@ class FreeSpaceMemory:
         seen = np.require(seen, np.bool_, ["C", "W"])  # as in seen_free_voxels: one type for numba
         if use_robot:
             robot = np.require(robot, np.bool_, ["C", "W"])
-        freespace_kernels.last_axis_of_memory(self._arrival, seen, robot if use_robot else self._no_robot, use_robot, t,
-                                     self._d2)
+        freespace_kernels.grown_possibly_occupied(self._arrival, seen, robot if use_robot else self._no_robot,
+                                                  use_robot, t, self._grown, self._scratch)
+        freespace_kernels.last_axis_of_mask(self._grown, self._d2)
         freespace_kernels.middle_axis(self._d2)
         freespace_kernels.first_axis(self._d2)
-        freespace_kernels.advance_arrival(self._d2, t, self.box.voxel, self.box.voxel * _SQRT3, self.v_max,
-                                 config.FREESPACE_ROUNDING, self._arrival)
+        freespace_kernels.advance_arrival(self._d2, t, self.box.voxel, 0.0, self.v_max, config.FREESPACE_ROUNDING,
+                                          self._arrival)
         self._time = t
 
     def forget(self, occupied: np.ndarray) -> None:

@@ -298,22 +298,42 @@ def last_axis_of_mask(mask, d2):
 
 
 @kernel(parallel=True)
-def last_axis_of_memory(arrival, seen, robot, use_robot, t, d2):
-    """Pass 1 for the memory's update at time t: the sites are U = (arrival <= t) & ~seen & ~robot (robot only when
-    use_robot), the voxels where a person may be now. arrival: (nx, ny, nz) float64 seconds; seen, robot: bool
-    (robot may be any shape when not use_robot); use_robot: bool; t: float, seconds, the frames' clock; d2:
-    (nx, ny, nz) int32, written."""
+def grown_possibly_occupied(arrival, seen, robot, use_robot, t, grown, scratch):
+    """grown = U grown by one voxel in every direction (the 26 neighbours), the layer outside the box counting as U;
+    U = (arrival <= t) & ~seen & ~robot (robot only when use_robot), the voxels where a person may be now. The
+    distance between voxel centres from a voxel to the nearest voxel of ``grown`` is exactly its cube's distance to
+    the nearest cube of U (or to the outside): along each axis max(|d| - 1, 0) voxels. arrival: (nx, ny, nz) float64
+    seconds; seen, robot: bool (robot may be any shape when not use_robot); use_robot: bool; t: float, seconds, the
+    frames' clock; grown, scratch: (nx, ny, nz) bool, written (scratch: work space)."""
     nx, ny, nz = arrival.shape
-    for p in prange(nx * ny):
+    for p in prange(nx * ny):  # U, grown along the last axis, into scratch
         ij = np.int64(p)
         i = ij // ny
         j = ij - i * ny
-        last = -1
+        before = True  # the layer outside the box
+        here = arrival[i, j, 0] <= t and not seen[i, j, 0] and not (use_robot and robot[i, j, 0])
         for k in range(nz):
-            if arrival[i, j, k] <= t and not seen[i, j, k] and not (use_robot and robot[i, j, k]):
-                last = k
-            d2[i, j, k] = k - last
-        _sweep_back(d2, i, j, nz)
+            after = True
+            if k + 1 < nz:
+                after = arrival[i, j, k + 1] <= t and not seen[i, j, k + 1] and not (use_robot and robot[i, j, k + 1])
+            scratch[i, j, k] = before or here or after
+            before = here
+            here = after
+    for p in prange(nx):  # along the middle axis, into grown
+        i = np.int64(p)
+        for j in range(ny):
+            for k in range(nz):
+                grown[i, j, k] = j == 0 or j == ny - 1 or scratch[i, j - 1, k] or scratch[i, j, k] or scratch[i, j + 1, k]
+    for p in prange(nx):  # along the first axis, into scratch, then back
+        i = np.int64(p)
+        for j in range(ny):
+            for k in range(nz):
+                scratch[i, j, k] = i == 0 or i == nx - 1 or grown[i - 1, j, k] or grown[i, j, k] or grown[i + 1, j, k]
+    for p in prange(nx):
+        i = np.int64(p)
+        for j in range(ny):
+            for k in range(nz):
+                grown[i, j, k] = scratch[i, j, k]
 
 
 @kernel(inline=True)

@@ -1,0 +1,173 @@
+"""The bound: what an ideal sound free-space memory clears next to the robot, from the simulation's exact geometry
+(SPEC §8a, issue 35 item 6).
+
+SPEC §8a's recursion, F_k = erode(F_{k-1}, v_max (t_k - t_{k-1})) ∪ Seen_k ∪ Robot_k, is run on the points of a
+regular grid over the workspace with what no depthguard code can know:
+
+- ``Seen_k``: a grid point is seen free when some camera's exact ray (the simulation's noise-free render,
+  ``SimFrame.depth_exact``, on the pixel the point projects to) passes it before the first surface: its optical depth
+  is below that pixel's depth, less the camera's noise margin k sigma(d) when ``noise_margin`` (what the cameras'
+  noise costs even an ideal memory), and nothing else (no calibration margin, no footprint, no voxel rounding);
+- ``Robot_k``: the points inside the robot's collision meshes at the frame's joints (each link's mesh with its open
+  ends closed, voxelised at ``robot_pitch`` and filled: exact to that pitch), and inside the known background
+  (floor, pedestal: no person is inside a solid);
+- the erosion: a point's earliest possible arrival of a person is the frame's time plus its Euclidean distance to the
+  nearest possibly-occupied point (or to the outside of the workspace, but for its floor) over v_max, and a point
+  where a camera sees a surface that is not the robot's is forgotten (something is there now).
+
+A point is possibly occupied at t_k when its arrival is at most t_k and it is neither seen free nor inside the robot
+or a solid. :meth:`IdealMemory.distances` answers, for query points, how far the nearest possibly-occupied point
+is, outside the robot's padded capsules (the space fusion gives to the robot by default): the bound the project's
+fused answers are measured against (``benchmarks/probe_memory_robot.py``). The grid's points stand for themselves
+(no rounding to voxels): this is generous, as a bound should be.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+from scipy import ndimage
+
+from depthguard import config
+from depthguard.robots._inner import closed_triangles
+
+#: Default grid spacing, metres.
+SPACING = 0.03
+#: Pitch of the robot links' voxelised volume, metres.
+ROBOT_PITCH = 0.005
+
+
+class IdealMemory:
+    """SPEC §8a's memory on exact geometry, for one simulated workcell (:func:`depthguard_lab.simulation.load_workcell`).
+
+    Args:
+        workcell: the workcell (its rig, robot, workspace, background and labels).
+        spacing: grid spacing, metres.
+        noise_margin: subtract each camera's noise margin from its exact depths (else none).
+        v_max: metres/second (``config.FREESPACE_V_MAX``).
+    """
+
+    def __init__(self, workcell, spacing: float = SPACING, noise_margin: bool = False,
+                 v_max: float = config.FREESPACE_V_MAX, robot_volume: str = "mesh", rounding: bool = False,
+                 corners: bool = False):
+        lo, hi = (np.asarray(c, dtype=np.float64) for c in workcell.rig.workspace)
+        self.spacing, self.v_max, self.noise_margin = float(spacing), float(v_max), bool(noise_margin)
+        self.shape = tuple(int(n) for n in np.maximum(np.floor((hi - lo) / spacing), 1))
+        self.lo = lo
+        axes = [lo[i] + (np.arange(self.shape[i]) + 0.5) * spacing for i in range(3)]
+        self.points = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        self.robot = workcell.robot
+        self.robot_volume, self.rounding, self.corners = robot_volume, rounding, corners
+        self.cameras = dict(workcell.rig.cameras)
+        self._robot_labels = {i for i, (name, _) in enumerate(workcell.labels()) if name.startswith("robot/")}
+        self._links = {}
+        for link, mesh in self.robot.collision_meshes.items():
+            triangles = closed_triangles(mesh)
+            if triangles is not None:
+                mesh = trimesh.Trimesh(vertices=triangles.reshape(-1, 3),
+                                       faces=np.arange(3 * len(triangles)).reshape(-1, 3))
+                mesh.merge_vertices()
+            self._links[link] = mesh.voxelized(ROBOT_PITCH).fill()
+        solid = np.zeros(len(self.points), dtype=bool)
+        for box in workcell.background_parts():
+            solid |= box.distance(self.points) <= 0.0
+        self.solid = solid.reshape(self.shape)
+        self.arrival = np.full(self.shape, -np.inf)
+        self.ever_seen = np.zeros(self.shape, dtype=bool)
+        self.possibly = np.ones(self.shape, dtype=bool)
+        self.seen = np.zeros(self.shape, dtype=bool)
+
+    def inside_robot(self, joints) -> np.ndarray:
+        """(nx, ny, nz) bool: the grid points inside the robot's links at ``joints``."""
+        out = np.zeros(len(self.points), dtype=bool)
+        if self.robot_volume == "inner":
+            for p0, p1, r in ((c[0:3], c[3:6], c[6]) for c in self.robot.inner_capsules_world(joints)):
+                axis = p1 - p0
+                s = np.clip((self.points - p0) @ axis / max(float(axis @ axis), 1e-12), 0.0, 1.0)
+                out |= np.linalg.norm(self.points - (p0 + s[:, None] * axis), axis=1) < r - 0.5 * 3 ** 0.5 * self.spacing
+            return out.reshape(self.shape)
+        poses = self.robot.link_poses(joints)
+        for link, grid in self._links.items():
+            T = np.asarray(poses[link])
+            local = (self.points - T[:3, 3]) @ T[:3, :3]
+            lo, hi = grid.bounds
+            near = np.flatnonzero(np.all((local >= lo) & (local <= hi), axis=1))
+            if len(near):
+                out[near[grid.is_filled(local[near])]] = True
+        return out.reshape(self.shape)
+
+    def update(self, time: float, joints, depth_exact: dict, labels: dict) -> None:
+        """Take in one frame: its time (seconds), joints, each camera's exact depth ((h, w) metres, 0 = nothing)
+        and label image ((h, w), indices into the workcell's labels)."""
+        seen = np.zeros(len(self.points), dtype=bool)
+        offsets = [np.zeros(3)] if not self.corners else \
+            [0.5 * self.spacing * np.array(c) for c in np.ndindex(2, 2, 2) for c in [2 * np.array(c) - 1]]
+        surfaces = np.zeros(len(self.points), dtype=bool)
+        for name, camera in self.cameras.items():
+            depth = np.asarray(depth_exact[name], dtype=np.float64)
+            h, w = depth.shape
+            seen_here = np.ones(len(self.points), dtype=bool)
+            for offset in offsets:
+                local = camera.world_to_camera(self.points + offset)
+                z = local[:, 2]
+                front = z > 1e-3
+                u = np.full(len(z), -1, dtype=np.int64)
+                v = np.full(len(z), -1, dtype=np.int64)
+                u[front] = np.rint(camera.fx * local[front, 0] / z[front] + camera.cx).astype(np.int64)
+                v[front] = np.rint(camera.fy * local[front, 1] / z[front] + camera.cy).astype(np.int64)
+                inside = front & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+                d = depth[v[inside], u[inside]]
+                reach = np.where(d > 0.0, d - (camera.noise.margin(d) if self.noise_margin else 0.0), np.inf)
+                ok = np.zeros(len(z), dtype=bool)
+                ok[np.flatnonzero(inside)[z[inside] < reach]] = True
+                seen_here &= ok
+            seen |= seen_here
+            # what this camera sees that is not the robot: a surface is there now
+            label = np.asarray(labels[name])
+            hit = (depth > 0.0) & ~np.isin(label, list(self._robot_labels))
+            rows, cols = np.nonzero(hit)
+            zs = depth[rows, cols]
+            rays = np.stack([(cols - camera.cx) / camera.fx * zs, (rows - camera.cy) / camera.fy * zs, zs], axis=1)
+            T = np.linalg.inv(camera.T_camera_world)
+            world = rays @ T[:3, :3].T + T[:3, 3]
+            index = np.floor((world - self.lo) / self.spacing).astype(np.int64)
+            keep = np.all((index >= 0) & (index < self.shape), axis=1)
+            surfaces[np.ravel_multi_index(index[keep].T, self.shape)] = True
+        seen = (seen & ~surfaces).reshape(self.shape)
+        self.arrival.reshape(-1)[surfaces] = -np.inf
+        free = seen | self.inside_robot(joints) | self.solid
+        possibly = (self.arrival <= time) & ~free
+        # distance to the nearest possibly-occupied point, or to outside the workspace but for its floor
+        padded = np.ones(tuple(n + 2 for n in self.shape), dtype=bool)
+        padded[1:-1, 1:-1, 1:-1] = ~possibly
+        padded[:, :, 0] = True
+        distance = ndimage.distance_transform_edt(padded)[1:-1, 1:-1, 1:-1] * self.spacing
+        if self.rounding:
+            distance = np.maximum(distance - 3 ** 0.5 * self.spacing, 0.0)
+        np.maximum(self.arrival, time + distance / self.v_max, out=self.arrival)
+        self.possibly, self.seen = possibly, seen
+        self.ever_seen |= seen
+
+    def distances(self, points: np.ndarray, capsules, rho: float) -> tuple[np.ndarray, list[str]]:
+        """For each of the (m, 3) query points: the distance (metres, inf beyond ``rho``) to the nearest point
+        possibly occupied now outside the padded ``capsules`` (:class:`depthguard.scenes.Capsule` list), and where
+        that point is: "never seen" (no camera has seen it free yet), "seen before" (seen free earlier, reached by
+        the erosion since), or "" (none within rho)."""
+        candidates = np.flatnonzero(self.possibly.reshape(-1))
+        where = self.points[candidates]
+        for capsule in capsules:
+            p0, p1 = np.asarray(capsule.p0), np.asarray(capsule.p1)
+            axis = p1 - p0
+            s = np.clip((where - p0) @ axis / max(float(axis @ axis), 1e-12), 0.0, 1.0)
+            outside = np.linalg.norm(where - (p0 + s[:, None] * axis), axis=1) > capsule.radius
+            candidates, where = candidates[outside], where[outside]
+        out = np.full(len(points), np.inf)
+        kinds = [""] * len(points)
+        ever = self.ever_seen.reshape(-1)
+        for i, point in enumerate(np.asarray(points, dtype=np.float64)):
+            d = np.linalg.norm(where - point, axis=1)
+            if len(d) and d.min() <= rho:
+                j = int(np.argmin(d))
+                out[i] = d[j]
+                kinds[i] = "seen before" if ever[candidates[j]] else "never seen"
+        return out, kinds
