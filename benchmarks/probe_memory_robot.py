@@ -14,6 +14,13 @@ under each row, how many of the far pairs read below rho carry each flag (why th
 
     .venv/bin/python benchmarks/probe_memory_robot.py [--step 3] [--scene scenario_b.yaml ...] [--exact]
 
+Beside them, the bound (issue 35, item 6): ``ideal, exact`` is an ideal sound memory on the simulation's exact
+geometry (:mod:`depthguard_lab.experiments.ideal_memory`: exact ray casts per frame, the robot's exact volume, the
+erosion at v_max, on a grid of ``--ideal-spacing`` points), ``ideal, noise`` the same with each camera's noise margin
+taken off its exact depths; their distances are to the nearest possibly-occupied grid point outside the padded
+capsules, their excess is over the truth alone, and under each, where that point lies ("seen before": seen free
+earlier and reached by the erosion since; "never seen").
+
 ``--exact`` is a diagnosis, not a layout: the simulation's noise-free frames, cameras without a noise margin (and
 without the sensor's dropouts), to show what the noise margin alone costs the memory next to the robot; with
 ``--calibrated`` also without the calibration margin (``fusion_margin`` 0, no pad): the nearest this code comes to
@@ -29,6 +36,7 @@ import numpy as np
 
 import depthguard as dg
 from depthguard_lab.experiments import fusion_workcell as fw
+from depthguard_lab.experiments.ideal_memory import IdealMemory
 from depthguard_lab.experiments.workcell import scene_distance
 from depthguard_lab.simulation import load_workcell, simulate
 from _common import report
@@ -36,6 +44,9 @@ from _common import report
 USEFUL_MARGIN = 0.05  # pairs truly farther than rho + 5 cm
 CONFIGURATIONS = {"no memory": dict(memory=False), "memory 4 cm": dict(memory=True),
                   "memory 2 cm": dict(memory=True, memory_voxel=0.02)}
+#: The bound (issue 35, item 6; :mod:`depthguard_lab.experiments.ideal_memory`): an ideal sound memory on the
+#: simulation's exact geometry, with exact ray casts (the issue's definition) and with the cameras' noise margins.
+IDEALS = {"ideal, exact": False, "ideal, noise": True}
 
 
 def noise_free(rig) -> dg.Rig:
@@ -46,7 +57,7 @@ def noise_free(rig) -> dg.Rig:
     return dg.Rig(cameras, principal=rig.principal, workspace=rig.workspace)
 
 
-def probe(path, step: int, exact: bool = False, calibrated: bool = False) -> dict:
+def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_spacing: float = 0.04) -> dict:
     """configuration -> (far pairs, below rho, end-effector far, below rho, remembered answers, largest excess in
     metres, seconds per set, per measured frame the memory's certified shares by band (:func:`certified_by_band`),
     and how many of the far pairs read below rho carry each flag)."""
@@ -57,11 +68,13 @@ def probe(path, step: int, exact: bool = False, calibrated: bool = False) -> dic
         options.update(fusion_margin=0.0, fusion_pixels=0)
     rig = noise_free(workcell.rig) if exact else workcell.rig
     monitors = {name: dg.DistanceMonitor(rig, **options, **extra) for name, extra in CONFIGURATIONS.items()}
+    ideals = {} if exact else {name: IdealMemory(workcell, spacing=ideal_spacing, noise_margin=noisy)
+                               for name, noisy in IDEALS.items()}
     background = workcell.background_parts()
     principal = workcell.rig.cameras[workcell.rig.principal]
     cases = fw.case_frames(workcell)
     measured = set(cases[::step])
-    out = {name: [0, 0, 0, 0, 0, -np.inf, [], [], {}] for name in monitors}
+    out = {name: [0, 0, 0, 0, 0, -np.inf, [], [], {}] for name in list(monitors) + list(ideals)}
     for frame in simulate(workcell, seed=0, frames=range(max(cases) + 1)):
         points = robot.control_point_positions(frame.joints)
         ask = frame.index in measured
@@ -72,6 +85,20 @@ def probe(path, step: int, exact: bool = False, calibrated: bool = False) -> dic
             depth = np.maximum(principal.world_to_camera(points)[:, 2], 0.1)
             tolerance = 2.5 * (depth + fw.RHO) / principal.fx + 1e-3
             far = truth >= fw.RHO + USEFUL_MARGIN
+        for name, ideal in ideals.items():
+            ideal.update(frame.time, frame.joints, frame.depth_exact, frame.label)
+            if not ask:
+                continue
+            reported, kinds = ideal.distances(points, robot.capsules_world(frame.joints), fw.RHO)
+            row = out[name]
+            row[0] += int(far.sum())
+            row[1] += int((far & (reported < fw.RHO)).sum())
+            row[2] += int(far[-1])
+            row[3] += int(far[-1] and reported[-1] < fw.RHO)
+            row[5] = max(row[5], float(np.max(np.minimum(reported, fw.RHO) - truth)))
+            for i in np.flatnonzero(far & (reported < fw.RHO)):  # which space holds the bound
+                row[8][kinds[i]] = row[8].get(kinds[i], 0) + 1
+            row[7].append(ideal_by_band(ideal, robot, frame))
         for name, monitor in monitors.items():
             start = time.perf_counter()
             prepared = monitor.prepare_set(frames, joints=frame.joints, now=frame.time)
@@ -116,6 +143,16 @@ def certified_by_band(monitor, frame) -> np.ndarray:
     return np.array([free[(gap >= lo) & (gap < hi)].mean() for lo, hi in zip(BANDS[:-1], BANDS[1:])])
 
 
+def ideal_by_band(ideal: IdealMemory, robot, frame) -> np.ndarray:
+    """As :func:`certified_by_band` for the ideal memory: the share of its grid points in each band that it leaves
+    free (not possibly occupied) at the frame."""
+    gap = np.full(len(ideal.points), np.inf)
+    for c in robot.capsules_world(frame.joints):
+        gap = np.minimum(gap, c.distance(ideal.points))
+    free = ~ideal.possibly.reshape(-1)
+    return np.array([free[(gap > lo) & (gap < hi)].mean() for lo, hi in zip(BANDS[:-1], BANDS[1:])])
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", action="append", help="scene YAML (default: scenario_b and scenario_b_four)")
@@ -124,6 +161,7 @@ def main() -> None:
                         help="the simulation's noise-free frames and cameras without a noise margin (a diagnosis)")
     parser.add_argument("--calibrated", action="store_true",
                         help="with --exact: no calibration margin either (fusion_margin 0, fusion_pixels 0)")
+    parser.add_argument("--ideal-spacing", type=float, default=0.04, help="grid spacing of the ideal memory (metres)")
     args = parser.parse_args()
     names = args.scene or ["scenario_b.yaml", "scenario_b_four.yaml"]
     bands = "  ".join(f"{lo * 100:g}-{hi * 100:g} cm" for lo, hi in zip(BANDS[:-1], BANDS[1:]))
@@ -131,14 +169,14 @@ def main() -> None:
           f"{'remembered':>10s} {'largest excess':>15s} {'ms per set':>10s}   certified free by distance from the "
           f"padded capsules: {bands}")
     for path in fw.scene_paths(tuple(names)):
-        rows = probe(path, args.step, args.exact, args.calibrated).items()
+        rows = probe(path, args.step, args.exact, args.calibrated, args.ideal_spacing).items()
         for name, (far, below, ee_far, ee_below, kept, excess, seconds, shares, flags) in rows:
             certified = "  ".join(f"{share:9.1%}" for share in np.mean(shares, axis=0)) if shares else "-"
             label = path.stem + (" exact" if args.exact else "") + (" calibrated" if args.calibrated else "")
             print(f"{label:22s} {name:14s} {below:>6d}/{far:<5d} {below / max(far, 1):6.1%} "
                   f"{ee_below:>5d}/{ee_far:<5d} {kept:10d} {excess * 1e3:+11.1f} mm "
-                  f"{np.median(seconds) * 1e3:10.1f}   {certified}", flush=True)
-            print(f"{'':37s} flags of those below rho: "
+                  f"{np.median(seconds) * 1e3 if seconds else np.nan:10.1f}   {certified}", flush=True)
+            print(f"{'':37s} {'where the nearest possibly-occupied point lies' if name in IDEALS else 'flags'} of those below rho: "
                   f"{', '.join(f'{k} {v}' for k, v in sorted(flags.items(), key=lambda x: -x[1])) or 'none'}")
 
 

@@ -461,19 +461,30 @@ class DistanceMonitor:
                and state.occupancy.timestamp is not None and state.occupancy.timestamp >= last]
         if not new:
             return
-        from depthguard.freespace import remember_frames, robot_inside_voxels, surface_voxels
+        from depthguard.freespace import remember_frames, robot_inside_voxels, robot_voxels, surface_voxels
 
         box = self.memory.box
         t = min(state.occupancy.timestamp for state in new)
-        robot = None
+        robot = near = inner = None
         if self.robot is not None:  # Robot_k: inside the links at the joints of the frames captured at t
             joints = [state.joints for state in new if state.occupancy.timestamp == t and state.joints is not None]
             if joints:
-                robot = robot_inside_voxels(box, [self.robot.inner_capsules_world(q, check=False) for q in joints])
+                moments = [self.robot.inner_capsules_world(q, check=False) for q in joints]
+                robot = robot_inside_voxels(box, moments)
+                # the voxels touching the padded capsules, judged piece by piece; the robot's pieces only where the
+                # frames of t agree on the joints (else the cameras alone)
+                near = np.zeros(box.shape, dtype=bool)
+                padded = np.empty((len(self.robot.capsules), 7))
+                for q in joints:
+                    padded[:, :6] = self.robot.capsule_segments(q, check=False).reshape(-1, 6)
+                    padded[:, 6] = [capsule.radius for capsule in self.robot.capsules]
+                    robot_voxels(box, padded, box.voxel * math.sqrt(3.0), near)
+                same = all(np.array_equal(m, moments[0]) for m in moments)
+                inner = moments[0] if same else None
         self._seen_now = remember_frames(
             self.memory, t, [state.camera for state in new], [state.free for state in new],
             [functools.partial(surface_voxels, box, state.camera, state.image, state.occupancy) for state in new],
-            margin=self.fusion_margin, pad=self.fusion_pixels, robot=robot)
+            margin=self.fusion_margin, pad=self.fusion_pixels, robot=robot, near_robot=near, inner=inner)
         self._remembered = {id(state) for state in usable.values()}
 
     def plan(self, usable, stale) -> "QueryPlan":

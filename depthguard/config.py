@@ -343,6 +343,10 @@ FREESPACE_ROUNDING = 1e-12
 #: seen_free_voxels tests blocks of this many voxels a side whole first, then their halves, down to single voxels
 #: (a power of 2): where a camera sees a whole block free, its voxels cost nothing more.
 FREESPACE_BLOCK = 8
+#: The memory judges a voxel next to the robot that no one camera sees wholly free, and that is not wholly inside the
+#: robot, in pieces of FREESPACE_VOXEL / 2^FREESPACE_MIXED_LEVELS a side (1 cm at 4 cm): it is free when each piece is
+#: seen free by some camera or lies inside the robot (design §8a: the two combine within one voxel).
+FREESPACE_MIXED_LEVELS = 2
 
 # ------------------------------------------------------------------------------------------ avoidance (design §9)
 #: The papers' avoidance parameters (2015 paper section 5.3): rho 0.4 m, the end-effector's largest repulsive speed

@@ -484,3 +484,81 @@ def test_surface_voxels_hold_the_measured_points_and_forget_makes_them_possibly_
     assert not memory.free_at(0.0)[marked].any() and memory.free_at(0.0)[~marked].any()
     memory.update(0.01, np.zeros(box.shape, dtype=bool))
     assert not memory.free_at(0.01)[marked].any()
+
+
+def test_mixed_voxels_combine_cameras_and_the_robot_within_a_voxel():
+    """design §8a: a voxel counts free when every point of it is seen free by some camera or lies inside the robot.
+    Two cameras see a floor and a rendered capsule (the robot; its inner capsule 2 mm thinner); the voxels next to it
+    that neither camera sees whole and that are not wholly inside it are judged piece by piece
+    (``mixed_voxels``). Judge: every point of a 9^3 lattice in each voxel that passes is inside the inner capsule or
+    seen free by a camera on the pixel it projects to (free there at least to its depth plus the margin). Some pass
+    only by the two cameras together; none that holds the robot's surface passes (the layer the margins leave between
+    the seen-free space and the robot's inside is neither); a voxel in two inner capsules passes by the robot alone."""
+    from depthguard.freespace import CameraViews
+    from depthguard.freespace._memory import mixed_voxels
+    from depthguard.scenes import Capsule
+
+    p0, p1, radius = np.array([-0.25, 0.0, 0.5]), np.array([0.25, 0.05, 0.6]), 0.07
+    scene = [Box.from_bounds([-3, -3, -0.05], [3, 3, 0.0]), Capsule(tuple(p0), tuple(p1), radius)]
+    cameras, images = [], []
+    for n, eye in enumerate(([1.6, -1.4, 1.8], [1.5, 1.6, 1.6])):
+        camera = dg.PinholeCamera(f"c{n}", 320, 240, 260.0, 260.0, 159.5, 119.5, look_at(eye, [0.0, 0.0, 0.5]),
+                                  depth_range=(0.4, 6.0))
+        cameras.append(camera)
+        images.append(free_image(dg.depth_image(render_depth(camera, scene), camera), camera))
+    margin = 0.005
+    box = VoxelBox([-0.4, -0.2, 0.35], [0.4, 0.24, 0.76], 0.04)
+    seen = seen_free_voxels(box, cameras, images, margin=margin, pad=0)
+    inner = np.array([[*p0, *p1, radius - 0.002]])
+    idx = np.indices(box.shape).reshape(3, -1).T
+    centres = box.lo + (idx + 0.5) * box.voxel
+
+    def inside(points):
+        axis = p1 - p0
+        s = np.clip((points - p0) @ axis / (axis @ axis), 0.0, 1.0)
+        return np.linalg.norm(points - (p0 + s[:, None] * axis), axis=1) < radius - 0.002
+
+    lattice = np.stack(np.meshgrid(*[np.linspace(0.0, 1.0, 9)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    whole_inside = np.array([inside(box.lo + (v + lattice) * box.voxel).all() for v in idx]).reshape(box.shape)
+    near = np.linalg.norm(centres - np.clip(centres, p0 - 0.2, p1 + 0.2), axis=1) >= 0  # every voxel
+    candidates = np.argwhere(near.reshape(box.shape) & ~seen & ~whole_inside)
+    views = CameraViews.of(cameras, images, margin, 0)
+
+    def seen_by(points, c):
+        camera, free = cameras[c], images[c]
+        local = camera.world_to_camera(points)
+        u = np.floor(camera.fx * local[:, 0] / local[:, 2] + camera.cx + 0.5).astype(int)
+        v = np.floor(camera.fy * local[:, 1] / local[:, 2] + camera.cy + 0.5).astype(int)
+        ok = (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height) & (local[:, 2] > 0.4)
+        out = np.zeros(len(points), bool)
+        out[ok] = free[v[ok], u[ok]] >= local[ok, 2] + margin - 1e-6
+        return out
+
+    passed = {}
+    for name, capsules, levels in (("both", inner, 2), ("cameras", np.zeros((0, 7)), 2), ("coarse", inner, 1)):
+        passed[name] = mixed_voxels(box, views, candidates, capsules, levels)
+    kinds = {"robot and cameras": 0, "two cameras": 0}
+    for m in np.flatnonzero(passed["both"]):
+        points = box.lo + (candidates[m] + lattice) * box.voxel
+        by = [seen_by(points, c) for c in range(2)]
+        robot = inside(points)
+        assert np.all(robot | by[0] | by[1]), f"voxel {candidates[m]} passed with a point neither seen nor inside"
+        if robot.any():
+            kinds["robot and cameras"] += 1
+        elif by[0].any() and by[1].any() and not (by[0].all() or by[1].all()):
+            kinds["two cameras"] += 1
+    print(f"\n{len(candidates)} voxels neither seen whole nor inside: {passed['both'].sum()} pass in 1 cm pieces "
+          f"({kinds}), {passed['cameras'].sum()} without the robot, {passed['coarse'].sum()} in 2 cm pieces")
+    assert kinds["two cameras"] > 0
+    assert not np.any(passed["cameras"] & ~passed["both"])  # the robot only adds
+    assert passed["coarse"].sum() < passed["both"].sum()
+    # No voxel that holds the robot's surface passes with these cameras: every such voxel has a piece across the
+    # layer between what a camera sees free (its measurement less the margins) and the inner capsule.
+    assert kinds["robot and cameras"] == 0
+    # The robot's pieces: a voxel half in each of two inner capsules (neither holds it whole) passes with no camera.
+    blind = CameraViews.of([], [], 0.0, 0)
+    one = VoxelBox([0.0, 0.0, 0.0], [0.04, 0.04, 0.04], 0.04)
+    halves = np.array([[-0.1, 0.02, 0.02, 0.0, 0.02, 0.02, 0.035], [0.04, 0.02, 0.02, 0.14, 0.02, 0.02, 0.035]])
+    assert mixed_voxels(one, blind, np.zeros((1, 3), int), halves, 1)[0]
+    assert not mixed_voxels(one, blind, np.zeros((1, 3), int), halves[:1], 2)[0]
+    assert not mixed_voxels(one, blind, np.zeros((1, 3), int), halves, 0)[0]

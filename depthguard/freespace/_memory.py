@@ -363,8 +363,26 @@ class FreeSpaceMemory:
         return mask
 
 
+def mixed_voxels(box: VoxelBox, views: "CameraViews", candidates: np.ndarray, inner: np.ndarray,
+                 levels: int = config.FREESPACE_MIXED_LEVELS) -> np.ndarray:
+    """(m,) bool: which of the voxels ``candidates`` ((m, 3) int indices into ``box``) are wholly free now, every
+    point of them seen free by some camera or inside the robot (design §8a: the two combine within one voxel), cut
+    into pieces of voxel / 2^``levels`` a side: each piece seen entirely free by one camera (the rule of
+    :func:`seen_free_voxels`) or wholly inside one of the capsules ``inner`` ((k, 7) p0, p1, radius, metres, world:
+    :meth:`~depthguard.robots.RobotModel.inner_capsules_world` at the frames' joints). Sound: a voxel passes only
+    when all its pieces do; finer ``levels`` pass more of the voxels that touch the robot, at 8 times the work each."""
+    out = np.zeros(len(candidates), dtype=bool)
+    if len(candidates):
+        freespace_kernels.certify_mixed_voxels(box.lo, box.voxel, np.ascontiguousarray(candidates, dtype=np.int64),
+                                               *views.kernel_arguments(),
+                                               np.ascontiguousarray(inner, dtype=np.float64).reshape(-1, 7),
+                                               int(levels), out)
+    return out
+
+
 def remember_frames(memory: "FreeSpaceMemory", t: float, cameras: Sequence[PinholeCamera], free_images: Sequence,
-                    surfaces_of: Sequence, margin: float, pad: int, robot: np.ndarray | None = None) -> np.ndarray:
+                    surfaces_of: Sequence, margin: float, pad: int, robot: np.ndarray | None = None,
+                    near_robot: np.ndarray | None = None, inner: np.ndarray | None = None) -> np.ndarray:
     """The remember stage (design §8a): take one set of frames, captured no earlier than ``t`` (seconds), into
     ``memory``. ``cameras`` and ``free_images`` as :func:`seen_free_voxels`; ``surfaces_of``: for each camera, a
     function that marks in a (nx, ny, nz) bool array the voxels holding a surface that camera measures now and does
@@ -372,8 +390,20 @@ def remember_frames(memory: "FreeSpaceMemory", t: float, cameras: Sequence[Pinho
     remembers free space moved faster than v_max: the memory forgets that voxel, and these frames do not clear it. A
     measurement of the robot neither clears nor forgets. ``robot``: (nx, ny, nz) bool or None, the voxels wholly
     inside the robot's links at t (Robot_k: no person is there; :func:`depthguard.freespace.robot_inside_voxels`).
-    Returns the voxels these frames saw free ((nx, ny, nz) bool)."""
-    seen = seen_free_voxels(memory.box, cameras, free_images, margin=margin, pad=pad, check=False)
+    ``near_robot`` ((nx, ny, nz) bool or None) and ``inner`` ((k, 7) capsules inside the links at t, or None): the
+    voxels next to the robot that no one camera sees wholly free and that are not wholly inside it are judged piece
+    by piece (:func:`mixed_voxels`): free when every piece is seen free by some camera or lies inside the robot.
+    Returns the voxels these frames saw free, alone or with the robot ((nx, ny, nz) bool)."""
+    views = CameraViews.of(cameras, free_images, margin, pad)
+    seen = np.zeros(memory.box.shape, dtype=bool)
+    if views.count:
+        freespace_kernels.seen_free_voxels(memory.box.lo, memory.box.voxel, *views.kernel_arguments(),
+                                           config.FREESPACE_BLOCK, seen)
+    if near_robot is not None and views.count:
+        undecided = near_robot & ~seen if robot is None else near_robot & ~seen & ~robot
+        candidates = np.argwhere(undecided)
+        passed = mixed_voxels(memory.box, views, candidates, np.zeros((0, 7)) if inner is None else inner)
+        seen[tuple(candidates[passed].T)] = True
     surfaces = np.zeros(memory.box.shape, dtype=bool)
     for mark in surfaces_of:
         mark(surfaces)
@@ -381,4 +411,3 @@ def remember_frames(memory: "FreeSpaceMemory", t: float, cameras: Sequence[Pinho
     seen &= ~surfaces
     memory.update(t, seen, robot, check=False)
     return seen
-

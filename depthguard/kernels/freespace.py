@@ -263,6 +263,132 @@ def seen_free_voxels(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_
                                    k0)
 
 
+@kernel(inline=True)
+def _piece_inside(world, capsules, near, n_near):
+    """Whether the box with corners ``world`` ((8, 3) float64, metres) lies wholly inside one of the capsules
+    ``capsules[near[:n_near]]`` ((k, 7): p0, p1, radius): all 8 corners within its radius of its segment (a capsule
+    is convex, so then the whole box is)."""
+    for q in range(n_near):
+        c = near[q]
+        ax = capsules[c, 3] - capsules[c, 0]
+        ay = capsules[c, 4] - capsules[c, 1]
+        az = capsules[c, 5] - capsules[c, 2]
+        length2 = ax * ax + ay * ay + az * az
+        r2 = capsules[c, 6] * capsules[c, 6]
+        inside = True
+        for corner in range(8):
+            dx = world[corner, 0] - capsules[c, 0]
+            dy = world[corner, 1] - capsules[c, 1]
+            dz = world[corner, 2] - capsules[c, 2]
+            s = 0.0
+            if length2 > 0.0:
+                s = min(max((dx * ax + dy * ay + dz * az) / length2, 0.0), 1.0)
+            ex = dx - s * ax
+            ey = dy - s * ay
+            ez = dz - s * az
+            if not ex * ex + ey * ey + ez * ez < r2:
+                inside = False
+                break
+        if inside:
+            return True
+    return False
+
+
+@kernel(parallel=True)
+def certify_mixed_voxels(lo, voxel, candidates, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad,
+                         capsules, levels, out):
+    """out[m] = every point of voxel candidates[m] is seen free by some camera or lies inside the robot (design §8a:
+    the two combine within one voxel). The voxel is cut into 8^levels pieces, coarse to fine as needed: a piece
+    passes when one camera sees it entirely free (the rule of :func:`seen_free_voxels`, ``camera_sees_box``) or it
+    lies wholly inside one of ``capsules`` (all 8 corners within one); the voxel passes when every piece does.
+    Different pieces may pass by different cameras or by the robot.
+
+    candidates: (m, 3) int64 voxel indices; capsules: (k, 7) float64, metres, world frame: p0, p1, radius (the robot's
+    inner capsules at the frames' joints; (0, 7) for none); levels: int >= 0 (pieces of voxel / 2^levels a side);
+    out: (m,) bool, written. The cameras' arguments as :func:`seen_free_voxels`. A voxel's capsules are those whose
+    segment passes within their radius plus half the voxel's diagonal of its centre (at most 64 are looked at: a
+    voxel with more is judged by its first 64, which can only pass fewer pieces)."""
+    n_cameras = poses.shape[0]
+    n = np.int64(1) << levels
+    half_diagonal = 0.5 * np.sqrt(3.0) * voxel
+    for p in prange(candidates.shape[0]):
+        i = candidates[p, 0]
+        j = candidates[p, 1]
+        k = candidates[p, 2]
+        cx = lo[0] + (i + 0.5) * voxel
+        cy = lo[1] + (j + 0.5) * voxel
+        cz = lo[2] + (k + 0.5) * voxel
+        near = np.empty(64, dtype=np.int64)
+        n_near = 0
+        for c in range(capsules.shape[0]):
+            ax = capsules[c, 3] - capsules[c, 0]
+            ay = capsules[c, 4] - capsules[c, 1]
+            az = capsules[c, 5] - capsules[c, 2]
+            length2 = ax * ax + ay * ay + az * az
+            dx = cx - capsules[c, 0]
+            dy = cy - capsules[c, 1]
+            dz = cz - capsules[c, 2]
+            s = 0.0
+            if length2 > 0.0:
+                s = min(max((dx * ax + dy * ay + dz * az) / length2, 0.0), 1.0)
+            ex = dx - s * ax
+            ey = dy - s * ay
+            ez = dz - s * az
+            reach = capsules[c, 6] + half_diagonal
+            if ex * ex + ey * ey + ez * ez < reach * reach and n_near < 64:
+                near[n_near] = c
+                n_near += 1
+        world = np.empty((8, 3))
+        corners = np.empty((8, 3))
+        stack = np.empty((7 * levels + 1, 4), dtype=np.int64)  # (a, b, c, side) in pieces
+        stack[0, 0] = 0
+        stack[0, 1] = 0
+        stack[0, 2] = 0
+        stack[0, 3] = n
+        top = 1
+        passed = True
+        while top > 0:
+            top -= 1
+            a = stack[top, 0]
+            b = stack[top, 1]
+            c = stack[top, 2]
+            side = stack[top, 3]
+            for corner in range(8):
+                world[corner, 0] = lo[0] + (i + (a + (side if corner & 1 else 0)) / n) * voxel
+                world[corner, 1] = lo[1] + (j + (b + (side if corner & 2 else 0)) / n) * voxel
+                world[corner, 2] = lo[2] + (k + (c + (side if corner & 4 else 0)) / n) * voxel
+            ok = _piece_inside(world, capsules, near, n_near)
+            m = 0
+            while not ok and m < n_cameras:
+                pose = poses[m]
+                for corner in range(8):
+                    x = world[corner, 0]
+                    y = world[corner, 1]
+                    z = world[corner, 2]
+                    pz = pose[6] * x + pose[7] * y + pose[8] * z + pose[11]
+                    px = pose[0] * x + pose[1] * y + pose[2] * z + pose[9]
+                    py = pose[3] * x + pose[4] * y + pose[5] * z + pose[10]
+                    corners[corner, 0] = intrinsics[m, 0] * px / pz + intrinsics[m, 2]
+                    corners[corner, 1] = intrinsics[m, 1] * py / pz + intrinsics[m, 3]
+                    corners[corner, 2] = pz
+                ok = camera_sees_box(corners, z_near[m], sizes[m, 0], sizes[m, 1], tables[m], floor_log2, margin,
+                                     pad)
+                m += 1
+            if ok:
+                continue
+            if side == 1:
+                passed = False
+                break
+            half = side // 2
+            for child in range(8):
+                stack[top, 0] = a + (half if child & 1 else 0)
+                stack[top, 1] = b + (half if child & 2 else 0)
+                stack[top, 2] = c + (half if child & 4 else 0)
+                stack[top, 3] = half
+                top += 1
+        out[p] = passed
+
+
 # ----------------------------------------------------------------------------------------- the distance transform
 
 
