@@ -145,7 +145,7 @@ class IdealMemory:
         if self.rounding:
             distance = np.maximum(distance - 3 ** 0.5 * self.spacing, 0.0)
         np.maximum(self.arrival, time + distance / self.v_max, out=self.arrival)
-        self.possibly, self.seen = possibly, seen
+        self.possibly, self.seen, self.surfaces = possibly, seen, surfaces.reshape(self.shape)
         self.ever_seen |= seen
 
     def distances(self, points: np.ndarray, capsules, rho: float) -> tuple[np.ndarray, list[str]]:

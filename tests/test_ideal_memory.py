@@ -1,0 +1,60 @@
+"""The lab's ideal memory (issue 35's bound, ``depthguard_lab.experiments.ideal_memory``) does what its docstring
+says on scenario B's first frame: the robot's inside and what a camera's exact ray passes are never possibly
+occupied, everything else is at start-up, and with the cameras blind the possibly-occupied space grows at v_max."""
+
+import numpy as np
+import pytest
+
+from depthguard_lab.experiments import fusion_workcell as fw
+from depthguard_lab.experiments.ideal_memory import IdealMemory
+from depthguard_lab.simulation import load_workcell, simulate
+
+
+@pytest.fixture(scope="module")
+def start():
+    workcell = load_workcell(fw.scene_paths(("scenario_b.yaml",))[0])
+    frame = next(iter(simulate(workcell, seed=0, frames=range(1))))
+    return workcell, frame
+
+
+def exact_seen(ideal, workcell, frame, noise_margin):
+    """The grid points some camera's exact ray passes before its first surface (less the noise margin)."""
+    seen = np.zeros(len(ideal.points), bool)
+    for name, camera in workcell.rig.cameras.items():
+        depth = frame.depth_exact[name]
+        local = camera.world_to_camera(ideal.points)
+        z = local[:, 2]
+        u = np.rint(camera.fx * local[:, 0] / np.maximum(z, 1e-9) + camera.cx)
+        v = np.rint(camera.fy * local[:, 1] / np.maximum(z, 1e-9) + camera.cy)
+        for p in np.flatnonzero((z > 1e-3) & (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)):
+            d = float(depth[int(v[p]), int(u[p])])
+            reach = np.inf if d == 0.0 else d - (float(camera.noise.margin(d)) if noise_margin else 0.0)
+            seen[p] |= z[p] < reach
+    return seen.reshape(ideal.shape)
+
+
+@pytest.mark.parametrize("noise_margin", [False, True])
+def test_the_ideal_memory_at_start_up_and_blind(start, noise_margin):
+    workcell, frame = start
+    ideal = IdealMemory(workcell, spacing=0.1, noise_margin=noise_margin)
+    ideal.update(frame.time, frame.joints, frame.depth_exact, frame.label)
+    robot = ideal.inside_robot(frame.joints)
+    seen = exact_seen(ideal, workcell, frame, noise_margin)
+    assert robot.sum() >= 3 and 0.3 < seen.mean() < 0.99  # the test says something
+    assert not np.any(ideal.possibly & (robot | ideal.solid))
+    # Seen free now is not possibly occupied, unless a camera sees a surface that is not the robot's in that cell.
+    assert not np.any(ideal.possibly & seen & ~ideal.surfaces) and np.mean(ideal.surfaces[seen]) < 0.1
+    # Everything else is possibly occupied at start-up.
+    np.testing.assert_array_equal(ideal.possibly[~seen & ~robot & ~ideal.solid], True)
+    # One second later with every camera blind (a surface 1 cm in front of each), the possibly-occupied space has grown
+    # by v_max * 1 s = 2 m: every point not inside the robot or a solid within 2 m of it is possibly occupied.
+    blind = {name: np.full_like(depth, 0.01) for name, depth in frame.depth_exact.items()}
+    labels = {name: np.full_like(label, -1) for name, label in frame.label.items()}
+    before = ideal.possibly.copy()
+    ideal.update(frame.time + 1.0, frame.joints, blind, labels)
+    grid = ideal.points.reshape(*ideal.shape, 3)
+    sources = grid[before]
+    far = ~before & ~robot & ~ideal.solid
+    for point in grid[far][::7]:
+        reached = np.min(np.linalg.norm(sources - point, axis=1)) <= 2.0
+        assert not reached or ideal.possibly[tuple(np.round((point - ideal.lo) / ideal.spacing - 0.5).astype(int))]
