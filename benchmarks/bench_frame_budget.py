@@ -199,6 +199,7 @@ STEPS = [  # (step, owner, attribute), in the order the monitor calls them
     ("memory: row-min tables", memory_kernels, "row_min_tables"),
     ("memory: seen-free voxels", freespace, "seen_free_voxels"),
     ("memory: seen-free voxels", memory_kernels, "seen_free_voxels"),
+    ("memory: voxels next to the robot, in pieces", memory_kernels, "certify_mixed_voxels"),
     ("memory: distance transform", memory_kernels, "grown_possibly_occupied"),
     ("memory: distance transform", memory_kernels, "last_axis_of_mask"),
     ("memory: distance transform", memory_kernels, "middle_axis"),

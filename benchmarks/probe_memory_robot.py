@@ -12,7 +12,7 @@ time per set, and, with the memory, the share of its voxels it certifies free at
 centre's distance from the robot's padded capsules (mean over the frames): where next to the robot it clears space;
 under each row, how many of the far pairs read below rho carry each flag (why they could be small). Monitors: rho 0.4 m, hybrid, invalid "neighbors", the robot self-filtered (as ``fusion-workcell``).
 
-    .venv/bin/python benchmarks/probe_memory_robot.py [--step 3] [--scene scenario_b.yaml ...] [--exact]
+    .venv/bin/python benchmarks/probe_memory_robot.py [--step 3] [--scene scenario_b.yaml ...] [--exact] [--fed]
 
 Beside them, the bound (issue 35, item 6): ``ideal, exact`` is an ideal sound memory on the simulation's exact
 geometry (:mod:`depthguard_lab.experiments.ideal_memory`: exact ray casts per frame, the robot's exact volume, the
@@ -20,6 +20,10 @@ erosion at v_max, on a grid of ``--ideal-spacing`` points), ``ideal, noise`` the
 taken off its exact depths; their distances are to the nearest possibly-occupied grid point outside the padded
 capsules, their excess is over the truth alone, and under each, where that point lies ("seen before": seen free
 earlier and reached by the erosion since; "never seen").
+
+``--fed`` is a diagnosis too: one monitor whose fused answers read the ideal memory's free space (with the noise
+margins) instead of its own memory's, beside the ideal rows: the gap between it and the ideal lies in the fused
+query, the rest in the memory.
 
 ``--exact`` is a diagnosis, not a layout: the simulation's noise-free frames, cameras without a noise margin (and
 without the sensor's dropouts), to show what the noise margin alone costs the memory next to the robot; with
@@ -57,7 +61,23 @@ def noise_free(rig) -> dg.Rig:
     return dg.Rig(cameras, principal=rig.principal, workspace=rig.workspace)
 
 
-def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_spacing: float = 0.04) -> dict:
+def fed_with(monitor, ideal: IdealMemory) -> None:
+    """Make ``monitor``'s fused answers read ``ideal``'s free space (its grid points not possibly occupied, taken as
+    the memory's 4 cm voxels, whose centres they are) instead of its memory's: a diagnosis of how much of the gap to
+    the bound lies in the fused query rather than in the memory (not sound: a point stands for its voxel)."""
+    if monitor.memory.box.shape != ideal.shape:
+        raise SystemExit("--fed needs the ideal's grid on the memory's voxel centres (--ideal-spacing 0.04)")
+
+    def remembered_free(usable):
+        free = ~ideal.possibly
+        monitor._free_now = (free, monitor.memory.box, free)
+        return free, monitor.memory.box
+
+    monitor._remembered_free = remembered_free
+
+
+def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_spacing: float = 0.04,
+          fed: bool = False) -> dict:
     """configuration -> (far pairs, below rho, end-effector far, below rho, remembered answers, largest excess in
     metres, seconds per set, per measured frame the memory's certified shares by band (:func:`certified_by_band`),
     and how many of the far pairs read below rho carry each flag)."""
@@ -70,6 +90,9 @@ def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_
     monitors = {name: dg.DistanceMonitor(rig, **options, **extra) for name, extra in CONFIGURATIONS.items()}
     ideals = {} if exact else {name: IdealMemory(workcell, spacing=ideal_spacing, noise_margin=noisy)
                                for name, noisy in IDEALS.items()}
+    if fed:  # the fused query given the ideal memory's free space (with the noise margins)
+        monitors = {"fed the ideal": dg.DistanceMonitor(rig, **options, memory=True)}
+        fed_with(monitors["fed the ideal"], ideals["ideal, noise"])
     background = workcell.background_parts()
     principal = workcell.rig.cameras[workcell.rig.principal]
     cases = fw.case_frames(workcell)
@@ -161,6 +184,8 @@ def main() -> None:
                         help="the simulation's noise-free frames and cameras without a noise margin (a diagnosis)")
     parser.add_argument("--calibrated", action="store_true",
                         help="with --exact: no calibration margin either (fusion_margin 0, fusion_pixels 0)")
+    parser.add_argument("--fed", action="store_true",
+                        help="a diagnosis: the fused query given the ideal memory's free space (with noise margins)")
     parser.add_argument("--ideal-spacing", type=float, default=0.04, help="grid spacing of the ideal memory (metres)")
     args = parser.parse_args()
     names = args.scene or ["scenario_b.yaml", "scenario_b_four.yaml"]
@@ -169,7 +194,7 @@ def main() -> None:
           f"{'remembered':>10s} {'largest excess':>15s} {'ms per set':>10s}   certified free by distance from the "
           f"padded capsules: {bands}")
     for path in fw.scene_paths(tuple(names)):
-        rows = probe(path, args.step, args.exact, args.calibrated, args.ideal_spacing).items()
+        rows = probe(path, args.step, args.exact, args.calibrated, args.ideal_spacing, args.fed).items()
         for name, (far, below, ee_far, ee_below, kept, excess, seconds, shares, flags) in rows:
             certified = "  ".join(f"{share:9.1%}" for share in np.mean(shares, axis=0)) if shares else "-"
             label = path.stem + (" exact" if args.exact else "") + (" calibrated" if args.calibrated else "")
@@ -183,6 +208,7 @@ def main() -> None:
 if __name__ == "__main__":
     import sys
 
-    diagnosis = "_exact" * ("--exact" in sys.argv) + "_calibrated" * ("--calibrated" in sys.argv)
+    diagnosis = ("_exact" * ("--exact" in sys.argv) + "_calibrated" * ("--calibrated" in sys.argv)
+                 + "_fed" * ("--fed" in sys.argv))
     with report(__file__, name=f"probe_memory_robot{diagnosis}" if diagnosis else None):
         main()

@@ -142,6 +142,20 @@ def _all_true(out, i0, i1, j0, j1, k0, k1):
 
 
 @kernel(inline=True)
+def _push_halves(stack, top, a, b, c, side):
+    """Push the 8 halves of the box (a, b, c, side) onto ``stack`` ((depth, 4) int64 rows a, b, c, side) at ``top``;
+    returns the new top."""
+    half = side // 2
+    for child in range(8):
+        stack[top, 0] = a + (half if child & 1 else 0)
+        stack[top, 1] = b + (half if child & 2 else 0)
+        stack[top, 2] = c + (half if child & 4 else 0)
+        stack[top, 3] = half
+        top += 1
+    return top
+
+
+@kernel(inline=True)
 def seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad, block, i0, j0, k0,
                     nx, ny, nz, lattice, corners, stack, skip_covered, last, out, oi, oj, ok):
     """out[oi + a, oj + b, ok + c] = True where some camera sees voxel (i0 + a, j0 + b, k0 + c) entirely free, for
@@ -212,13 +226,7 @@ def seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_l
                     for dc in range(c, c1):
                         out[oi + da, oj + db, ok + dc] = True
         elif side > 1:
-            half = side // 2
-            for child in range(8):
-                stack[top, 0] = a + (half if child & 1 else 0)
-                stack[top, 1] = b + (half if child & 2 else 0)
-                stack[top, 2] = c + (half if child & 4 else 0)
-                stack[top, 3] = half
-                top += 1
+            top = _push_halves(stack, top, a, b, c, side)
     return last
 
 
@@ -264,29 +272,36 @@ def seen_free_voxels(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_
 
 
 @kernel(inline=True)
+def _segment_distance2(x, y, z, capsules, c):
+    """Squared distance (metres^2) from the point (x, y, z) to the segment of capsule c of ``capsules`` ((k, 7): p0,
+    p1, radius; world, metres)."""
+    ax = capsules[c, 3] - capsules[c, 0]
+    ay = capsules[c, 4] - capsules[c, 1]
+    az = capsules[c, 5] - capsules[c, 2]
+    length2 = ax * ax + ay * ay + az * az
+    dx = x - capsules[c, 0]
+    dy = y - capsules[c, 1]
+    dz = z - capsules[c, 2]
+    s = 0.0
+    if length2 > 0.0:
+        s = min(max((dx * ax + dy * ay + dz * az) / length2, 0.0), 1.0)
+    ex = dx - s * ax
+    ey = dy - s * ay
+    ez = dz - s * az
+    return ex * ex + ey * ey + ez * ez
+
+
+@kernel(inline=True)
 def _piece_inside(world, capsules, near, n_near):
     """Whether the box with corners ``world`` ((8, 3) float64, metres) lies wholly inside one of the capsules
     ``capsules[near[:n_near]]`` ((k, 7): p0, p1, radius): all 8 corners within its radius of its segment (a capsule
     is convex, so then the whole box is)."""
     for q in range(n_near):
         c = near[q]
-        ax = capsules[c, 3] - capsules[c, 0]
-        ay = capsules[c, 4] - capsules[c, 1]
-        az = capsules[c, 5] - capsules[c, 2]
-        length2 = ax * ax + ay * ay + az * az
         r2 = capsules[c, 6] * capsules[c, 6]
         inside = True
         for corner in range(8):
-            dx = world[corner, 0] - capsules[c, 0]
-            dy = world[corner, 1] - capsules[c, 1]
-            dz = world[corner, 2] - capsules[c, 2]
-            s = 0.0
-            if length2 > 0.0:
-                s = min(max((dx * ax + dy * ay + dz * az) / length2, 0.0), 1.0)
-            ex = dx - s * ax
-            ey = dy - s * ay
-            ez = dz - s * az
-            if not ex * ex + ey * ey + ez * ez < r2:
+            if not _segment_distance2(world[corner, 0], world[corner, 1], world[corner, 2], capsules, c) < r2:
                 inside = False
                 break
         if inside:
@@ -321,21 +336,8 @@ def certify_mixed_voxels(lo, voxel, candidates, poses, intrinsics, z_near, sizes
         near = np.empty(64, dtype=np.int64)
         n_near = 0
         for c in range(capsules.shape[0]):
-            ax = capsules[c, 3] - capsules[c, 0]
-            ay = capsules[c, 4] - capsules[c, 1]
-            az = capsules[c, 5] - capsules[c, 2]
-            length2 = ax * ax + ay * ay + az * az
-            dx = cx - capsules[c, 0]
-            dy = cy - capsules[c, 1]
-            dz = cz - capsules[c, 2]
-            s = 0.0
-            if length2 > 0.0:
-                s = min(max((dx * ax + dy * ay + dz * az) / length2, 0.0), 1.0)
-            ex = dx - s * ax
-            ey = dy - s * ay
-            ez = dz - s * az
             reach = capsules[c, 6] + half_diagonal
-            if ex * ex + ey * ey + ez * ez < reach * reach and n_near < 64:
+            if _segment_distance2(cx, cy, cz, capsules, c) < reach * reach and n_near < 64:
                 near[n_near] = c
                 n_near += 1
         world = np.empty((8, 3))
@@ -379,13 +381,7 @@ def certify_mixed_voxels(lo, voxel, candidates, poses, intrinsics, z_near, sizes
             if side == 1:
                 passed = False
                 break
-            half = side // 2
-            for child in range(8):
-                stack[top, 0] = a + (half if child & 1 else 0)
-                stack[top, 1] = b + (half if child & 2 else 0)
-                stack[top, 2] = c + (half if child & 4 else 0)
-                stack[top, 3] = half
-                top += 1
+            top = _push_halves(stack, top, a, b, c, side)
         out[p] = passed
 
 
