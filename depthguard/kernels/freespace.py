@@ -320,7 +320,10 @@ def certify_mixed_voxels(lo, voxel, candidates, poses, intrinsics, z_near, sizes
 
     candidates: (m, 3) int64 voxel indices; capsules: (k, 7) float64, metres, world frame: p0, p1, radius (the robot's
     inner capsules at the frames' joints; (0, 7) for none); levels: int >= 0 (pieces of voxel / 2^levels a side);
-    out: (m,) bool, written. The cameras' arguments as :func:`seen_free_voxels`. A voxel's capsules are those whose
+    out: (m,) bool, written. The cameras, as :func:`seen_free_voxels` takes them: poses (n, 12) float64, world ->
+    optical (rotation rows, translation in metres); intrinsics (n, 4) float64, fx, fy, cx, cy, pixels; z_near (n,)
+    float64, metres, the nearest depth a corner may have; sizes (n, 2) width, height; tables (n, levels, >= w, >= h)
+    float32, metres, each free image's row-minimum table (:func:`row_min_tables`). A voxel's capsules are those whose
     segment passes within their radius plus half the voxel's diagonal of its centre (at most 64 are looked at: a
     voxel with more is judged by its first 64, which can only pass fewer pieces)."""
     n_cameras = poses.shape[0]

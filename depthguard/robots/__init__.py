@@ -10,12 +10,14 @@ Typical use::
 """
 
 from depthguard.robots._capsules import LinkCapsule, enclosing_circle, fit_capsule, segment_distances
+from depthguard.robots._inner import closed_triangles
 from depthguard.robots._model import ControlPoint, RobotModel, default_robot_path, panda_robot_path, xarm6_robot_path
 
 __all__ = [
     "ControlPoint",
     "LinkCapsule",
     "RobotModel",
+    "closed_triangles",
     "default_robot_path",
     "enclosing_circle",
     "fit_capsule",

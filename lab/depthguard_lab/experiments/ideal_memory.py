@@ -29,7 +29,7 @@ import trimesh
 from scipy import ndimage
 
 from depthguard import config
-from depthguard.robots._inner import closed_triangles
+from depthguard.robots import closed_triangles
 
 #: Default grid spacing, metres.
 SPACING = 0.03
