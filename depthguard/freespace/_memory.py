@@ -144,8 +144,12 @@ def seen_free_voxels(box: VoxelBox, cameras: Sequence[PinholeCamera], free_image
                 not 0 <= pad <= config.MAX_FUSION_PIXELS:
             raise InputError(f"pad must be a whole number of pixels in [0, {config.MAX_FUSION_PIXELS}], got "
                              f"{short_repr(pad)}", field="pad")
+    return _seen_by(box, CameraViews.of(cameras, free_images, margin, pad))
+
+
+def _seen_by(box: VoxelBox, views: "CameraViews") -> np.ndarray:
+    """(nx, ny, nz) bool: the voxels of ``box`` that one of ``views`` sees entirely free (:func:`seen_free_voxels`)."""
     out = np.zeros(box.shape, dtype=bool)
-    views = CameraViews.of(cameras, free_images, margin, pad)
     if views.count:
         freespace_kernels.seen_free_voxels(box.lo, box.voxel, *views.kernel_arguments(), config.FREESPACE_BLOCK, out)
     return out
@@ -395,10 +399,7 @@ def remember_frames(memory: "FreeSpaceMemory", t: float, cameras: Sequence[Pinho
     by piece (:func:`mixed_voxels`): free when every piece is seen free by some camera or lies inside the robot.
     Returns the voxels these frames saw free, alone or with the robot ((nx, ny, nz) bool)."""
     views = CameraViews.of(cameras, free_images, margin, pad)
-    seen = np.zeros(memory.box.shape, dtype=bool)
-    if views.count:
-        freespace_kernels.seen_free_voxels(memory.box.lo, memory.box.voxel, *views.kernel_arguments(),
-                                           config.FREESPACE_BLOCK, seen)
+    seen = _seen_by(memory.box, views)
     if near_robot is not None and views.count:
         undecided = near_robot & ~seen if robot is None else near_robot & ~seen & ~robot
         candidates = np.argwhere(undecided)

@@ -48,8 +48,7 @@ class IdealMemory:
     """
 
     def __init__(self, workcell, spacing: float = SPACING, noise_margin: bool = False,
-                 v_max: float = config.FREESPACE_V_MAX, robot_volume: str = "mesh", rounding: bool = False,
-                 corners: bool = False):
+                 v_max: float = config.FREESPACE_V_MAX):
         lo, hi = (np.asarray(c, dtype=np.float64) for c in workcell.rig.workspace)
         self.spacing, self.v_max, self.noise_margin = float(spacing), float(v_max), bool(noise_margin)
         self.shape = tuple(int(n) for n in np.maximum(np.floor((hi - lo) / spacing), 1))
@@ -57,7 +56,6 @@ class IdealMemory:
         axes = [lo[i] + (np.arange(self.shape[i]) + 0.5) * spacing for i in range(3)]
         self.points = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
         self.robot = workcell.robot
-        self.robot_volume, self.rounding, self.corners = robot_volume, rounding, corners
         self.cameras = dict(workcell.rig.cameras)
         self._robot_labels = {i for i, (name, _) in enumerate(workcell.labels()) if name.startswith("robot/")}
         self._links = {}
@@ -75,17 +73,10 @@ class IdealMemory:
         self.arrival = np.full(self.shape, -np.inf)
         self.ever_seen = np.zeros(self.shape, dtype=bool)
         self.possibly = np.ones(self.shape, dtype=bool)
-        self.seen = np.zeros(self.shape, dtype=bool)
 
     def inside_robot(self, joints) -> np.ndarray:
         """(nx, ny, nz) bool: the grid points inside the robot's links at ``joints``."""
         out = np.zeros(len(self.points), dtype=bool)
-        if self.robot_volume == "inner":
-            for p0, p1, r in ((c[0:3], c[3:6], c[6]) for c in self.robot.inner_capsules_world(joints)):
-                axis = p1 - p0
-                s = np.clip((self.points - p0) @ axis / max(float(axis @ axis), 1e-12), 0.0, 1.0)
-                out |= np.linalg.norm(self.points - (p0 + s[:, None] * axis), axis=1) < r - 0.5 * 3 ** 0.5 * self.spacing
-            return out.reshape(self.shape)
         poses = self.robot.link_poses(joints)
         for link, grid in self._links.items():
             T = np.asarray(poses[link])
@@ -100,28 +91,21 @@ class IdealMemory:
         """Take in one frame: its time (seconds), joints, each camera's exact depth ((h, w) metres, 0 = nothing)
         and label image ((h, w), indices into the workcell's labels)."""
         seen = np.zeros(len(self.points), dtype=bool)
-        offsets = [np.zeros(3)] if not self.corners else \
-            [0.5 * self.spacing * np.array(c) for c in np.ndindex(2, 2, 2) for c in [2 * np.array(c) - 1]]
         surfaces = np.zeros(len(self.points), dtype=bool)
         for name, camera in self.cameras.items():
             depth = np.asarray(depth_exact[name], dtype=np.float64)
             h, w = depth.shape
-            seen_here = np.ones(len(self.points), dtype=bool)
-            for offset in offsets:
-                local = camera.world_to_camera(self.points + offset)
-                z = local[:, 2]
-                front = z > 1e-3
-                u = np.full(len(z), -1, dtype=np.int64)
-                v = np.full(len(z), -1, dtype=np.int64)
-                u[front] = np.rint(camera.fx * local[front, 0] / z[front] + camera.cx).astype(np.int64)
-                v[front] = np.rint(camera.fy * local[front, 1] / z[front] + camera.cy).astype(np.int64)
-                inside = front & (u >= 0) & (u < w) & (v >= 0) & (v < h)
-                d = depth[v[inside], u[inside]]
-                reach = np.where(d > 0.0, d - (camera.noise.margin(d) if self.noise_margin else 0.0), np.inf)
-                ok = np.zeros(len(z), dtype=bool)
-                ok[np.flatnonzero(inside)[z[inside] < reach]] = True
-                seen_here &= ok
-            seen |= seen_here
+            local = camera.world_to_camera(self.points)
+            z = local[:, 2]
+            front = z > 1e-3
+            u = np.full(len(z), -1, dtype=np.int64)
+            v = np.full(len(z), -1, dtype=np.int64)
+            u[front] = np.rint(camera.fx * local[front, 0] / z[front] + camera.cx).astype(np.int64)
+            v[front] = np.rint(camera.fy * local[front, 1] / z[front] + camera.cy).astype(np.int64)
+            inside = front & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+            d = depth[v[inside], u[inside]]
+            reach = np.where(d > 0.0, d - (camera.noise.margin(d) if self.noise_margin else 0.0), np.inf)
+            seen[np.flatnonzero(inside)[z[inside] < reach]] = True
             # what this camera sees that is not the robot: a surface is there now
             label = np.asarray(labels[name])
             hit = (depth > 0.0) & ~np.isin(label, list(self._robot_labels))
@@ -142,10 +126,8 @@ class IdealMemory:
         padded[1:-1, 1:-1, 1:-1] = ~possibly
         padded[:, :, 0] = True
         distance = ndimage.distance_transform_edt(padded)[1:-1, 1:-1, 1:-1] * self.spacing
-        if self.rounding:
-            distance = np.maximum(distance - 3 ** 0.5 * self.spacing, 0.0)
         np.maximum(self.arrival, time + distance / self.v_max, out=self.arrival)
-        self.possibly, self.seen, self.surfaces = possibly, seen, surfaces.reshape(self.shape)
+        self.possibly, self.surfaces = possibly, surfaces.reshape(self.shape)
         self.ever_seen |= seen
 
     def distances(self, points: np.ndarray, capsules, rho: float) -> tuple[np.ndarray, list[str]]:
