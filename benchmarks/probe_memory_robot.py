@@ -13,6 +13,7 @@ centre's distance from the robot's padded capsules (mean over the frames): where
 under each row, how many of the far pairs read below rho carry each flag (why they could be small). Monitors: rho 0.4 m, hybrid, invalid "neighbors", the robot self-filtered (as ``fusion-workcell``).
 
     .venv/bin/python benchmarks/probe_memory_robot.py [--step 3] [--scene scenario_b.yaml ...] [--exact] [--fed]
+        [--voxel 0.01]
 
 Beside them, the bound (issue 35, item 6): ``ideal, exact`` is an ideal sound memory on the simulation's exact
 geometry (:mod:`depthguard_lab.experiments.ideal_memory`: exact ray casts per frame, the robot's exact volume, the
@@ -24,6 +25,9 @@ earlier and reached by the erosion since; "never seen").
 ``--fed`` is a diagnosis too: one monitor whose fused answers read the ideal memory's free space (with the noise
 margins) instead of its own memory's, beside the ideal rows: the gap between it and the ideal lies in the fused
 query, the rest in the memory.
+
+``--voxel 0.01`` is a diagnosis too: the memory alone at a finer voxel (1 cm costs about a second a set), to show
+whether finer voxels next to the robot would change the answers.
 
 ``--exact`` is a diagnosis, not a layout: the simulation's noise-free frames, cameras without a noise margin (and
 without the sensor's dropouts), to show what the noise margin alone costs the memory next to the robot; with
@@ -77,7 +81,7 @@ def fed_with(monitor, ideal: IdealMemory) -> None:
 
 
 def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_spacing: float = 0.04,
-          fed: bool = False) -> dict:
+          fed: bool = False, voxels: list | None = None) -> dict:
     """configuration -> (far pairs, below rho, end-effector far, below rho, remembered answers, largest excess in
     metres, seconds per set, per measured frame the memory's certified shares by band (:func:`certified_by_band`),
     and how many of the far pairs read below rho carry each flag)."""
@@ -87,8 +91,10 @@ def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_
     if calibrated:  # no calibration margin: a camera clears what it sees beyond, to the pixel
         options.update(fusion_margin=0.0, fusion_pixels=0)
     rig = noise_free(workcell.rig) if exact else workcell.rig
-    monitors = {name: dg.DistanceMonitor(rig, **options, **extra) for name, extra in CONFIGURATIONS.items()}
-    ideals = {} if exact else {name: IdealMemory(workcell, spacing=ideal_spacing, noise_margin=noisy)
+    configurations = CONFIGURATIONS if not voxels else \
+        {f"memory {v * 100:g} cm": dict(memory=True, memory_voxel=v) for v in voxels}
+    monitors = {name: dg.DistanceMonitor(rig, **options, **extra) for name, extra in configurations.items()}
+    ideals = {} if exact or voxels else {name: IdealMemory(workcell, spacing=ideal_spacing, noise_margin=noisy)
                                for name, noisy in IDEALS.items()}
     if fed:  # the fused query given the ideal memory's free space (with the noise margins)
         monitors = {"fed the ideal": dg.DistanceMonitor(rig, **options, memory=True)}
@@ -187,6 +193,8 @@ def main() -> None:
     parser.add_argument("--fed", action="store_true",
                         help="a diagnosis: the fused query given the ideal memory's free space (with noise margins)")
     parser.add_argument("--ideal-spacing", type=float, default=0.04, help="grid spacing of the ideal memory (metres)")
+    parser.add_argument("--voxel", type=float, action="append",
+                        help="a diagnosis: only the memory at this voxel side (metres; repeatable), no ideal rows")
     args = parser.parse_args()
     names = args.scene or ["scenario_b.yaml", "scenario_b_four.yaml"]
     bands = "  ".join(f"{lo * 100:g}-{hi * 100:g} cm" for lo, hi in zip(BANDS[:-1], BANDS[1:]))
@@ -194,7 +202,8 @@ def main() -> None:
           f"{'remembered':>10s} {'largest excess':>15s} {'ms per set':>10s}   certified free by distance from the "
           f"padded capsules: {bands}")
     for path in fw.scene_paths(tuple(names)):
-        rows = probe(path, args.step, args.exact, args.calibrated, args.ideal_spacing, args.fed).items()
+        rows = probe(path, args.step, args.exact, args.calibrated, args.ideal_spacing, args.fed,
+                     args.voxel).items()
         for name, (far, below, ee_far, ee_below, kept, excess, seconds, shares, flags) in rows:
             certified = "  ".join(f"{share:9.1%}" for share in np.mean(shares, axis=0)) if shares else "-"
             label = path.stem + (" exact" if args.exact else "") + (" calibrated" if args.calibrated else "")
@@ -209,6 +218,6 @@ if __name__ == "__main__":
     import sys
 
     diagnosis = ("_exact" * ("--exact" in sys.argv) + "_calibrated" * ("--calibrated" in sys.argv)
-                 + "_fed" * ("--fed" in sys.argv))
+                 + "_fed" * ("--fed" in sys.argv) + "_voxel" * ("--voxel" in sys.argv))
     with report(__file__, name=f"probe_memory_robot{diagnosis}" if diagnosis else None):
         main()

@@ -292,7 +292,11 @@ def test_memory_steps_against_brute_force_box_distances():
         judge, _ = exact_arrival(box, v_max, judge, t, seen, no_robot)
         assert np.all(ours <= judge)
         for dt in (0.0, 0.01, 0.05):
-            assert not np.any(memory.free_at(t + dt) & ~(judge > t + dt))
+            now = (seen | no_robot) if dt == 0.0 else np.zeros(box.shape, bool)  # F_k = ... | Seen_k | Robot_k
+            assert not np.any(memory.free_at(t + dt) & ~((judge > t + dt) | now))
+        assert np.all(memory.free_at(t)[seen | no_robot])  # free at t_k, even next to U_k ...
+        touching = (box_distances(box, u) == 0.0) & (old <= t)  # not remembered, its cube touching U_k's
+        assert not np.any(memory.free_at(np.nextafter(t, np.inf))[touching])  # ... not an instant later
         certified += memory.free_at(t).sum()
     assert certified > 20  # the memory does certify something
 
@@ -410,7 +414,7 @@ def test_memory_refuses_bad_arguments():
             call()
         assert info.value.field == "t"
     assert memory.time == 2.0
-    assert memory.nbytes == box.size * 14
+    assert memory.nbytes == box.size * 15
     with pytest.raises(ValueError):
         memory.arrival[0, 0, 0] = 1e9  # read-only
 

@@ -275,8 +275,8 @@ class FreeSpaceMemory:
         v_max: the fastest a person may move, metres/second, finite and > 0 (``config.FREESPACE_V_MAX``). A body part
             moving faster is outside the guarantee.
 
-    Memory: 8 bytes a voxel for ``arrival``, 4 for the distance transform's work space and 2 for the grown set
-    (``nbytes``).
+    Memory: 8 bytes a voxel for ``arrival``, 4 for the distance transform's work space, 2 for the grown set and 1 for
+    the last update's seen-free and robot voxels (``nbytes``).
     """
 
     def __init__(self, box: VoxelBox, v_max: float = config.FREESPACE_V_MAX):
@@ -287,6 +287,7 @@ class FreeSpaceMemory:
         self._d2 = np.empty(box.shape, dtype=np.int32)
         self._grown = np.empty(box.shape, dtype=bool)  # U grown by one voxel (the distance transform's sites)
         self._scratch = np.empty(box.shape, dtype=bool)
+        self._now = np.zeros(box.shape, dtype=bool)  # Seen_k | Robot_k of the last update: free at its time
         self._time: float | None = None
         self._no_robot = np.zeros((1, 1, 1), dtype=bool)
 
@@ -305,7 +306,7 @@ class FreeSpaceMemory:
     @property
     def nbytes(self) -> int:
         """Bytes the memory holds: the arrival times and the distance transform's work space."""
-        return self._arrival.nbytes + self._d2.nbytes + self._grown.nbytes + self._scratch.nbytes
+        return self._arrival.nbytes + self._d2.nbytes + self._grown.nbytes + self._scratch.nbytes + self._now.nbytes
 
     def update(self, t: float, seen: np.ndarray, robot: np.ndarray | None = None, check: bool = True) -> None:
         """Take in the frames of time ``t``.
@@ -340,6 +341,7 @@ class FreeSpaceMemory:
         freespace_kernels.first_axis(self._d2)
         freespace_kernels.advance_arrival(self._d2, t, self.box.voxel, 0.0, self.v_max, config.FREESPACE_ROUNDING,
                                           self._arrival)
+        np.logical_or(seen, robot, out=self._now) if use_robot else np.copyto(self._now, seen)
         self._time = t
 
     def forget(self, occupied: np.ndarray) -> None:
@@ -347,18 +349,26 @@ class FreeSpaceMemory:
         so the next :meth:`update` counts them where a person may be (unless a camera sees them entirely free then).
         The monitor passes the voxels in which a camera measures a surface: an object seen where the memory
         remembers free space moved faster than v_max, and is at least not cleared where it is seen."""
-        self._arrival[self._check_mask(occupied, "occupied")] = -np.inf
+        occupied = self._check_mask(occupied, "occupied")
+        self._arrival[occupied] = -np.inf
+        self._now[occupied] = False
 
     def free_at(self, t: float) -> np.ndarray:
         """(nx, ny, nz) bool: the voxels certified free at time ``t`` (seconds, at least the last update's; no voxel
-        before the first update). Valid until the next update: a later update can only certify more."""
+        before the first update): those no person can have reached (``arrival > t``) and, at exactly the last
+        update's time t_k, also those it took as seen free or inside the robot then (F_k contains Seen_k and Robot_k,
+        even where a person may be in the voxel next to it: one instant later, no longer). Valid until the next
+        update: a later update can only certify more."""
         t = check_real(t, "t", unit="seconds", field="t")
         if self._time is None:
             return np.zeros(self.box.shape, dtype=bool)
         if t < self._time:
             raise InputError(f"t must be at least the last update's time {self._time!r} (the memory does not know "
                              f"the past), got {t!r}", field="t")
-        return self._arrival > t
+        free = self._arrival > t
+        if t == self._time:
+            free |= self._now
+        return free
 
     def _check_mask(self, mask, name: str) -> np.ndarray:
         if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_ or mask.shape != self.box.shape:
