@@ -1,6 +1,10 @@
 """The ROS side of the live tests, with no ROS: a zenoh peer on 127.0.0.1 that publishes a recording's depth frames,
 camera_info and joint states as CDR messages, in rmw_zenoh's layout (keys with the type hash, attachments) or the
-bridge's (bare topic names), restamped on the host's clock as a camera driver stamps them."""
+bridge's (bare topic names), restamped on the host's clock as a camera driver stamps them.
+
+In rmw_zenoh's layout it behaves as image_transport's publishers and realsense-ros do: a camera's image and
+camera_info go out only while it counts a subscriber of the image topic, from rmw_zenoh's liveliness tokens (kind
+``MS``) in its domain. A node that declares no subscriber token gets no frame."""
 
 from __future__ import annotations
 
@@ -26,7 +30,8 @@ class RosPublisher:
     """A zenoh peer listening on 127.0.0.1:port. :meth:`publish_set` sends one set of frames (and the joint state at
     their stamp); :meth:`wait_answer` waits for the node's distances."""
 
-    def __init__(self, rig, joint_names, layout="rmw_zenoh", port=None, type_hash=None):
+    def __init__(self, rig, joint_names, layout="rmw_zenoh", port=None, type_hash=None,
+                 scaling_topic="/depthguard/speed_scaling", latched_info=False):
         import zenoh
 
         self.rig = rig
@@ -38,6 +43,7 @@ class RosPublisher:
         conf.insert_json5("mode", json.dumps("peer"))
         conf.insert_json5("listen/endpoints", json.dumps([self.endpoint]))
         conf.insert_json5("scouting/multicast/enabled", "false")
+        conf.insert_json5("timestamping/enabled", "true")  # as rmw_zenoh's sessions: its advanced publishers need it
         self.session = zenoh.open(conf)
         self.store = wire.type_store()
         self.sequences: dict[str, int] = {}  # rmw_zenoh numbers each publisher's messages from 1
@@ -49,9 +55,13 @@ class RosPublisher:
         self._sub = self.session.declare_subscriber(key, self._on_answer)
         self.scaling = []  # (key, has an attachment, factor) of /depthguard/speed_scaling (live --ssm)
         self._scale = self.session.declare_subscriber(
-            wire.subscription_key("/depthguard/speed_scaling", "control_msgs/msg/SpeedScalingFactor", layout),
+            wire.subscription_key(scaling_topic, "control_msgs/msg/SpeedScalingFactor", layout),
             lambda sample: self.scaling.append((str(sample.key_expr), sample.attachment is not None, wire.deserialize(
                 sample.payload.to_bytes(), "control_msgs/msg/SpeedScalingFactor").factor)))
+        self.scaling_times = []  # when each factor arrived (time.monotonic)
+        self._scale_times = self.session.declare_subscriber(
+            wire.subscription_key(scaling_topic, "control_msgs/msg/SpeedScalingFactor", layout),
+            lambda sample: self.scaling_times.append(time.monotonic()))
         self.diagnostics = []  # diagnostic_msgs/DiagnosticArray messages on /diagnostics
         self._diag = self.session.declare_subscriber(
             wire.subscription_key("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", layout),
@@ -59,17 +69,40 @@ class RosPublisher:
                                                                     "diagnostic_msgs/msg/DiagnosticArray")))
         # Every publisher declared up front: a put right after its declaration can go before the route to the
         # node's subscriber is known.
+        self.latched_info = latched_info  # camera_info transient local: kept in an advanced publisher's cache
         for name in rig.cameras:
             self._publisher(f"/{name}/depth/camera_info", "sensor_msgs/msg/CameraInfo")
             self._publisher(f"/{name}/depth/image_raw", "sensor_msgs/msg/Image")
         self._publisher("/joint_states", "sensor_msgs/msg/JointState")
+        self.tokens: set[str] = set()  # the rmw_zenoh liveliness tokens alive in the domain
+        self.withheld = 0  # frames not published: no subscriber counted
+        self._tokens = None
+        if layout == "rmw_zenoh":
+            self._tokens = self.session.liveliness().declare_subscriber("@ros2_lv/0/**", self._on_token, history=True)
+
+    def _on_token(self, sample):
+        import zenoh
+
+        key = str(sample.key_expr)
+        if sample.kind == zenoh.SampleKind.PUT:
+            self.tokens.add(key)
+        else:
+            self.tokens.discard(key)
+
+    def subscribers(self, topic: str) -> int:
+        """How many subscriptions of ``topic`` the domain's liveliness tokens declare (rmw_zenoh's graph count,
+        what ``getNumSubscribers()`` returns to a driver)."""
+        parsed = [wire.parse_liveliness_key(key) for key in list(self.tokens)]
+        return sum(1 for token in parsed if token is not None and token.kind == "MS" and token.topic == topic)
 
     def wait_for_node(self, timeout: float = 20.0) -> bool:
         """Wait until the node's subscriptions reach every publisher (zenoh's matching status): a sample put
         before then goes nowhere."""
         end = time.monotonic() + timeout
         while time.monotonic() < end:
-            if all(p.matching_status.matching for p in self._publishers.values()):
+            if all(p.matching_status.matching for p in self._publishers.values() if hasattr(p, "matching_status")) and (
+                    self.layout != "rmw_zenoh" or all(self.subscribers(f"/{name}/depth/image_raw")
+                                                      for name in self.rig.cameras)):
                 return True
             time.sleep(0.02)
         return False
@@ -84,8 +117,14 @@ class RosPublisher:
             # as rmw_zenoh's keep-last publishers do; the node counts such losses from the sequence numbers).
             import zenoh
 
-            publisher = self._publishers[key] = self.session.declare_publisher(
-                key, congestion_control=zenoh.CongestionControl.BLOCK)
+            if self.latched_info and msgtype == "sensor_msgs/msg/CameraInfo":  # as rmw_zenoh's transient local
+                import zenoh.ext
+
+                publisher = self._publishers[key] = zenoh.ext.declare_advanced_publisher(
+                    self.session, key, cache=zenoh.ext.CacheConfig(max_samples=1), publisher_detection=True)
+            else:
+                publisher = self._publishers[key] = self.session.declare_publisher(
+                    key, congestion_control=zenoh.CongestionControl.BLOCK)
         return publisher
 
     def _on_answer(self, sample):
@@ -107,11 +146,23 @@ class RosPublisher:
         else:
             publisher.put(payload)
 
+    def latch_info(self, camera: str, ns: int) -> None:
+        """Publish ``camera``'s CameraInfo once, into the advanced publisher's cache (``latched_info``): a driver
+        that latches it at start-up and never sends it again."""
+        info_message, _ = depth_messages(self.store, ns, self.rig.cameras[camera],
+                                         np.zeros(1, dtype=np.uint16).reshape(1, 1))
+        self.put(f"/{camera}/depth/camera_info", "sensor_msgs/msg/CameraInfo", info_message)
+
     def publish_joints(self, ns: int, positions) -> None:
         self.put("/joint_states", "sensor_msgs/msg/JointState",
                  joint_state_message(self.store, ns, self.joint_names, positions))
 
-    def publish_frame(self, camera: str, ns: int, data: np.ndarray, *, big_endian=False, padding=0, info=None):
+    def publish_frame(self, camera: str, ns: int, data: np.ndarray, *, big_endian=False, padding=0, info=None) -> bool:
+        """Publish one frame and its camera_info; in rmw_zenoh's layout only while a subscriber of the image topic
+        is counted (else nothing goes out, ``withheld`` counts it, and False comes back)."""
+        if self.layout == "rmw_zenoh" and not self.subscribers(f"/{camera}/depth/image_raw"):
+            self.withheld += 1
+            return False
         info_message, image = depth_messages(self.store, ns, self.rig.cameras[camera], data)
         if big_endian or padding:
             array = np.ascontiguousarray(data, dtype=data.dtype.newbyteorder(">" if big_endian else "<"))
@@ -119,13 +170,18 @@ class RosPublisher:
             rows = np.concatenate([rows, np.zeros((rows.shape[0], padding), np.uint8)], axis=1)
             image = type(image)(header=image.header, height=image.height, width=image.width, encoding=image.encoding,
                                 is_bigendian=int(big_endian), step=rows.shape[1], data=rows.ravel())
-        self.put(f"/{camera}/depth/camera_info", "sensor_msgs/msg/CameraInfo", info or info_message)
+        if not self.latched_info:
+            self.put(f"/{camera}/depth/camera_info", "sensor_msgs/msg/CameraInfo", info or info_message)
         self.put(f"/{camera}/depth/image_raw", "sensor_msgs/msg/Image", image)
+        return True
 
     def close(self):
         self._sub.undeclare()
         self._diag.undeclare()
         self._scale.undeclare()
+        self._scale_times.undeclare()
+        if self._tokens is not None:
+            self._tokens.undeclare()
         for publisher in self._publishers.values():
             publisher.undeclare()
         self.session.close()

@@ -67,3 +67,32 @@ def test_cdr_of_a_distances_message():
         wire.deserialize(b"\x07\x07", "std_msgs/msg/Float64MultiArray")
     with pytest.raises(InputError, match="CDR"):
         wire.deserialize(data[:-3], "std_msgs/msg/Float64MultiArray")
+
+
+def test_topic_names_expand_as_ros_2_expands_them_in_the_node():
+    """issue 36: ``~`` and relative names are the node's (/depthguard), never keyed literally; substitutions and
+    names ROS 2 refuses are named errors."""
+    assert wire.ros_name("~") == "/depthguard"
+    assert wire.ros_name("~/speed_scaling") == "/depthguard/speed_scaling"
+    assert wire.ros_name("cam/depth/image_raw") == "/cam/depth/image_raw"
+    assert wire.ros_name("/cam/depth/image_raw/") == "/cam/depth/image_raw"
+    assert wire.data_key("~/x", "sensor_msgs/msg/Image", "bridge") == "depthguard/x"
+    assert wire.data_key("a/b", "sensor_msgs/msg/Image").startswith("0/a/b/sensor_msgs::msg::dds_::Image_/RIHS01_")
+    key = wire.liveliness_key("abc", 11, "MS", "depthguard", "~/x", "sensor_msgs/msg/Image", qos=wire.SENSOR_QOS)
+    assert "/%depthguard%x/" in key
+    for bad in ("{node}/x", "//a", "", "1a", "/a b", "~x", "a/~", "/a/1b", None, 3):
+        with pytest.raises(InputError) as info:
+            wire.ros_name(bad)
+        assert info.value.field == "topic"
+
+
+def test_liveliness_tokens_read_back():
+    key = wire.liveliness_key("abc", 11, "MS", "depthguard", "/cam/depth/image_raw", "sensor_msgs/msg/Image", domain=5,
+                              qos=wire.SENSOR_QOS)
+    token = wire.parse_liveliness_key(key)
+    assert token == wire.Token(5, "abc", "MS", "depthguard", "/cam/depth/image_raw", "sensor_msgs::msg::dds_::Image_",
+                               wire.type_hash("sensor_msgs/msg/Image"), "2::,10:,:,:,,")
+    assert wire.parse_liveliness_key(wire.liveliness_key("abc", 0, "NN", "depthguard")).kind == "NN"
+    for bad in ("", "@ros2_lv/x/abc/0/0/NN/%/%/n", "other/0/abc/0/0/NN/%/%/n", "@ros2_lv/0/abc/0/3/XX/%/%/n",
+                "@ros2_lv/0/abc/0/3/MP/%/%/n/%t"):
+        assert wire.parse_liveliness_key(bad) is None

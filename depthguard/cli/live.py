@@ -36,7 +36,8 @@ def add_arguments(parser) -> None:
                              "tcp/127.0.0.1:7447, rmw_zenoh's router); never listens")
     parser.add_argument("--layout", choices=("rmw_zenoh", "bridge"), default="rmw_zenoh",
                         help="rmw_zenoh's keys, hashes and attachments, or zenoh-bridge-ros2dds' bare topic names")
-    parser.add_argument("--domain", type=int, default=0, help="ROS domain id (rmw_zenoh layout; default 0)")
+    parser.add_argument("--domain", type=int, default=None,
+                        help="ROS domain id, 0-232 (rmw_zenoh layout; default: $ROS_DOMAIN_ID, else 0)")
     add_base_option(parser)
     add_monitor_options(parser, memory=True)
     ssm = parser.add_argument_group("speed scaling (--ssm; docs/design.md §9, §12b)")
@@ -52,6 +53,9 @@ def add_arguments(parser) -> None:
     ssm.add_argument("--ssm-braking", metavar="RAD_S2[,...]",
                      help="the deceleration each joint is sure of, rad/s^2: one number or one per joint (default "
                           f"{config.JOINT_ACCELERATION:g})")
+    ssm.add_argument("--speed-scaling-topic", metavar="TOPIC",
+                     help="where the factor goes (default /depthguard/speed_scaling); joint_trajectory_controller "
+                          "listens on /<controller>/speed_scaling_input")
     ssm.add_argument("--ssm-hold", type=HOLD, default=config.SSM_HOLD, metavar="S",
                      help="seconds the controller applies a factor with no newer one before it stops (its "
                           f"watchdog; counted in the reaction time; default {config.SSM_HOLD:g})")
@@ -71,7 +75,7 @@ def add_arguments(parser) -> None:
 def topics_of(args, rig):
     """The :class:`~depthguard.live.Topics` from ``--camera`` and ``--joint-states``."""
     from depthguard.errors import InputError
-    from depthguard.live import Topics
+    from depthguard.live import Topics, wire
 
     cameras = {name: (Topics.default_image(name), Topics.info_of(Topics.default_image(name))) for name in rig.cameras}
     for text in args.camera:
@@ -82,9 +86,9 @@ def topics_of(args, rig):
         if name not in rig.cameras:
             raise InputError(f"--camera {text!r}: the rig has no camera {name!r} (cameras: "
                              f"{', '.join(rig.cameras)})", camera=name, field="camera")
-        image = match["image"]
-        cameras[name] = (image, match["info"] or Topics.info_of(image))
-    return Topics(cameras, args.joint_states)
+        image = wire.ros_name(match["image"])  # ~ and relative names as ROS 2 expands them in /depthguard
+        cameras[name] = (image, wire.ros_name(match["info"]) if match["info"] else Topics.info_of(image))
+    return Topics(cameras, wire.ros_name(args.joint_states))
 
 
 def per_joint(text: str | None, option: str, robot):
@@ -111,12 +115,31 @@ def ssm_options(args, robot) -> dict | None:
     from depthguard.errors import InputError
 
     if not args.ssm:
-        for name in ("detection_capability", "ssm_joint_speed", "ssm_braking"):
+        for name in ("detection_capability", "ssm_joint_speed", "ssm_braking", "speed_scaling_topic"):
             if getattr(args, name) is not None:
                 raise InputError(f"--{name.replace('_', '-')} needs --ssm", field=name)
         return None
     return dict(joint_speed=per_joint(args.ssm_joint_speed, "--ssm-joint-speed", robot),
                 braking=per_joint(args.ssm_braking, "--ssm-braking", robot), hold=args.ssm_hold)
+
+
+def ros_domain(given: int | None) -> int:
+    """The ROS domain id: ``--domain`` when given, else ``ROS_DOMAIN_ID`` as ROS 2 reads it (unset or empty: 0),
+    checked (0-232) with an error naming whichever it came from."""
+    import os
+
+    from depthguard.errors import InputError
+
+    if given is not None:
+        field, text = "domain", str(given)
+    else:
+        field, text = "ROS_DOMAIN_ID", os.environ.get("ROS_DOMAIN_ID", "").strip()
+        if not text:
+            return 0
+    if not text.isdigit() or not 0 <= int(text) <= 232:
+        raise InputError(f"{'--domain' if given is not None else 'ROS_DOMAIN_ID'} must be a ROS domain id, a whole "
+                         f"number in [0, 232], got {text[:40]!r}", field=field)
+    return int(text)
 
 
 def run(args) -> int:
@@ -134,10 +157,14 @@ def run(args) -> int:
     rig = load_rig(args.rig)
     robot = load_robot(args.robot, args.base)
     topics = topics_of(args, rig)
+    args.domain = ros_domain(args.domain)
     for image, info in topics.cameras.values():
         wire.data_key(image, "sensor_msgs/msg/Image", args.layout, args.domain)  # names checked before connecting
         wire.data_key(info, "sensor_msgs/msg/CameraInfo", args.layout, args.domain)
-    options = LiveOptions(layout=args.layout, domain=args.domain, connect=args.connect or ["tcp/127.0.0.1:7447"])
+    scaling_topic = wire.ros_name(args.speed_scaling_topic or "/depthguard/speed_scaling")
+    wire.data_key(scaling_topic, "control_msgs/msg/SpeedScalingFactor", args.layout, args.domain)
+    options = LiveOptions(layout=args.layout, domain=args.domain, connect=args.connect or ["tcp/127.0.0.1:7447"],
+                          scaling_topic=scaling_topic)
     if args.record is not None and Path(args.record).exists():
         raise InputError(f"--record {args.record}: exists already; a recording is written into a new folder",
                          field="record")
@@ -168,7 +195,7 @@ def run(args) -> int:
                   f"and {robot.name}")
             return 0
         node.start()
-        outputs = "/depthguard/distances and /depthguard/status" + (", /depthguard/speed_scaling" if ssm else "")
+        outputs = "/depthguard/distances and /depthguard/status" + (f", {scaling_topic}" if ssm else "")
         print(f"depthguard live: listening ({args.layout}, {', '.join(options.connect)}) for "
               f"{', '.join(rig.cameras)}; publishing {outputs}", file=sys.stderr, flush=True)
         if scaling is not None:
@@ -178,11 +205,19 @@ def run(args) -> int:
                   f"within {scaling.at_rest(scaling.extra_time + 0.05):.2f} m of possibly occupied space",
                   file=sys.stderr, flush=True)
         start = time.monotonic()
+        import signal
+
+        def terminate(signum, frame):  # SIGTERM (ros2 launch, systemd, docker stop): close as on Ctrl-C, factor 0
+            raise KeyboardInterrupt
+
+        previous = signal.signal(signal.SIGTERM, terminate)
         try:
             while args.duration is None or time.monotonic() - start < args.duration:
                 time.sleep(0.05)
         except KeyboardInterrupt:
             pass
+        finally:
+            signal.signal(signal.SIGTERM, previous)
     finally:
         node.close()
     print(f"depthguard live: {node.answers} answers, {node.dropped} sets dropped, {node.deadline_misses} deadline "

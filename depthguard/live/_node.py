@@ -11,7 +11,7 @@ Threads:
   newest: older ones are dropped and counted, never queued.
 
 Every output goes out as rmw_zenoh sends it (the type hash in the key, an attachment, a liveliness token per
-publisher), or at the bare topic name for the bridge layout: ``/depthguard/distances``
+publisher; every subscription has its token too, so that drivers count a subscriber), or at the bare topic name for the bridge layout: ``/depthguard/distances``
 (``std_msgs/msg/Float64MultiArray``, one value per control point in the robot's order, ``inf`` for nothing within
 rho) and ``/depthguard/status`` (``diagnostic_msgs/msg/DiagnosticArray``: one status per control point, its flags,
 and one per camera, its age and counts; ERROR while a camera is stale or missing, WARN for other flags), back to
@@ -53,7 +53,9 @@ SCALING_TOPIC = "/depthguard/speed_scaling"
 SCALING_TYPE = "control_msgs/msg/SpeedScalingFactor"
 #: Diagnostic levels (diagnostic_msgs/msg/DiagnosticStatus).
 OK, WARN, ERROR = 0, 1, 2
-NODE_NAME = "depthguard"
+NODE_NAME = wire.NODE_NAME
+#: Entity ids: the node 0, its publishers 1-4, its subscriptions from this one on.
+_FIRST_SUBSCRIPTION = 10
 CSV_HEADER = RESULT_COLUMNS + ["cameras", "latency_ms"]
 
 
@@ -201,6 +203,8 @@ class LiveOptions:
     #: seconds the host's clock is held back when it drives the loop: a frame reaches the node this much after its
     #: stamp (driver, transport, decoding) and still joins its set, as it does in replay
     transport: float = config.LIVE_TRANSPORT
+    #: where the speed factor goes (with ``ssm``): joint_trajectory_controller's is ``/<controller>/speed_scaling_input``
+    scaling_topic: str = "/depthguard/speed_scaling"
 
 
 class LiveNode:
@@ -238,6 +242,9 @@ class LiveNode:
         self.ssm = None if ssm is None else dict(ssm)
         self.scaling = None  # the SpeedScaling, made on the worker's thread with the monitor
         self.last_scaling = None  # the last ScalingAnswer published
+        self.scaling_published = 0  # factors published, the deadline's zeros included
+        self.deadline_zeros = 0  # zeros published because no answer came within hold
+        self.ssm_hold = float((ssm or {}).get("hold", config.SSM_HOLD))
         self.recent: collections.deque = collections.deque(maxlen=1000)  # the last answers' (time, why, seen)
         self.errors: collections.deque = collections.deque(maxlen=100)  # the last errors, one line each
         self._warned: set = set()
@@ -256,9 +263,10 @@ class LiveNode:
             raise InputError(f"zenoh cannot open a client session to {', '.join(options.connect)}: {reason}",
                              field="connect") from None
         self._subscribers = []
+        self._subscription_tokens = []  # rmw_zenoh's liveliness token of each subscription
         for name, (image_topic, info_topic) in topics.cameras.items():
             self._subscribe(image_topic, IMAGE, lambda s, n=name: self._on_image(n, s))
-            self._subscribe(info_topic, CAMERA_INFO, lambda s, n=name: self._on_info(n, s))
+            self._subscribe(info_topic, CAMERA_INFO, lambda s, n=name: self._on_info(n, s), latched=True)
         self._subscribe(topics.joints, JOINT_STATE, self._on_joints)
         seed = os.urandom(12)
         self._distances = _Publisher(self.session, DISTANCES_TOPIC, DISTANCES_TYPE, options.layout, options.domain, 1,
@@ -267,8 +275,14 @@ class LiveNode:
                                   self._recorder)
         self._diagnostics = _Publisher(self.session, DIAGNOSTICS_TOPIC, STATUS_TYPE, options.layout, options.domain, 3,
                                        seed, self._recorder)
-        self._scaling = None if ssm is None else _Publisher(self.session, SCALING_TOPIC, SCALING_TYPE, options.layout,
-                                                            options.domain, 4, seed, self._recorder)
+        self._scaling = None if ssm is None else _Publisher(self.session, options.scaling_topic, SCALING_TYPE,
+                                                            options.layout, options.domain, 4, seed, self._recorder)
+        # The factor's deadline, kept by a thread of its own (a set that takes long must not hold it up): each factor
+        # holds for ssm's hold seconds; with no newer one by then, 0 goes out, and again every hold seconds.
+        self._scaling_lock = threading.Lock()
+        self._scaling_deadline = math.inf
+        self._keeper = None if ssm is None else threading.Thread(target=self._keep_deadline,
+                                                                 name="depthguard-live-deadline", daemon=True)
         self._next_diagnostics = 0.0
         self._node_token = None
         if options.layout == "rmw_zenoh":
@@ -279,7 +293,7 @@ class LiveNode:
 
     # ------------------------------------------------------------------------------------------------ receiving
 
-    def _subscribe(self, topic: str, msgtype: str, callback) -> None:
+    def _subscribe(self, topic: str, msgtype: str, callback, latched: bool = False) -> None:
         key = wire.subscription_key(topic, msgtype, self.options.layout, self.options.domain)
         expected = wire.type_hash(msgtype)
 
@@ -294,7 +308,22 @@ class LiveNode:
             except Exception as exc:  # noqa: BLE001 - a callback must never raise into zenoh
                 self.errors.append(f"{topic}: {exc}")
 
-        self._subscribers.append(self.session.declare_subscriber(key, on_sample))
+        if latched and self.options.layout == "rmw_zenoh":
+            # A transient-local publisher (camera_info, latched) keeps its last messages in zenoh's advanced
+            # publisher cache, as rmw_zenoh does; this subscriber asks every such publisher for them, also one
+            # that appears later, as rmw_zenoh's own transient-local subscribers do. Live samples come as usual.
+            import zenoh.ext
+
+            self._subscribers.append(zenoh.ext.declare_advanced_subscriber(
+                self.session, key, on_sample, history=zenoh.ext.HistoryConfig(detect_late_publishers=True,
+                                                                                max_samples=1)))
+        else:
+            self._subscribers.append(self.session.declare_subscriber(key, on_sample))
+        if self.options.layout == "rmw_zenoh":  # counted by the publisher's side as a subscriber (kind MS)
+            entity = _FIRST_SUBSCRIPTION + len(self._subscription_tokens)
+            self._subscription_tokens.append(self.session.liveliness().declare_token(wire.liveliness_key(
+                str(self.session.info.zid()), entity, "MS", NODE_NAME, topic, msgtype, domain=self.options.domain,
+                qos=wire.SENSOR_QOS)))
 
     def _on_image(self, camera: str, sample) -> None:
         counts = self.counts[camera]
@@ -403,6 +432,9 @@ class LiveNode:
         self._ready.wait()
         if self._startup_error is not None:
             raise self._startup_error
+        if self._keeper is not None:  # zeros from the start, until the first answer
+            self._scaling_deadline = clock.monotonic()
+            self._keeper.start()
 
     _startup_error = None
 
@@ -411,10 +443,14 @@ class LiveNode:
         self._wake.set()
         if self._worker.is_alive():
             self._worker.join()
+        if self._keeper is not None and self._keeper.is_alive():
+            self._keeper.join()
+        if self._scaling is not None:  # the last word on the factor: 0 (the stock controller keeps the last one)
+            self._publish_scaling(None, why="closing")
         outputs = [p for p in (self._distances, self._status, self._diagnostics, self._scaling) if p is not None]
         for entity in [*self._subscribers, *(p.publisher for p in outputs)]:
             entity.undeclare()
-        for token in [*(p.token for p in outputs), self._node_token]:
+        for token in [*(p.token for p in outputs), *self._subscription_tokens, self._node_token]:
             if token is not None:
                 token.undeclare()
         self.session.close()
@@ -480,6 +516,9 @@ class LiveNode:
                         self._publish_scaling(None)
                     if out_file is not None:
                         out_file.flush()
+        except Exception as exc:  # noqa: BLE001 - the loop itself broke: no more answers, the deadline's zeros go on
+            self.errors.append(f"the worker stopped: {type(exc).__name__}: {exc}")
+            _LOG.exception("depthguard live: the worker stopped; the speed factor falls to 0 at its deadline")
         finally:
             if out_file is not None:
                 out_file.close()
@@ -513,15 +552,28 @@ class LiveNode:
             for row in answer.rows(self.robot.control_point_names):
                 writer.writerow(row + [";".join(answer.seen), f"{latency * 1e3:.3f}"] + extra)
 
-    def _publish_scaling(self, scaling) -> None:
-        """``/depthguard/speed_scaling`` (with ``ssm``): the factor of ``scaling`` (a ScalingAnswer), 0 for None."""
+    def _publish_scaling(self, scaling, why: str = "no answer") -> None:
+        """The speed factor (with ``ssm``, on ``LiveOptions.scaling_topic``): the factor of ``scaling`` (a
+        ScalingAnswer), 0 for None (``why`` says why). A factor above 0 holds for ``hold`` seconds: with no newer one
+        by then, :meth:`_keep_deadline` publishes 0."""
         if self._scaling is None:
             return
         from depthguard.avoidance import ScalingAnswer
 
-        scaling = ScalingAnswer(0.0, math.inf, "no answer") if scaling is None else scaling
-        self.last_scaling = scaling
-        self._scaling.put(wire.type_store().types[SCALING_TYPE](factor=float(scaling.factor)))
+        scaling = ScalingAnswer(0.0, math.inf, why) if scaling is None else scaling
+        with self._scaling_lock:
+            self.last_scaling = scaling
+            self._scaling_deadline = clock.monotonic() + self.ssm_hold
+            self._scaling.put(wire.type_store().types[SCALING_TYPE](factor=float(scaling.factor)))
+            self.scaling_published += 1
+
+    def _keep_deadline(self) -> None:
+        """Publish 0 whenever ``hold`` seconds passed since the last factor (a stream of zeros while no answer comes:
+        the joints or the frames stopped, or a set takes longer than hold)."""
+        while not self._stop.wait(min(self.ssm_hold / 4, 0.01)):
+            if clock.monotonic() >= self._scaling_deadline:
+                self.deadline_zeros += 1
+                self._publish_scaling(None, why="no answer within hold")
 
     def clock_problem(self, name: str) -> str:
         """Why camera ``name``'s clock and the host's disagree, "" when they agree (within

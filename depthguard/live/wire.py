@@ -18,8 +18,13 @@ payloads, attachments and liveliness tokens. Pure functions of strings and bytes
 **zenoh-bridge-ros2dds** (ROS 2 on DDS, bridged): the key is the topic without its leading slash, the payload the
 same CDR bytes, and no attachment.
 
-Type hashes come from ``rosbags``' type store (ROS 2 Jazzy's definitions; Humble's give the same hashes for the
-types used here), which also serialises the messages.
+Type hashes come from ``rosbags``' type store (ROS 2 Jazzy's definitions), which also serialises the messages.
+rosidl gives Humble's messages the same hashes, but rmw_zenoh on Humble does not use them: it keys every topic with
+``TypeHashNotSupported``, so a Humble peer is not spoken to (yet).
+
+Every entity depthguard declares has its liveliness token, subscriptions included (kind ``MS``, best effort and
+volatile: :data:`SENSOR_QOS`): camera drivers that publish only while they count a subscriber (image_transport,
+realsense-ros) count depthguard. Topic names follow ROS 2's rules in the node ``/depthguard`` (:func:`ros_name`).
 """
 
 from __future__ import annotations
@@ -30,19 +35,27 @@ from dataclasses import dataclass
 
 from depthguard.errors import InputError
 
-__all__ = ["LAYOUTS", "Attachment", "type_store", "type_name", "type_hash", "data_key", "subscription_key",
-           "key_type_hash", "attachment_bytes", "parse_attachment", "liveliness_key", "serialize", "deserialize",
-           "CDR_HEADER"]
+__all__ = ["LAYOUTS", "Attachment", "Token", "type_store", "type_name", "type_hash", "ros_name", "data_key",
+           "subscription_key", "key_type_hash", "attachment_bytes", "parse_attachment", "liveliness_key",
+           "parse_liveliness_key", "serialize", "deserialize", "CDR_HEADER", "DEFAULT_QOS", "SENSOR_QOS"]
 
 LAYOUTS = ("rmw_zenoh", "bridge")
 #: Little-endian plain CDR (encapsulation kind 0x0001, options 0).
 CDR_HEADER = b"\x00\x01\x00\x00"
 _GID_SIZE = 16
 _ATTACHMENT = struct.Struct("<qqB")
-_TOPIC = re.compile(r"/?(?:[A-Za-z_~{][A-Za-z0-9_{}]*)(?:/[A-Za-z_][A-Za-z0-9_]*)*/?")
+_TOPIC = re.compile(r"(?:~|~/[A-Za-z_][A-Za-z0-9_]*(?:/[A-Za-z_][A-Za-z0-9_]*)*|/?[A-Za-z_][A-Za-z0-9_]*"
+                    r"(?:/[A-Za-z_][A-Za-z0-9_]*)*)/?")
+#: The node's name and namespace, against which ``~`` and relative topic names expand (ROS 2's name rules).
+NODE_NAME = "depthguard"
+NODE_NAMESPACE = "/"
 #: rmw_zenoh's QoS of a topic we publish: reliable, volatile, keep last 10 (the fields that differ from its
 #: defaults).
 DEFAULT_QOS = "::,10:,:,:,,"
+#: rmw_zenoh's QoS of a topic we subscribe to: best effort (2), volatile, keep last 10. A best-effort subscription
+#: is compatible with every publisher, reliable or best effort, volatile or transient local, so every camera
+#: driver counts it (image_transport and realsense-ros publish only while they count a subscriber).
+SENSOR_QOS = "2::,10:,:,:,,"
 
 _STORE = None
 
@@ -84,10 +97,23 @@ def _parts(msgtype: str) -> tuple[str, str, str]:
     return parts[0], parts[1], parts[2]
 
 
-def _check_topic(topic: str) -> str:
+def ros_name(topic: str) -> str:
+    """``topic`` as the absolute name ROS 2 gives it in the node ``/depthguard``: ``~`` and ``~/x`` expand to
+    ``/depthguard`` and ``/depthguard/x``, a relative ``x/y`` to ``/x/y``; a trailing slash is dropped.
+    Substitutions (``{node}``) and anything that is not a ROS 2 topic name are refused with an :class:`InputError`
+    naming the topic."""
     if not isinstance(topic, str) or not _TOPIC.fullmatch(topic) or "//" in topic:
-        raise InputError(f"not a ROS 2 topic name: {topic!r}", field="topic")
-    return topic.strip("/")
+        raise InputError(f"not a ROS 2 topic name: {topic!r} (letters, digits and underscores between slashes; "
+                         f"'~' for the node's private names; no substitutions)", field="topic")
+    name = topic.rstrip("/") if len(topic) > 1 else topic
+    if name.startswith("~"):
+        node = NODE_NAMESPACE.rstrip("/") + "/" + NODE_NAME
+        return node + name[1:]
+    return name if name.startswith("/") else NODE_NAMESPACE.rstrip("/") + "/" + name
+
+
+def _check_topic(topic: str) -> str:
+    return ros_name(topic).strip("/")
 
 
 def data_key(topic: str, msgtype: str, layout: str = "rmw_zenoh", domain: int = 0) -> str:
@@ -168,8 +194,39 @@ def liveliness_key(zid: str, entity: int, kind: str, node: str, topic: str | Non
             _mangle(namespace), node]
     if kind == "NN":
         return "/".join(head)
-    _check_topic(topic)
-    return "/".join(head + [_mangle(topic), type_name(msgtype), type_hash(msgtype), qos])
+    return "/".join(head + [_mangle(ros_name(topic)), type_name(msgtype), type_hash(msgtype), qos])
+
+
+@dataclass(frozen=True)
+class Token:
+    """What an rmw_zenoh liveliness token says (:func:`parse_liveliness_key`): the entity's domain, kind (NN, MP,
+    MS, SS, SC), node, and for a topic's entity its topic (absolute), type (``pkg::msg::dds_::Name_``), type hash
+    (``RIHS01_...`` or Humble's ``TypeHashNotSupported``) and QoS text."""
+
+    domain: int
+    zid: str
+    kind: str
+    node: str
+    topic: str | None = None
+    type: str | None = None
+    hash: str | None = None
+    qos: str | None = None
+
+
+def parse_liveliness_key(key: str) -> Token | None:
+    """The :class:`Token` of an rmw_zenoh liveliness key (the layout of :func:`liveliness_key`), None when the key
+    is not one."""
+    parts = str(key).split("/")
+    if len(parts) < 9 or parts[0] != "@ros2_lv" or not parts[1].isdigit() or parts[5] not in (
+            "NN", "MP", "MS", "SS", "SC"):
+        return None
+    token = Token(int(parts[1]), parts[2], parts[5], parts[8])
+    if parts[5] == "NN":
+        return token
+    if len(parts) < 13:
+        return None
+    return Token(token.domain, token.zid, token.kind, token.node, parts[9].replace("%", "/"), parts[10], parts[11],
+                 parts[12])
 
 
 def serialize(message, msgtype: str) -> bytes:
