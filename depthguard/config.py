@@ -381,6 +381,9 @@ SSM_REQUERY = 0.005
 #: seconds with no newer one (its watchdog; then it stops), and runs every SSM_CONTROL_PERIOD seconds. Both count in
 #: the reaction time T_r.
 SSM_HOLD = 0.1
+#: depthguard live: how long, at start-up, it asks the domain's liveliness tokens which rmw_zenoh hash style the
+#: peers speak (Humble's or Jazzy's), seconds.
+LIVE_DISCOVERY = 1.0
 SSM_CONTROL_PERIOD = 0.002
 #: Speed scaling: the largest joint speed (rad/s or m/s) and braking (rad/s^2 or m/s^2) it takes, above any arm's: a
 #: larger one is a wrong value (a URDF's placeholder limit, a unit slip), and a braking that large would claim a stop

@@ -31,7 +31,7 @@ class RosPublisher:
     their stamp); :meth:`wait_answer` waits for the node's distances."""
 
     def __init__(self, rig, joint_names, layout="rmw_zenoh", port=None, type_hash=None,
-                 scaling_topic="/depthguard/speed_scaling", latched_info=False):
+                 scaling_topic="/depthguard/speed_scaling", latched_info=False, distro="jazzy"):
         import zenoh
 
         self.rig = rig
@@ -48,11 +48,16 @@ class RosPublisher:
         self.store = wire.type_store()
         self.sequences: dict[str, int] = {}  # rmw_zenoh numbers each publisher's messages from 1
         self.type_hash = type_hash  # a wrong hash in the image keys, when given
+        self.distro = distro  # rmw_zenoh's hash style: Jazzy's RIHS01 hashes or Humble's TypeHashNotSupported
+        self._declared = []  # the liveliness tokens of this peer's publishers and subscriptions
         self._publishers = {}
         self.answers = []
         self._answered = threading.Condition()
-        key = wire.subscription_key("/depthguard/distances", "std_msgs/msg/Float64MultiArray", layout)
+        # Subscribed at the exact key of this peer's hash style, as rmw_zenoh's subscriptions are: a node that
+        # speaks the other style is not heard.
+        key = wire.data_key("/depthguard/distances", "std_msgs/msg/Float64MultiArray", layout, distro=distro)
         self._sub = self.session.declare_subscriber(key, self._on_answer)
+        self._token("MS", "/depthguard/distances", "std_msgs/msg/Float64MultiArray")
         self.scaling = []  # (key, has an attachment, factor) of /depthguard/speed_scaling (live --ssm)
         self._scale = self.session.declare_subscriber(
             wire.subscription_key(scaling_topic, "control_msgs/msg/SpeedScalingFactor", layout),
@@ -95,6 +100,13 @@ class RosPublisher:
         parsed = [wire.parse_liveliness_key(key) for key in list(self.tokens)]
         return sum(1 for token in parsed if token is not None and token.kind == "MS" and token.topic == topic)
 
+    def _token(self, kind: str, topic: str, msgtype: str) -> None:
+        """Declare this peer's liveliness token for one of its entities, as rmw_zenoh does (rmw_zenoh layout)."""
+        if self.layout == "rmw_zenoh":
+            key = wire.liveliness_key(str(self.session.info.zid()), 100 + len(self._declared), kind, "camera_driver",
+                                      topic, msgtype, distro=self.distro)
+            self._declared.append(self.session.liveliness().declare_token(key))
+
     def wait_for_node(self, timeout: float = 20.0) -> bool:
         """Wait until the node's subscriptions reach every publisher (zenoh's matching status): a sample put
         before then goes nowhere."""
@@ -108,7 +120,7 @@ class RosPublisher:
         return False
 
     def _publisher(self, topic: str, msgtype: str):
-        key = wire.data_key(topic, msgtype, self.layout)
+        key = wire.data_key(topic, msgtype, self.layout, distro=self.distro)
         if self.type_hash is not None and msgtype == "sensor_msgs/msg/Image":
             key = key.rsplit("/", 1)[0] + "/" + self.type_hash
         publisher = self._publishers.get(key)
@@ -125,6 +137,7 @@ class RosPublisher:
             else:
                 publisher = self._publishers[key] = self.session.declare_publisher(
                     key, congestion_control=zenoh.CongestionControl.BLOCK)
+            self._token("MP", topic, msgtype)
         return publisher
 
     def _on_answer(self, sample):
@@ -182,6 +195,8 @@ class RosPublisher:
         self._scale_times.undeclare()
         if self._tokens is not None:
             self._tokens.undeclare()
+        for token in self._declared:
+            token.undeclare()
         for publisher in self._publishers.values():
             publisher.undeclare()
         self.session.close()

@@ -589,3 +589,40 @@ def test_sigterm_leaves_0_as_the_last_factor(recording, tmp_path):
         if process.poll() is None:
             process.kill()
         publisher.close()
+
+
+@pytest.mark.parametrize("distro", ["humble", "jazzy"])
+def test_the_node_speaks_the_hash_style_of_its_peers(recording, robot, tmp_path, distro):
+    """issue 36: rmw_zenoh on Humble keys topics and writes tokens with TypeHashNotSupported, Jazzy and later with
+    the RIHS01 hash; a subscriber listens at the exact key of its own style. The node takes the style from the
+    peers' liveliness tokens, and a peer of that style hears its distances. (The layout, as in nano-ros's Humble
+    key ``0/chatter/std_msgs::msg::dds_::Int32_/TypeHashNotSupported`` and token ``@ros2_lv/0/<zid>/0/5/MP/%/%/
+    <node>/<topic>/std_msgs::msg::dds_::Int32_/TypeHashNotSupported/1:2:1,10:,:,:,,``.)"""
+    from depthguard.live import wire
+
+    assert wire.data_key("/chatter", "std_msgs/msg/Int32", distro="humble") == \
+        "0/chatter/std_msgs::msg::dds_::Int32_/TypeHashNotSupported"
+    assert wire.liveliness_key("z", 5, "MP", "talker", "/chatter", "std_msgs/msg/Int32", qos="1:2:1,10:,:,:,,",
+                               distro="humble") == \
+        "@ros2_lv/0/z/0/5/MP/%/%/talker/%chatter/std_msgs::msg::dds_::Int32_/TypeHashNotSupported/1:2:1,10:,:,:,,"
+    rig = recording.rig
+    publisher = RosPublisher(rig, recording.joint_names, distro=distro)
+    node = LiveNode(rig, robot, topics(rig), LiveOptions(connect=[publisher.endpoint], transport=1.0), OPTIONS)
+    try:
+        node.start()
+        assert node.distro == distro
+        assert publisher.wait_for_node()
+        ours = [wire.parse_liveliness_key(k) for k in list(publisher.tokens)]
+        ours = [t for t in ours if t is not None and t.node == "depthguard" and t.kind != "NN"]
+        assert ours and {t.hash == wire.HUMBLE_HASH for t in ours} == {distro == "humble"}
+        frame_set = next(recording.frame_sets())
+        ns = time.time_ns()
+        publisher.publish_joints(ns, recording.joints_at(frame_set.time))
+        assert wait_for(lambda: node.joint_states > 0)
+        for camera, image in frame_set.images.items():
+            assert publisher.publish_frame(camera, ns, image.data)
+        assert publisher.wait_answer(1)
+        assert publisher.answers[0][0].endswith("/" + wire.hash_of("std_msgs/msg/Float64MultiArray", distro))
+    finally:
+        node.close()
+        publisher.close()

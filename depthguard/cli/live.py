@@ -36,6 +36,9 @@ def add_arguments(parser) -> None:
                              "tcp/127.0.0.1:7447, rmw_zenoh's router); never listens")
     parser.add_argument("--layout", choices=("rmw_zenoh", "bridge"), default="rmw_zenoh",
                         help="rmw_zenoh's keys, hashes and attachments, or zenoh-bridge-ros2dds' bare topic names")
+    parser.add_argument("--ros-distro", choices=("auto", "jazzy", "humble"), default="auto",
+                        help="rmw_zenoh's type-hash style: Jazzy and later (RIHS01 hashes) or Humble "
+                             "(TypeHashNotSupported); auto: the one the peers' liveliness tokens use (default)")
     parser.add_argument("--domain", type=int, default=None,
                         help="ROS domain id, 0-232 (rmw_zenoh layout; default: $ROS_DOMAIN_ID, else 0)")
     add_base_option(parser)
@@ -164,7 +167,7 @@ def run(args) -> int:
     scaling_topic = wire.ros_name(args.speed_scaling_topic or "/depthguard/speed_scaling")
     wire.data_key(scaling_topic, "control_msgs/msg/SpeedScalingFactor", args.layout, args.domain)
     options = LiveOptions(layout=args.layout, domain=args.domain, connect=args.connect or ["tcp/127.0.0.1:7447"],
-                          scaling_topic=scaling_topic)
+                          scaling_topic=scaling_topic, distro=args.ros_distro)
     if args.record is not None and Path(args.record).exists():
         raise InputError(f"--record {args.record}: exists already; a recording is written into a new folder",
                          field="record")

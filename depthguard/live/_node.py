@@ -107,12 +107,12 @@ class _Publisher:
     """One output topic: its zenoh publisher, rmw_zenoh's attachment and liveliness token (rmw_zenoh layout)."""
 
     def __init__(self, session, topic: str, msgtype: str, layout: str, domain: int, entity: int, gid_seed: bytes,
-                 recorder=None):
+                 recorder=None, distro: str = "jazzy"):
         self.topic = topic
         self.recorder = recorder
         self.msgtype = msgtype
         self.layout = layout
-        self.key = wire.data_key(topic, msgtype, layout, domain)
+        self.key = wire.data_key(topic, msgtype, layout, domain, distro)
         self.publisher = session.declare_publisher(self.key)
         self.sequence = 0
         self.gid = (gid_seed + entity.to_bytes(4, "little"))[-16:].rjust(16, b"\x00")
@@ -120,7 +120,7 @@ class _Publisher:
         if layout == "rmw_zenoh":
             zid = str(session.info.zid())
             self.token = session.liveliness().declare_token(
-                wire.liveliness_key(zid, entity, "MP", NODE_NAME, topic, msgtype, domain=domain))
+                wire.liveliness_key(zid, entity, "MP", NODE_NAME, topic, msgtype, domain=domain, distro=distro))
 
     def put(self, message) -> None:
         payload = wire.serialize(message, self.msgtype)
@@ -205,6 +205,9 @@ class LiveOptions:
     transport: float = config.LIVE_TRANSPORT
     #: where the speed factor goes (with ``ssm``): joint_trajectory_controller's is ``/<controller>/speed_scaling_input``
     scaling_topic: str = "/depthguard/speed_scaling"
+    #: rmw_zenoh's hash style: "jazzy" (RIHS01 hashes), "humble" (TypeHashNotSupported) or "auto" (the peers' tokens
+    #: in the domain say; Jazzy when none is found)
+    distro: str = "auto"
 
 
 class LiveNode:
@@ -262,6 +265,7 @@ class LiveNode:
             reason = str(exc).split(" at /")[0][:200]  # zenoh's message, without its source location
             raise InputError(f"zenoh cannot open a client session to {', '.join(options.connect)}: {reason}",
                              field="connect") from None
+        self.distro = self._distro(options)  # rmw_zenoh's hash style, spoken on every key and token
         self._subscribers = []
         self._subscription_tokens = []  # rmw_zenoh's liveliness token of each subscription
         for name, (image_topic, info_topic) in topics.cameras.items():
@@ -270,13 +274,14 @@ class LiveNode:
         self._subscribe(topics.joints, JOINT_STATE, self._on_joints)
         seed = os.urandom(12)
         self._distances = _Publisher(self.session, DISTANCES_TOPIC, DISTANCES_TYPE, options.layout, options.domain, 1,
-                                     seed, self._recorder)
+                                     seed, self._recorder, self.distro)
         self._status = _Publisher(self.session, STATUS_TOPIC, STATUS_TYPE, options.layout, options.domain, 2, seed,
-                                  self._recorder)
+                                  self._recorder, self.distro)
         self._diagnostics = _Publisher(self.session, DIAGNOSTICS_TOPIC, STATUS_TYPE, options.layout, options.domain, 3,
-                                       seed, self._recorder)
+                                       seed, self._recorder, self.distro)
         self._scaling = None if ssm is None else _Publisher(self.session, options.scaling_topic, SCALING_TYPE,
-                                                            options.layout, options.domain, 4, seed, self._recorder)
+                                                            options.layout, options.domain, 4, seed, self._recorder,
+                                                            self.distro)
         # The factor's deadline, kept by a thread of its own (a set that takes long must not hold it up): each factor
         # holds for ssm's hold seconds; with no newer one by then, 0 goes out, and again every hold seconds.
         self._scaling_lock = threading.Lock()
@@ -292,6 +297,27 @@ class LiveNode:
         self._ready = threading.Event()
 
     # ------------------------------------------------------------------------------------------------ receiving
+
+    def _distro(self, options) -> str:
+        """rmw_zenoh's hash style to speak: ``options.distro``, or with "auto" the one the liveliness tokens alive in
+        the domain use (asked once, for up to ``config.LIVE_DISCOVERY`` seconds): Humble's when every peer's is,
+        else Jazzy's (a peer of the other style is named in the errors)."""
+        if options.layout != "rmw_zenoh":
+            return "jazzy"
+        if options.distro != "auto":
+            wire.hash_of(IMAGE, options.distro)  # checked
+            return options.distro
+        keys = []
+        for reply in self.session.liveliness().get(f"@ros2_lv/{options.domain}/**", timeout=config.LIVE_DISCOVERY):
+            with contextlib.suppress(Exception):  # an error reply carries no key
+                keys.append(str(reply.ok.key_expr))
+        found = wire.distros_of(keys)
+        if found == {"humble"}:
+            return "humble"
+        if "humble" in found:
+            self.errors.append("peers of both rmw_zenoh hash styles (Humble's TypeHashNotSupported and Jazzy's "
+                               "RIHS01) in the domain: speaking Jazzy's; Humble's subscribers will not hear the outputs")
+        return "jazzy"
 
     def _subscribe(self, topic: str, msgtype: str, callback, latched: bool = False) -> None:
         key = wire.subscription_key(topic, msgtype, self.options.layout, self.options.domain)
@@ -323,7 +349,7 @@ class LiveNode:
             entity = _FIRST_SUBSCRIPTION + len(self._subscription_tokens)
             self._subscription_tokens.append(self.session.liveliness().declare_token(wire.liveliness_key(
                 str(self.session.info.zid()), entity, "MS", NODE_NAME, topic, msgtype, domain=self.options.domain,
-                qos=wire.SENSOR_QOS)))
+                qos=wire.SENSOR_QOS, distro=self.distro)))
 
     def _on_image(self, camera: str, sample) -> None:
         counts = self.counts[camera]

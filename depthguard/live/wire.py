@@ -19,8 +19,9 @@ payloads, attachments and liveliness tokens. Pure functions of strings and bytes
 same CDR bytes, and no attachment.
 
 Type hashes come from ``rosbags``' type store (ROS 2 Jazzy's definitions), which also serialises the messages.
-rosidl gives Humble's messages the same hashes, but rmw_zenoh on Humble does not use them: it keys every topic with
-``TypeHashNotSupported``, so a Humble peer is not spoken to (yet).
+rosidl gives Humble's messages the same hashes, but rmw_zenoh on Humble does not use them: it keys every topic, and
+writes every token, with ``TypeHashNotSupported`` (``distro="humble"``; the node takes the style from its peers'
+tokens, :func:`distros_of`). Older rmw_zenoh releases' attachments (named fields) are not spoken.
 
 Every entity depthguard declares has its liveliness token, subscriptions included (kind ``MS``, best effort and
 volatile: :data:`SENSOR_QOS`): camera drivers that publish only while they count a subscriber (image_transport,
@@ -37,9 +38,13 @@ from depthguard.errors import InputError
 
 __all__ = ["LAYOUTS", "Attachment", "Token", "type_store", "type_name", "type_hash", "ros_name", "data_key",
            "subscription_key", "key_type_hash", "attachment_bytes", "parse_attachment", "liveliness_key",
-           "parse_liveliness_key", "serialize", "deserialize", "CDR_HEADER", "DEFAULT_QOS", "SENSOR_QOS"]
+           "parse_liveliness_key", "hash_of", "distros_of", "DISTROS", "HUMBLE_HASH", "serialize", "deserialize",
+           "CDR_HEADER", "DEFAULT_QOS", "SENSOR_QOS"]
 
 LAYOUTS = ("rmw_zenoh", "bridge")
+#: rmw_zenoh's type-hash styles: Jazzy on key topics with the type's RIHS01 hash, Humble with this word instead.
+DISTROS = ("jazzy", "humble")
+HUMBLE_HASH = "TypeHashNotSupported"
 #: Little-endian plain CDR (encapsulation kind 0x0001, options 0).
 CDR_HEADER = b"\x00\x01\x00\x00"
 _GID_SIZE = 16
@@ -116,13 +121,33 @@ def _check_topic(topic: str) -> str:
     return ros_name(topic).strip("/")
 
 
-def data_key(topic: str, msgtype: str, layout: str = "rmw_zenoh", domain: int = 0) -> str:
-    """The zenoh key a message of ``msgtype`` on ``topic`` is published at, in ``layout``."""
+def data_key(topic: str, msgtype: str, layout: str = "rmw_zenoh", domain: int = 0, distro: str = "jazzy") -> str:
+    """The zenoh key a message of ``msgtype`` on ``topic`` is published at, in ``layout`` (and, for rmw_zenoh, the
+    ``distro``'s hash style: :func:`hash_of`)."""
     name = _check_topic(topic)
     if layout == "bridge":
         return name
     _check_layout(layout)
-    return f"{_check_domain(domain)}/{name}/{type_name(msgtype)}/{type_hash(msgtype)}"
+    return f"{_check_domain(domain)}/{name}/{type_name(msgtype)}/{hash_of(msgtype, distro)}"
+
+
+def hash_of(msgtype: str, distro: str = "jazzy") -> str:
+    """What rmw_zenoh writes for ``msgtype``'s hash in keys and tokens: its RIHS01 hash on Jazzy and later,
+    ``TypeHashNotSupported`` on Humble."""
+    if distro not in DISTROS:
+        raise InputError(f"distro must be one of {', '.join(DISTROS)}, got {distro!r}", field="distro")
+    return type_hash(msgtype) if distro == "jazzy" else HUMBLE_HASH
+
+
+def distros_of(tokens) -> set:
+    """The hash styles (:data:`DISTROS`) that the rmw_zenoh liveliness keys ``tokens`` (an iterable of str) use: a
+    peer's publishers and subscriptions say which it speaks."""
+    found = set()
+    for key in tokens:
+        token = parse_liveliness_key(key)
+        if token is not None and token.hash is not None:
+            found.add("humble" if token.hash == HUMBLE_HASH else "jazzy" if token.hash.startswith("RIHS") else "?")
+    return found
 
 
 def subscription_key(topic: str, msgtype: str, layout: str = "rmw_zenoh", domain: int = 0) -> str:
@@ -185,7 +210,7 @@ def _mangle(name: str) -> str:
 
 def liveliness_key(zid: str, entity: int, kind: str, node: str, topic: str | None = None, msgtype: str | None = None,
                    domain: int = 0, namespace: str = "/", qos: str = DEFAULT_QOS, node_id: int = 0,
-                   enclave: str = "/") -> str:
+                   enclave: str = "/", distro: str = "jazzy") -> str:
     """rmw_zenoh's liveliness token of a node (``kind`` ``"NN"``), a publisher (``"MP"``) or a subscriber
     (``"MS"``) of ``topic`` carrying ``msgtype``; ``zid``: the zenoh session's id (hex)."""
     if kind not in ("NN", "MP", "MS"):
@@ -194,7 +219,7 @@ def liveliness_key(zid: str, entity: int, kind: str, node: str, topic: str | Non
             _mangle(namespace), node]
     if kind == "NN":
         return "/".join(head)
-    return "/".join(head + [_mangle(ros_name(topic)), type_name(msgtype), type_hash(msgtype), qos])
+    return "/".join(head + [_mangle(ros_name(topic)), type_name(msgtype), hash_of(msgtype, distro), qos])
 
 
 @dataclass(frozen=True)
