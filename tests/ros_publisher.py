@@ -31,7 +31,7 @@ class RosPublisher:
     their stamp); :meth:`wait_answer` waits for the node's distances."""
 
     def __init__(self, rig, joint_names, layout="rmw_zenoh", port=None, type_hash=None,
-                 scaling_topic="/depthguard/speed_scaling", latched_info=False, distro="jazzy"):
+                 scaling_topic="/depthguard/speed_scaling", latched_info=False, distro="jazzy", old_attachment=False):
         import zenoh
 
         self.rig = rig
@@ -49,6 +49,7 @@ class RosPublisher:
         self.sequences: dict[str, int] = {}  # rmw_zenoh numbers each publisher's messages from 1
         self.type_hash = type_hash  # a wrong hash in the image keys, when given
         self.distro = distro  # rmw_zenoh's hash style: Jazzy's RIHS01 hashes or Humble's TypeHashNotSupported
+        self.old_attachment = old_attachment  # an older rmw_zenoh's attachment: named fields, not the 33 bytes
         self._declared = []  # the liveliness tokens of this peer's publishers and subscriptions
         self._publishers = {}
         self.answers = []
@@ -154,7 +155,10 @@ class RosPublisher:
         publisher = self._publisher(topic, msgtype)
         payload = raw if raw is not None else wire.serialize(message, msgtype)
         sequence = self.sequences[topic] = self.sequences.get(topic, 0) + 1
-        if self.layout == "rmw_zenoh":
+        if self.layout == "rmw_zenoh" and self.old_attachment:  # key-value pairs, as zenoh's serializer wrote them
+            publisher.put(payload, attachment=b"\x0fsequence_number" + struct.pack("<q", sequence)
+                          + b"\x0fsource_timestamp" + struct.pack("<q", time.time_ns()) + b"\x0csource_gid" + b"p" * 16)
+        elif self.layout == "rmw_zenoh":
             publisher.put(payload, attachment=wire.attachment_bytes(sequence, time.time_ns(), b"p" * 16))
         else:
             publisher.put(payload)

@@ -626,3 +626,33 @@ def test_the_node_speaks_the_hash_style_of_its_peers(recording, robot, tmp_path,
     finally:
         node.close()
         publisher.close()
+
+
+def test_dry_run_names_a_peer_of_an_older_rmw_zenoh(recording, tmp_path, capsys):
+    """issue 36: rmw_zenoh before Jazzy 0.2.4 wrote its attachment as named fields, and its subscribers throw on the
+    33-byte form depthguard writes. Such a peer is named, with exit status 2 at --dry-run, never silence."""
+    rig_file = tmp_path / "rig.yaml"
+    dg.save_rig(recording.rig, rig_file)
+    publisher = RosPublisher(recording.rig, recording.joint_names, old_attachment=True)
+    stop = time.monotonic() + 4.0
+
+    def keep_publishing():
+        frame_set = next(recording.frame_sets())
+        while time.monotonic() < stop:
+            ns = time.time_ns()
+            publisher.publish_joints(ns, recording.joints_at(frame_set.time))
+            for camera, image in frame_set.images.items():
+                publisher.publish_frame(camera, ns, image.data)
+            time.sleep(0.05)
+
+    import threading
+
+    thread = threading.Thread(target=keep_publishing)
+    thread.start()
+    try:
+        status, out, err = run_cli(["live", "--rig", rig_file, "--connect", publisher.endpoint, "--dry-run",
+                                    "--dry-run-wait", "3"], capsys)
+        assert status == 2 and "attachment in another form" in err and "not supported" in err, err
+    finally:
+        thread.join()
+        publisher.close()

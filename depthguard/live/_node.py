@@ -250,6 +250,7 @@ class LiveNode:
         self.ssm_hold = float((ssm or {}).get("hold", config.SSM_HOLD))
         self.recent: collections.deque = collections.deque(maxlen=1000)  # the last answers' (time, why, seen)
         self.errors: collections.deque = collections.deque(maxlen=100)  # the last errors, one line each
+        self.unspeakable = None  # why a peer cannot be spoken to (another rmw_zenoh style), or None
         self._warned: set = set()
         self._lock = threading.Lock()
         self._frames: dict = {}
@@ -315,8 +316,9 @@ class LiveNode:
         if found == {"humble"}:
             return "humble"
         if "humble" in found:
-            self.errors.append("peers of both rmw_zenoh hash styles (Humble's TypeHashNotSupported and Jazzy's "
-                               "RIHS01) in the domain: speaking Jazzy's; Humble's subscribers will not hear the outputs")
+            self.unspeakable = ("peers of both rmw_zenoh hash styles (Humble's TypeHashNotSupported and Jazzy's "
+                                "RIHS01) in the domain: speaking Jazzy's; Humble's subscribers will not hear the outputs")
+            self.errors.append(self.unspeakable)
         return "jazzy"
 
     def _subscribe(self, topic: str, msgtype: str, callback, latched: bool = False) -> None:
@@ -325,6 +327,12 @@ class LiveNode:
 
         def on_sample(sample):
             try:
+                if self.options.layout == "rmw_zenoh" and self.unspeakable is None and sample.attachment is not None \
+                        and wire.parse_attachment(sample.attachment.to_bytes()) is None:
+                    self.unspeakable = (
+                        f"{topic}: its publisher writes rmw_zenoh's attachment in another form "
+                        f"({len(sample.attachment.to_bytes())} bytes, not the 33 of rmw_zenoh Jazzy 0.2.4 and later): an "
+                        f"older rmw_zenoh, whose subscribers cannot read depthguard's outputs; not supported")
                 found = wire.key_type_hash(str(sample.key_expr))
                 if found is not None and found != expected and topic not in self._warned:
                     self._warned.add(topic)
@@ -424,7 +432,9 @@ class LiveNode:
 
     def ready(self) -> str | None:
         """None when every camera's image and camera_info and a joint state have come and agree with the rig and
-        the robot; else what is still missing or wrong (``--dry-run``)."""
+        the robot; else what is still missing or wrong (``--dry-run``), a peer that cannot be spoken to first."""
+        if self.unspeakable is not None:
+            return self.unspeakable
         for name, counts in self.counts.items():
             image, info = self.topics.cameras[name]
             if counts.info_error:
