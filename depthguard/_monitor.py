@@ -569,7 +569,7 @@ class DistanceMonitor:
         if not times:
             return None
         free = self.memory.free_at(max(max(times), self.memory.time))
-        self._free_now = (free, self.memory.box, free & ~self._seen_now)
+        self._free_now = (free, self.memory.box, free & ~self.memory.taken_now)  # remembered: free, not taken now
         return free, self.memory.box
 
 

@@ -299,6 +299,14 @@ class FreeSpaceMemory:
         return view
 
     @property
+    def taken_now(self) -> np.ndarray:
+        """(nx, ny, nz) bool, read-only view: the voxels the last :meth:`update` took as seen free or inside the robot
+        (free at its time whatever the memory held; :meth:`free_at`)."""
+        view = self._now.view()
+        view.setflags(write=False)
+        return view
+
+    @property
     def time(self) -> float | None:
         """The time of the last :meth:`update` (seconds), None before the first."""
         return self._time
