@@ -50,6 +50,39 @@ def wait_for(condition, timeout=30.0):
     return False
 
 
+def publish_first_set(publisher, recording, node) -> int:
+    """Publish the recording's first set, restamped now: its joint state, and once ``node`` has it, the frames (each
+    published: the peer counts the node's subscription). Returns the stamp, nanoseconds."""
+    frame_set = next(recording.frame_sets())
+    ns = time.time_ns()
+    publisher.publish_joints(ns, recording.joints_at(frame_set.time))
+    assert wait_for(lambda: node.joint_states > 0)
+    for camera, image in frame_set.images.items():
+        assert publisher.publish_frame(camera, ns, image.data)
+    return ns
+
+
+def publishing(publisher, recording, seconds):
+    """A started thread that publishes the recording's first set (joints, then frames), restamped now, every 50 ms
+    for ``seconds``."""
+    import threading
+
+    stop = time.monotonic() + seconds
+
+    def keep_publishing():
+        frame_set = next(recording.frame_sets())
+        while time.monotonic() < stop:
+            ns = time.time_ns()
+            publisher.publish_joints(ns, recording.joints_at(frame_set.time))
+            for camera, image in frame_set.images.items():
+                publisher.publish_frame(camera, ns, image.data)
+            time.sleep(0.05)
+
+    thread = threading.Thread(target=keep_publishing)
+    thread.start()
+    return thread
+
+
 def play(recording, robot, tmp_path, layout="rmw_zenoh", odd_images=False, info=None, type_hash=None, record=None,
          options=OPTIONS, ssm=None):
     """Publish the recording's sets one by one, each restamped now, waiting for the node's answer to it. Returns
@@ -196,21 +229,7 @@ def test_dry_run_says_what_is_missing(recording, tmp_path, capsys):
         status, out, err = run_cli(["live", "--rig", rig_file, "--connect", publisher.endpoint, "--dry-run",
                                     "--dry-run-wait", "0.5"], capsys)
         assert status == 2 and "no image on /principal/depth/image_raw" in err
-        stop = time.monotonic() + 3.0
-
-        def keep_publishing():
-            frame_set = next(recording.frame_sets())
-            while time.monotonic() < stop:
-                ns = time.time_ns()
-                publisher.publish_joints(ns, recording.joints_at(frame_set.time))
-                for camera, image in frame_set.images.items():
-                    publisher.publish_frame(camera, ns, image.data)
-                time.sleep(0.05)
-
-        import threading
-
-        thread = threading.Thread(target=keep_publishing)
-        thread.start()
+        thread = publishing(publisher, recording, 3.0)
         status, out, err = run_cli(["live", "--rig", rig_file, "--connect", publisher.endpoint, "--dry-run",
                                     "--dry-run-wait", "2.5"], capsys)
         thread.join()
@@ -486,12 +505,7 @@ def test_the_speed_factor_has_a_deadline_and_goes_to_0_on_exit(recording, robot,
         assert publisher.wait_for_node()
         assert wait_for(lambda: len(publisher.scaling) >= 3)  # no joints, no frames: zeros, every hold seconds
         assert {f for _, _, f in publisher.scaling} == {0.0}
-        frame_set = next(recording.frame_sets())
-        ns = time.time_ns()
-        publisher.publish_joints(ns, recording.joints_at(frame_set.time))
-        assert wait_for(lambda: node.joint_states > 0)
-        for camera, image in frame_set.images.items():
-            assert publisher.publish_frame(camera, ns, image.data)
+        ns = publish_first_set(publisher, recording, node)
         assert wait_for(lambda: node.answers >= 1)
         zeros = node.deadline_zeros
         assert wait_for(lambda: node.deadline_zeros > zeros + 2, timeout=10.0)  # nothing new: the deadline's zeros
@@ -517,12 +531,7 @@ def test_a_camera_info_latched_before_the_node_started_arrives(recording, robot,
         node.start()
         assert publisher.wait_for_node()
         assert wait_for(lambda: all(node.counts[n].info_seen for n in rig.cameras), timeout=20.0), node.counts
-        frame_set = next(recording.frame_sets())
-        ns = time.time_ns()
-        publisher.publish_joints(ns, recording.joints_at(frame_set.time))
-        assert wait_for(lambda: node.joint_states > 0)
-        for camera, image in frame_set.images.items():
-            assert publisher.publish_frame(camera, ns, image.data)  # the image alone: no CameraInfo beside it
+        ns = publish_first_set(publisher, recording, node)  # the image alone: no CameraInfo beside it
         assert wait_for(lambda: any(t >= ns / 1e9 and set(seen) == set(rig.cameras) for t, _, seen in list(node.recent)))
     finally:
         node.close()
@@ -615,12 +624,7 @@ def test_the_node_speaks_the_hash_style_of_its_peers(recording, robot, tmp_path,
         ours = [wire.parse_liveliness_key(k) for k in list(publisher.tokens)]
         ours = [t for t in ours if t is not None and t.node == "depthguard" and t.kind != "NN"]
         assert ours and {t.hash == wire.HUMBLE_HASH for t in ours} == {distro == "humble"}
-        frame_set = next(recording.frame_sets())
-        ns = time.time_ns()
-        publisher.publish_joints(ns, recording.joints_at(frame_set.time))
-        assert wait_for(lambda: node.joint_states > 0)
-        for camera, image in frame_set.images.items():
-            assert publisher.publish_frame(camera, ns, image.data)
+        ns = publish_first_set(publisher, recording, node)
         assert publisher.wait_answer(1)
         assert publisher.answers[0][0].endswith("/" + wire.hash_of("std_msgs/msg/Float64MultiArray", distro))
     finally:
@@ -634,21 +638,7 @@ def test_dry_run_names_a_peer_of_an_older_rmw_zenoh(recording, tmp_path, capsys)
     rig_file = tmp_path / "rig.yaml"
     dg.save_rig(recording.rig, rig_file)
     publisher = RosPublisher(recording.rig, recording.joint_names, old_attachment=True)
-    stop = time.monotonic() + 4.0
-
-    def keep_publishing():
-        frame_set = next(recording.frame_sets())
-        while time.monotonic() < stop:
-            ns = time.time_ns()
-            publisher.publish_joints(ns, recording.joints_at(frame_set.time))
-            for camera, image in frame_set.images.items():
-                publisher.publish_frame(camera, ns, image.data)
-            time.sleep(0.05)
-
-    import threading
-
-    thread = threading.Thread(target=keep_publishing)
-    thread.start()
+    thread = publishing(publisher, recording, 4.0)
     try:
         status, out, err = run_cli(["live", "--rig", rig_file, "--connect", publisher.endpoint, "--dry-run",
                                     "--dry-run-wait", "3"], capsys)
