@@ -398,7 +398,7 @@ def state_bytes(monitor) -> dict[str, int]:
                 walk(value, sub, depth + 1)
 
     walk(monitor.memory, "free-space memory (arrival times, work space)")
-    walk((monitor._seen_now, monitor._free_now), "memory masks (seen now, free now)")
+    walk(monitor._free_now, "memory masks (free now, remembered only)")
     walk(monitor.maps, "depth grid maps")
     walk(monitor._prepared, "prepared frames (copy, occupancy, robot renders, free depths)")
     walk(monitor._fused_frames, "fused frames (eroded free images, principal arrays)")

@@ -111,7 +111,6 @@ class DistanceMonitor:
         if settings.detection_capability is not None:
             self._detectable_space(static, settings.detection_capability, settings.detectable_voxel)
         self._remembered: set[int] = set()  # ids of the frames the memory has taken in
-        self._seen_now = None  # voxels the frames of the last memory update saw free
         self._free_now = None  # (free, box, remembered only) behind the fused frames last built
         self._prepared: dict[str, tuple[object, _CameraFrame]] = {}
         self._masks: dict = {}  # camera name -> the RobotMask of its last frame (reused while the robot stands still)
@@ -481,7 +480,7 @@ class DistanceMonitor:
                     robot_voxels(box, padded, box.voxel * math.sqrt(3.0), near)
                 same = all(np.array_equal(m, moments[0]) for m in moments)
                 inner = moments[0] if same else None
-        self._seen_now = remember_frames(
+        remember_frames(
             self.memory, t, [state.camera for state in new], [state.free for state in new],
             [functools.partial(surface_voxels, box, state.camera, state.image, state.occupancy) for state in new],
             margin=self.fusion_margin, pad=self.fusion_pixels, robot=robot, near_robot=near, inner=inner)

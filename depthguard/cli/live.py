@@ -164,7 +164,7 @@ def run(args) -> int:
     for image, info in topics.cameras.values():
         wire.data_key(image, "sensor_msgs/msg/Image", args.layout, args.domain)  # names checked before connecting
         wire.data_key(info, "sensor_msgs/msg/CameraInfo", args.layout, args.domain)
-    scaling_topic = wire.ros_name(args.speed_scaling_topic or "/depthguard/speed_scaling")
+    scaling_topic = wire.ros_name(args.speed_scaling_topic or LiveOptions.scaling_topic)
     wire.data_key(scaling_topic, "control_msgs/msg/SpeedScalingFactor", args.layout, args.domain)
     options = LiveOptions(layout=args.layout, domain=args.domain, connect=args.connect or ["tcp/127.0.0.1:7447"],
                           scaling_topic=scaling_topic, distro=args.ros_distro)

@@ -11,7 +11,8 @@ Threads:
   newest: older ones are dropped and counted, never queued.
 
 Every output goes out as rmw_zenoh sends it (the type hash in the key, an attachment, a liveliness token per
-publisher; every subscription has its token too, so that drivers count a subscriber), or at the bare topic name for the bridge layout: ``/depthguard/distances``
+publisher; every subscription has its token too, so that drivers count a subscriber), or at the bare topic name for
+the bridge layout: ``/depthguard/distances``
 (``std_msgs/msg/Float64MultiArray``, one value per control point in the robot's order, ``inf`` for nothing within
 rho) and ``/depthguard/status`` (``diagnostic_msgs/msg/DiagnosticArray``: one status per control point, its flags,
 and one per camera, its age and counts; ERROR while a camera is stale or missing, WARN for other flags), back to
@@ -204,7 +205,7 @@ class LiveOptions:
     #: stamp (driver, transport, decoding) and still joins its set, as it does in replay
     transport: float = config.LIVE_TRANSPORT
     #: where the speed factor goes (with ``ssm``): joint_trajectory_controller's is ``/<controller>/speed_scaling_input``
-    scaling_topic: str = "/depthguard/speed_scaling"
+    scaling_topic: str = SCALING_TOPIC
     #: rmw_zenoh's hash style: "jazzy" (RIHS01 hashes), "humble" (TypeHashNotSupported) or "auto" (the peers' tokens
     #: in the domain say; Jazzy when none is found)
     distro: str = "auto"

@@ -45,6 +45,8 @@ LAYOUTS = ("rmw_zenoh", "bridge")
 #: rmw_zenoh's type-hash styles: Jazzy on key topics with the type's RIHS01 hash, Humble with this word instead.
 DISTROS = ("jazzy", "humble")
 HUMBLE_HASH = "TypeHashNotSupported"
+#: rmw_zenoh's entity kinds in liveliness tokens: node, publisher, subscription, service server and client.
+_KINDS = ("NN", "MP", "MS", "SS", "SC")
 #: Little-endian plain CDR (encapsulation kind 0x0001, options 0).
 CDR_HEADER = b"\x00\x01\x00\x00"
 _GID_SIZE = 16
@@ -208,12 +210,16 @@ def _mangle(name: str) -> str:
     return name.replace("/", "%")
 
 
+def _demangle(name: str) -> str:
+    return name.replace("%", "/")
+
+
 def liveliness_key(zid: str, entity: int, kind: str, node: str, topic: str | None = None, msgtype: str | None = None,
                    domain: int = 0, namespace: str = "/", qos: str = DEFAULT_QOS, node_id: int = 0,
                    enclave: str = "/", distro: str = "jazzy") -> str:
     """rmw_zenoh's liveliness token of a node (``kind`` ``"NN"``), a publisher (``"MP"``) or a subscriber
     (``"MS"``) of ``topic`` carrying ``msgtype``; ``zid``: the zenoh session's id (hex)."""
-    if kind not in ("NN", "MP", "MS"):
+    if kind not in _KINDS[:3]:
         raise InputError(f"an entity kind is NN, MP or MS, got {kind!r}", field="kind")
     head = [ "@ros2_lv", str(_check_domain(domain)), zid, str(node_id), str(entity), kind, _mangle(enclave),
             _mangle(namespace), node]
@@ -242,15 +248,14 @@ def parse_liveliness_key(key: str) -> Token | None:
     """The :class:`Token` of an rmw_zenoh liveliness key (the layout of :func:`liveliness_key`), None when the key
     is not one."""
     parts = str(key).split("/")
-    if len(parts) < 9 or parts[0] != "@ros2_lv" or not parts[1].isdigit() or parts[5] not in (
-            "NN", "MP", "MS", "SS", "SC"):
+    if len(parts) < 9 or parts[0] != "@ros2_lv" or not parts[1].isdigit() or parts[5] not in _KINDS:
         return None
     token = Token(int(parts[1]), parts[2], parts[5], parts[8])
     if parts[5] == "NN":
         return token
     if len(parts) < 13:
         return None
-    return Token(token.domain, token.zid, token.kind, token.node, parts[9].replace("%", "/"), parts[10], parts[11],
+    return Token(token.domain, token.zid, token.kind, token.node, _demangle(parts[9]), parts[10], parts[11],
                  parts[12])
 
 
