@@ -485,7 +485,7 @@ def test_the_domain_comes_from_ros_domain_id(recording, tmp_path, capsys, monkey
     assert ros_domain(None) == 0
     rig_file = tmp_path / "rig.yaml"
     dg.save_rig(recording.rig, rig_file)
-    for bad in ("abc", "233", "-1", "1e3"):
+    for bad in ("abc", "233", "-1", "1e3", "nan", "inf", "²", "7\n8", "9" * 5000, "0x1"):
         monkeypatch.setenv("ROS_DOMAIN_ID", bad)
         assert_refused(["live", "--rig", rig_file, "--dry-run"], capsys, "ROS_DOMAIN_ID")
 
@@ -498,7 +498,8 @@ def test_the_speed_factor_has_a_deadline_and_goes_to_0_on_exit(recording, robot,
     topic = "/joint_trajectory_controller/speed_scaling_input"
     publisher = RosPublisher(rig, recording.joint_names, scaling_topic=topic)
     hold = 0.1
-    node = LiveNode(rig, robot, topics(rig), LiveOptions(connect=[publisher.endpoint], transport=1.0, scaling_topic=topic),
+    options = LiveOptions(connect=[publisher.endpoint], transport=1.0, scaling_topic=topic)
+    node = LiveNode(rig, robot, topics(rig), options,
                     dict(OPTIONS, detection_capability=0.04), ssm=dict(joint_speed=0.3, hold=hold))
     try:
         node.start()
@@ -510,7 +511,7 @@ def test_the_speed_factor_has_a_deadline_and_goes_to_0_on_exit(recording, robot,
         zeros = node.deadline_zeros
         assert wait_for(lambda: node.deadline_zeros > zeros + 2, timeout=10.0)  # nothing new: the deadline's zeros
         assert node.last_scaling.factor == 0.0 and node.last_scaling.why == "no answer within hold"
-        assert all(key.startswith("0/joint_trajectory_controller/speed_scaling_input/") for key, _, _ in publisher.scaling)
+        assert all(key.startswith(f"0{topic}/") for key, _, _ in publisher.scaling)
     finally:
         node.close()
     assert wait_for(lambda: node.scaling_published == len(publisher.scaling), timeout=10.0)
@@ -532,7 +533,8 @@ def test_a_camera_info_latched_before_the_node_started_arrives(recording, robot,
         assert publisher.wait_for_node()
         assert wait_for(lambda: all(node.counts[n].info_seen for n in rig.cameras), timeout=20.0), node.counts
         ns = publish_first_set(publisher, recording, node)  # the image alone: no CameraInfo beside it
-        assert wait_for(lambda: any(t >= ns / 1e9 and set(seen) == set(rig.cameras) for t, _, seen in list(node.recent)))
+        assert wait_for(lambda: any(t >= ns / 1e9 and set(seen) == set(rig.cameras)
+                                    for t, _, seen in list(node.recent)))
     finally:
         node.close()
         publisher.close()
@@ -581,8 +583,8 @@ def test_sigterm_leaves_0_as_the_last_factor(recording, tmp_path):
     topic = "/joint_trajectory_controller/speed_scaling_input"
     publisher = RosPublisher(recording.rig, recording.joint_names, scaling_topic=topic)
     process = subprocess.Popen(
-        [sys.executable, "-m", "depthguard.cli", "live", "--rig", str(rig_file), "--connect", publisher.endpoint, "--ssm",
-         "--ssm-joint-speed", "0.3", "--speed-scaling-topic", topic, "--duration", "120"],
+        [sys.executable, "-m", "depthguard.cli", "live", "--rig", str(rig_file), "--connect", publisher.endpoint,
+         "--ssm", "--ssm-joint-speed", "0.3", "--speed-scaling-topic", topic, "--duration", "120"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert wait_for(lambda: len(publisher.scaling) >= 3 or process.poll() is not None, timeout=90.0)

@@ -132,6 +132,7 @@ def ros_domain(given: int | None) -> int:
     import os
 
     from depthguard.errors import InputError
+    from depthguard.validation import short_repr
 
     if given is not None:
         field, text = "domain", str(given)
@@ -139,9 +140,9 @@ def ros_domain(given: int | None) -> int:
         field, text = "ROS_DOMAIN_ID", os.environ.get("ROS_DOMAIN_ID", "").strip()
         if not text:
             return 0
-    if not text.isdigit() or not 0 <= int(text) <= 232:
+    if not (text.isascii() and text.isdigit() and len(text) <= 3) or not 0 <= int(text) <= 232:  # not "²", 5000 digits
         raise InputError(f"{'--domain' if given is not None else 'ROS_DOMAIN_ID'} must be a ROS domain id, a whole "
-                         f"number in [0, 232], got {text[:40]!r}", field=field)
+                         f"number in [0, 232], got {short_repr(text)}", field=field)
     return int(text)
 
 

@@ -204,7 +204,8 @@ class LiveOptions:
     #: seconds the host's clock is held back when it drives the loop: a frame reaches the node this much after its
     #: stamp (driver, transport, decoding) and still joins its set, as it does in replay
     transport: float = config.LIVE_TRANSPORT
-    #: where the speed factor goes (with ``ssm``): joint_trajectory_controller's is ``/<controller>/speed_scaling_input``
+    #: where the speed factor goes (with ``ssm``): joint_trajectory_controller's is
+    #: ``/<controller>/speed_scaling_input``
     scaling_topic: str = SCALING_TOPIC
     #: rmw_zenoh's hash style: "jazzy" (RIHS01 hashes), "humble" (TypeHashNotSupported) or "auto" (the peers' tokens
     #: in the domain say; Jazzy when none is found)
@@ -318,7 +319,8 @@ class LiveNode:
             return "humble"
         if "humble" in found:
             self.unspeakable = ("peers of both rmw_zenoh hash styles (Humble's TypeHashNotSupported and Jazzy's "
-                                "RIHS01) in the domain: speaking Jazzy's; Humble's subscribers will not hear the outputs")
+                                "RIHS01) in the domain: speaking Jazzy's; Humble's subscribers will not hear the "
+                                "outputs")
             self.errors.append(self.unspeakable)
         return "jazzy"
 
@@ -332,8 +334,8 @@ class LiveNode:
                         and wire.parse_attachment(sample.attachment.to_bytes()) is None:
                     self.unspeakable = (
                         f"{topic}: its publisher writes rmw_zenoh's attachment in another form "
-                        f"({len(sample.attachment.to_bytes())} bytes, not the 33 of rmw_zenoh Jazzy 0.2.4 and later): an "
-                        f"older rmw_zenoh, whose subscribers cannot read depthguard's outputs; not supported")
+                        f"({len(sample.attachment.to_bytes())} bytes, not the 33 of rmw_zenoh Jazzy 0.2.4 and "
+                        f"later): an older rmw_zenoh, whose subscribers cannot read depthguard's outputs; not supported")
                 found = wire.key_type_hash(str(sample.key_expr))
                 if found is not None and found != expected and topic not in self._warned:
                     self._warned.add(topic)
