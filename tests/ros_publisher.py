@@ -4,11 +4,14 @@ bridge's (bare topic names), restamped on the host's clock as a camera driver st
 
 In rmw_zenoh's layout it behaves as image_transport's publishers and realsense-ros do: a camera's image and
 camera_info go out only while it counts a subscriber of the image topic, from rmw_zenoh's liveliness tokens (kind
-``MS``) in its domain. A node that declares no subscriber token gets no frame."""
+``MS``) in its domain. A node that declares no subscriber token gets no frame. In the bridge's layout it plays
+zenoh-bridge-ros2dds and a DDS driver behind it: the bridge creates a DDS reader of a topic only for another
+session's route token of kind ``MS`` (``bridge_route``), and the driver publishes only while it counts one."""
 
 from __future__ import annotations
 
 import json
+import re
 import socket
 import struct
 import threading
@@ -24,6 +27,24 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+#: zenoh-plugin-ros2dds 1.10.0's route tokens (``liveliness_mgt.rs``, kedefine ``ke_liveliness_pub`` and
+#: ``ke_liveliness_sub``: ``@ros2_lv/${zenoh_id:*}/MP|MS/${ke:*}/${typ:*}/${qos_ke:*}``, ``/`` in ke and typ written
+#: ``§``); its ``key_expr_to_qos`` refuses a QoS text that is not 4 fields between ``:``, each empty or a number
+#: (history: ``kind,depth``).
+_BRIDGE_ROUTE = re.compile(r"@ros2_lv/([^/*$?#]+)/(MP|MS)/([^/*$?#]+)/([^/*$?#]+)/(K?):(\d*):(\d*):(\d+,\d+)?")
+
+
+def bridge_route(key: str):
+    """(zenoh id, kind, topic, type, (keyless, reliability, durability, history)) of a bridge route token, as the
+    bridge reads it, or None when the bridge would not accept it."""
+    match = _BRIDGE_ROUTE.fullmatch(key)
+    if match is None:
+        return None
+    zid, kind, ke, typ, keyed, reliability, durability, history = match.groups()
+    return (zid, kind, "/" + ke.replace("\u00a7", "/"), typ.replace("\u00a7", "/"),
+            (not keyed, reliability, durability, history))
 
 
 class RosPublisher:
@@ -82,9 +103,10 @@ class RosPublisher:
         self._publisher("/joint_states", "sensor_msgs/msg/JointState")
         self.tokens: set[str] = set()  # the rmw_zenoh liveliness tokens alive in the domain
         self.withheld = 0  # frames not published: no subscriber counted
-        self._tokens = None
-        if layout == "rmw_zenoh":
-            self._tokens = self.session.liveliness().declare_subscriber("@ros2_lv/0/**", self._on_token, history=True)
+        # rmw_zenoh's graph in its domain, or, playing zenoh-bridge-ros2dds, every bridge route token
+        # (``@ros2_lv/<zenoh id>/...``, its liveliness_mgt.rs).
+        self._tokens = self.session.liveliness().declare_subscriber(
+            "@ros2_lv/0/**" if layout == "rmw_zenoh" else "@ros2_lv/**", self._on_token, history=True)
 
     def _on_token(self, sample):
         import zenoh
@@ -97,9 +119,14 @@ class RosPublisher:
 
     def subscribers(self, topic: str) -> int:
         """How many subscriptions of ``topic`` the domain's liveliness tokens declare (rmw_zenoh's graph count,
-        what ``getNumSubscribers()`` returns to a driver)."""
-        parsed = [wire.parse_liveliness_key(key) for key in list(self.tokens)]
-        return sum(1 for token in parsed if token is not None and token.kind == "MS" and token.topic == topic)
+        what ``getNumSubscribers()`` returns to a driver). In the bridge layout: how many route tokens of kind MS
+        announce it, parsed as zenoh-plugin-ros2dds 1.10.0 parses them (``liveliness_mgt.rs``: ``ke_liveliness_sub``
+        and ``key_expr_to_qos``), each one a DDS reader the bridge creates, which the DDS driver counts."""
+        if self.layout == "rmw_zenoh":
+            parsed = [wire.parse_liveliness_key(key) for key in list(self.tokens)]
+            return sum(1 for token in parsed if token is not None and token.kind == "MS" and token.topic == topic)
+        return sum(1 for key in list(self.tokens) if (route := bridge_route(key)) is not None
+                   and route[1] == "MS" and route[2] == topic)
 
     def _token(self, kind: str, topic: str, msgtype: str) -> None:
         """Declare this peer's liveliness token for one of its entities, as rmw_zenoh does (rmw_zenoh layout)."""
@@ -114,8 +141,7 @@ class RosPublisher:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             if all(p.matching_status.matching for p in self._publishers.values() if hasattr(p, "matching_status")) and (
-                    self.layout != "rmw_zenoh" or all(self.subscribers(f"/{name}/depth/image_raw")
-                                                      for name in self.rig.cameras)):
+                    all(self.subscribers(f"/{name}/depth/image_raw") for name in self.rig.cameras)):
                 return True
             time.sleep(0.02)
         return False
@@ -176,8 +202,9 @@ class RosPublisher:
 
     def publish_frame(self, camera: str, ns: int, data: np.ndarray, *, big_endian=False, padding=0, info=None) -> bool:
         """Publish one frame and its camera_info; in rmw_zenoh's layout only while a subscriber of the image topic
-        is counted (else nothing goes out, ``withheld`` counts it, and False comes back)."""
-        if self.layout == "rmw_zenoh" and not self.subscribers(f"/{camera}/depth/image_raw"):
+        is counted, and in the bridge's only while a route token makes the bridge create a DDS reader of it (else
+        nothing goes out, ``withheld`` counts it, and False comes back)."""
+        if not self.subscribers(f"/{camera}/depth/image_raw"):
             self.withheld += 1
             return False
         info_message, image = depth_messages(self.store, ns, self.rig.cameras[camera], data)

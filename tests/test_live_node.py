@@ -473,6 +473,49 @@ def test_the_node_is_counted_as_a_subscriber_of_every_topic_it_reads(recording, 
         publisher.close()
 
 
+def test_in_the_bridge_layout_the_node_announces_its_routes_to_zenoh_bridge_ros2dds(recording, robot, tmp_path):
+    """issue 36: zenoh-bridge-ros2dds creates the DDS reader of a topic (which the DDS camera driver counts as a
+    subscriber) only when another zenoh session announces a route to it, and the DDS writer that makes depthguard's
+    outputs visible to ``ros2 topic list`` only for an announced publisher (zenoh-plugin-ros2dds 1.10.0,
+    ``routes_mgr.rs``: ``on_ros_announcement_event``). The test's publisher plays the bridge and a DDS driver: it
+    reads the tokens as the bridge parses them (``ros_publisher.bridge_route``, from its ``liveliness_mgt.rs``) and
+    withholds a camera's frames while no MS route of its image topic is announced. Before, the node announced
+    nothing in this layout: no frame came."""
+    from ros_publisher import bridge_route
+
+    rig = recording.rig
+    publisher = RosPublisher(rig, recording.joint_names, layout="bridge")
+    node = LiveNode(rig, robot, topics(rig), LiveOptions(layout="bridge", connect=[publisher.endpoint]), OPTIONS)
+    try:
+        node.start()
+        assert publisher.wait_for_node()
+        zid = str(node.session.info.zid())
+        routes = [bridge_route(key) for key in list(publisher.tokens) if key.startswith(f"@ros2_lv/{zid}/")]
+        assert routes and None not in routes
+        read = {topic: (msgtype, qos) for _, kind, topic, msgtype, qos in routes if kind == "MS"}
+        expected = {"/joint_states": "sensor_msgs/msg/JointState"}
+        for name in rig.cameras:
+            expected[f"/{name}/depth/image_raw"] = "sensor_msgs/msg/Image"
+            expected[f"/{name}/depth/camera_info"] = "sensor_msgs/msg/CameraInfo"
+        assert {topic: msgtype for topic, (msgtype, _) in read.items()} == expected
+        assert all(qos == (True, "0", "0", "0,10") for _, qos in read.values())  # keyless, best effort, volatile
+        written = {topic: qos for _, kind, topic, _, qos in routes if kind == "MP"}
+        assert set(written) == {"/depthguard/distances", "/depthguard/status", "/diagnostics"}
+        assert all(qos == (True, "1", "0", "0,10") for qos in written.values())  # reliable: any reader matches
+        publish_first_set(publisher, recording, node)
+        assert publisher.wait_answer(1)
+    finally:
+        node.close()
+    image = f"/{next(iter(rig.cameras))}/depth/image_raw"
+    try:
+        assert wait_for(lambda: publisher.subscribers(image) == 0, timeout=10.0)
+        frame_set = next(recording.frame_sets())
+        camera = next(iter(rig.cameras))
+        assert publisher.publish_frame(camera, time.time_ns(), frame_set.images[camera].data) is False
+    finally:
+        publisher.close()
+
+
 def test_the_domain_comes_from_ros_domain_id(recording, tmp_path, capsys, monkeypatch):
     from cli_support import assert_refused
     from depthguard.cli.live import ros_domain

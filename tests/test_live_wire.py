@@ -96,3 +96,28 @@ def test_liveliness_tokens_read_back():
     for bad in ("", "@ros2_lv/x/abc/0/0/NN/%/%/n", "other/0/abc/0/0/NN/%/%/n", "@ros2_lv/0/abc/0/3/XX/%/%/n",
                 "@ros2_lv/0/abc/0/3/MP/%/%/n/%t"):
         assert wire.parse_liveliness_key(bad) is None
+
+
+def test_bridge_route_tokens_are_zenoh_plugin_ros2dds_s():
+    """Golden tokens written by hand from zenoh-plugin-ros2dds 1.10.0 (eclipse-zenoh/zenoh-plugin-ros2dds,
+    ``zenoh-plugin-ros2dds/src/liveliness_mgt.rs``, commit 09d68c0 of 2026-08-20): kedefine ``ke_liveliness_sub``
+    ``@ros2_lv/${zenoh_id:*}/MS/${ke:*}/${typ:*}/${qos_ke:*}``, ``/`` written ``§`` (SLASH_REPLACEMSNT_CHAR), the
+    type as ``ros2_utils.rs``'s ``dds_type_to_ros2_message_type`` gives it, and ``qos_to_key_expr``: "" for keyless,
+    then reliability, durability and ``history kind,depth`` as Cyclone DDS numbers them (BEST_EFFORT 0, RELIABLE 1;
+    VOLATILE 0; KEEP_LAST 0)."""
+    import ros_publisher
+
+    sub = "@ros2_lv/1f2e3d/MS/cam\u00a7depth\u00a7image_raw/sensor_msgs\u00a7msg\u00a7Image/:0:0:0,10"
+    pub = ("@ros2_lv/1f2e3d/MP/depthguard\u00a7distances/std_msgs\u00a7msg\u00a7Float64MultiArray/:1:0:0,10")
+    assert wire.bridge_liveliness_key("1f2e3d", "MS", "/cam/depth/image_raw", "sensor_msgs/msg/Image") == sub
+    assert wire.bridge_liveliness_key("1f2e3d", "MP", "/depthguard/distances", "std_msgs/msg/Float64MultiArray") == pub
+    assert wire.parse_bridge_liveliness_key(sub) == ("1f2e3d", "MS", "/cam/depth/image_raw", "sensor_msgs/msg/Image",
+                                                     ":0:0:0,10")
+    assert ros_publisher.bridge_route(sub)[1:4] == ("MS", "/cam/depth/image_raw", "sensor_msgs/msg/Image")
+    # Relative and private names are expanded first, as for rmw_zenoh's keys.
+    assert wire.bridge_liveliness_key("z", "MP", "~/x", "std_msgs/msg/String").split("/")[3] == "depthguard\u00a7x"
+    # rmw_zenoh's tokens are not the bridge's: its QoS text has 6 fields.
+    assert ros_publisher.bridge_route(wire.liveliness_key("z", 1, "MS", "n", "/a", "std_msgs/msg/String")) is None
+    assert wire.parse_bridge_liveliness_key("@ros2_lv/0/z/0/0/NN/%/%/n") is None
+    with pytest.raises(InputError, match="MP or MS"):
+        wire.bridge_liveliness_key("z", "NN", "/a", "std_msgs/msg/String")

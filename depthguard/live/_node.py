@@ -12,7 +12,8 @@ Threads:
 
 Every output goes out as rmw_zenoh sends it (the type hash in the key, an attachment, a liveliness token per
 publisher; every subscription has its token too, so that drivers count a subscriber), or at the bare topic name for
-the bridge layout: ``/depthguard/distances``
+the bridge layout, with the route tokens that make zenoh-bridge-ros2dds create a DDS reader for each subscription and
+a DDS writer for each output (:func:`~depthguard.live.wire.bridge_liveliness_key`): ``/depthguard/distances``
 (``std_msgs/msg/Float64MultiArray``, one value per control point in the robot's order, ``inf`` for nothing within
 rho) and ``/depthguard/status`` (``diagnostic_msgs/msg/DiagnosticArray``: one status per control point, its flags,
 and one per camera, its age and counts; ERROR while a camera is stale or missing, WARN for other flags), back to
@@ -105,7 +106,8 @@ def session_config(connect: list[str]):
 
 
 class _Publisher:
-    """One output topic: its zenoh publisher, rmw_zenoh's attachment and liveliness token (rmw_zenoh layout)."""
+    """One output topic: its zenoh publisher, rmw_zenoh's attachment and liveliness token (rmw_zenoh layout), or the
+    route token that makes zenoh-bridge-ros2dds create its DDS writer (bridge layout)."""
 
     def __init__(self, session, topic: str, msgtype: str, layout: str, domain: int, entity: int, gid_seed: bytes,
                  recorder=None, distro: str = "jazzy"):
@@ -117,11 +119,10 @@ class _Publisher:
         self.publisher = session.declare_publisher(self.key)
         self.sequence = 0
         self.gid = (gid_seed + entity.to_bytes(4, "little"))[-16:].rjust(16, b"\x00")
-        self.token = None
-        if layout == "rmw_zenoh":
-            zid = str(session.info.zid())
-            self.token = session.liveliness().declare_token(
-                wire.liveliness_key(zid, entity, "MP", NODE_NAME, topic, msgtype, domain=domain, distro=distro))
+        zid = str(session.info.zid())
+        self.token = session.liveliness().declare_token(
+            wire.liveliness_key(zid, entity, "MP", NODE_NAME, topic, msgtype, domain=domain, distro=distro)
+            if layout == "rmw_zenoh" else wire.bridge_liveliness_key(zid, "MP", topic, msgtype))
 
     def put(self, message) -> None:
         payload = wire.serialize(message, self.msgtype)
@@ -356,11 +357,15 @@ class LiveNode:
                                                                                 max_samples=1)))
         else:
             self._subscribers.append(self.session.declare_subscriber(key, on_sample))
-        if self.options.layout == "rmw_zenoh":  # counted by the publisher's side as a subscriber (kind MS)
-            entity = _FIRST_SUBSCRIPTION + len(self._subscription_tokens)
-            self._subscription_tokens.append(self.session.liveliness().declare_token(wire.liveliness_key(
-                str(self.session.info.zid()), entity, "MS", NODE_NAME, topic, msgtype, domain=self.options.domain,
-                qos=wire.SENSOR_QOS, distro=self.distro)))
+        # Counted by the publisher's side as a subscriber (kind MS): by rmw_zenoh's graph, or, in the bridge layout,
+        # by the DDS reader the bridge creates when it sees the route token (volatile: a camera_info that a DDS
+        # driver only latches is not received through the bridge).
+        zid = str(self.session.info.zid())
+        entity = _FIRST_SUBSCRIPTION + len(self._subscription_tokens)
+        self._subscription_tokens.append(self.session.liveliness().declare_token(
+            wire.liveliness_key(zid, entity, "MS", NODE_NAME, topic, msgtype, domain=self.options.domain,
+                                qos=wire.SENSOR_QOS, distro=self.distro)
+            if self.options.layout == "rmw_zenoh" else wire.bridge_liveliness_key(zid, "MS", topic, msgtype)))
 
     def _on_image(self, camera: str, sample) -> None:
         counts = self.counts[camera]

@@ -15,8 +15,14 @@ payloads, attachments and liveliness tokens. Pure functions of strings and bytes
   ``reliability:durability:history,depth:deadline:lifespan:liveliness``, a field left empty where it is rmw_zenoh's
   default (reliable, volatile, keep last, depth 42).
 
-**zenoh-bridge-ros2dds** (ROS 2 on DDS, bridged): the key is the topic without its leading slash, the payload the
-same CDR bytes, and no attachment.
+**zenoh-bridge-ros2dds** (ROS 2 on DDS, bridged; ``zenoh-plugin-ros2dds``'s ``liveliness_mgt.rs``,
+``ros2_utils.rs`` and ``routes_mgr.rs``, 1.10.0): the key is the topic without its leading slash, the payload the
+same CDR bytes, and no attachment. The bridges announce their routes to each other with liveliness tokens
+``@ros2_lv/<zenoh id>/<MP|MS>/<key>/<pkg/msg/Name>/<qos>``, each ``/`` in the key and the type written ``§``, the
+QoS as ``<K if keyed>:<reliability>:<durability>:<history>,<depth>`` in DDS's numbers (best effort 0, reliable 1;
+volatile 0, transient local 1; keep last 0, keep all 1). A bridge that sees another session's ``MS`` token creates a
+DDS reader of that topic, and for an ``MP`` token a DDS writer (:func:`bridge_liveliness_key`): so the DDS camera
+drivers count a subscriber, and ``ros2 topic list`` on the DDS side shows depthguard's outputs.
 
 Type hashes come from ``rosbags``' type store (ROS 2 Jazzy's definitions), which also serialises the messages.
 rosidl gives Humble's messages the same hashes, but rmw_zenoh on Humble does not use them: it keys every topic, and
@@ -39,7 +45,8 @@ from depthguard.errors import InputError
 __all__ = ["LAYOUTS", "Attachment", "Token", "type_store", "type_name", "type_hash", "ros_name", "data_key",
            "subscription_key", "key_type_hash", "attachment_bytes", "parse_attachment", "liveliness_key",
            "parse_liveliness_key", "hash_of", "distros_of", "DISTROS", "HUMBLE_HASH", "serialize", "deserialize",
-           "CDR_HEADER", "DEFAULT_QOS", "SENSOR_QOS"]
+           "CDR_HEADER", "DEFAULT_QOS", "SENSOR_QOS", "bridge_liveliness_key", "parse_bridge_liveliness_key",
+           "BRIDGE_SENSOR_QOS", "BRIDGE_DEFAULT_QOS"]
 
 LAYOUTS = ("rmw_zenoh", "bridge")
 #: rmw_zenoh's type-hash styles: Jazzy on key topics with the type's RIHS01 hash, Humble with this word instead.
@@ -63,6 +70,14 @@ DEFAULT_QOS = "::,10:,:,:,,"
 #: is compatible with every publisher, reliable or best effort, volatile or transient local, so every camera
 #: driver counts it (image_transport and realsense-ros publish only while they count a subscriber).
 SENSOR_QOS = "2::,10:,:,:,,"
+#: zenoh-bridge-ros2dds's QoS text for the DDS reader it creates for a topic we subscribe to: keyless, best effort
+#: (0), volatile (0), keep last (0) 10. A best-effort volatile reader matches every writer.
+BRIDGE_SENSOR_QOS = ":0:0:0,10"
+#: ... and for the DDS writer it creates for a topic we publish: keyless, reliable (1), volatile, keep last 10 (what
+#: a ROS 2 publisher's default QoS offers; a reliable writer matches reliable and best-effort readers).
+BRIDGE_DEFAULT_QOS = ":1:0:0,10"
+#: How the bridge writes a ``/`` inside one chunk of its tokens.
+_BRIDGE_SLASH = "\u00a7"
 
 _STORE = None
 
@@ -226,6 +241,29 @@ def liveliness_key(zid: str, entity: int, kind: str, node: str, topic: str | Non
     if kind == "NN":
         return "/".join(head)
     return "/".join(head + [_mangle(ros_name(topic)), type_name(msgtype), hash_of(msgtype, distro), qos])
+
+
+def bridge_liveliness_key(zid: str, kind: str, topic: str, msgtype: str, qos: str | None = None) -> str:
+    """zenoh-bridge-ros2dds's liveliness token announcing a route of ``kind`` ``"MP"`` (a publisher of ``topic`` on
+    the zenoh side: the bridge makes a DDS writer) or ``"MS"`` (a subscriber: the bridge makes a DDS reader), with
+    ``msgtype`` and ``qos`` (default :data:`BRIDGE_DEFAULT_QOS` for MP, :data:`BRIDGE_SENSOR_QOS` for MS);
+    ``zid``: the zenoh session's id (hex). The bridge's own namespace is taken as ``/``."""
+    if kind not in ("MP", "MS"):
+        raise InputError(f"a bridge route is MP or MS, got {kind!r}", field="kind")
+    _parts(msgtype)
+    qos = (BRIDGE_DEFAULT_QOS if kind == "MP" else BRIDGE_SENSOR_QOS) if qos is None else qos
+    key = _check_topic(topic).replace("/", _BRIDGE_SLASH)
+    return f"@ros2_lv/{zid}/{kind}/{key}/{msgtype.replace('/', _BRIDGE_SLASH)}/{qos}"
+
+
+def parse_bridge_liveliness_key(key: str) -> tuple[str, str, str, str, str] | None:
+    """(zid, kind, topic (absolute), msgtype, qos) of a zenoh-bridge-ros2dds route token (the layout of
+    :func:`bridge_liveliness_key`, MP or MS), None when the key is not one."""
+    parts = str(key).split("/")
+    if len(parts) != 6 or parts[0] != "@ros2_lv" or parts[2] not in ("MP", "MS") or parts[5].count(":") != 3:
+        return None
+    return (parts[1], parts[2], "/" + parts[3].replace(_BRIDGE_SLASH, "/"), parts[4].replace(_BRIDGE_SLASH, "/"),
+            parts[5])
 
 
 @dataclass(frozen=True)
