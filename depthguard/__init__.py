@@ -15,7 +15,7 @@ from depthguard._settings import MonitorSettings
 from depthguard.cameras import NoiseModel, PinholeCamera, Rig, load_camera_info, load_rig, rig_from_dict, save_rig
 from depthguard.depth import DepthImage, OccupancyImage, depth_image, load_depth, prepare_depth, read_depth_file
 from depthguard.depthspace import frustum_distance, paper_frustum_distance, single_camera_distances
-from depthguard.errors import DepthguardError, DepthImageError, InputError, RigError
+from depthguard.errors import DepthguardError, DepthImageError, InputError, RigError, WriteError
 from depthguard.results import DetectableResult, DistanceResult, Flag
 from depthguard.io.recordings import Recording, open_recording
 
@@ -51,4 +51,5 @@ __all__ = [
     "rig_from_dict",
     "save_rig",
     "single_camera_distances",
+    "WriteError",
 ]

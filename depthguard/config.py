@@ -189,6 +189,11 @@ FUSION_ROW_CHUNKS = 4
 #: a runaway file cannot make a monitor read forever or exhaust memory.
 MAX_TEXT_FILE_BYTES = 1 << 20  # rig, camera_info and scene YAML files: 1 MiB
 MAX_POINTS_FILE_BYTES = 16 << 20  # control-point CSV or JSON: 16 MiB (about half a million points)
+#: Control points one query takes (any API entry that takes points: DistanceMonitor.query, PreparedSet.query,
+#: single_camera_distances, FusedFrames.distances, the detectable distances): refused beyond this before anything is
+#: allocated, with a message naming the limit (a robot has tens to thousands; a million is 24 MB of coordinates and
+#: about 100 MB of results).
+MAX_QUERY_POINTS = 1_000_000
 MAX_DEPTH_FILE_BYTES = 256 << 20  # one depth image file: 256 MiB
 MAX_MAP_FILE_BYTES = 2 << 30  # one depth-grid map: 2 GiB
 

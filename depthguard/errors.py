@@ -9,7 +9,8 @@ fix the rig or the driver::
     ├── InputError        points, options or other arguments are malformed
     ├── RobotError        a robot description (URDF, meshes, control points) is missing, malformed or unsupported
     ├── RenderingError    no headless OpenGL (EGL) context, or its OpenGL lacks what rendering needs
-    └── SceneError        a simulation scene file (depthguard_lab.simulation) is malformed or describes the impossible
+    ├── SceneError        a simulation scene file (depthguard_lab.simulation) is malformed or describes the impossible
+    └── WriteError        a file or standard output could not be written (disk full, read-only, broken pipe)
 
 The checks that raise them, one per kind of value, live in :mod:`depthguard.validation`.
 """
@@ -17,8 +18,16 @@ The checks that raise them, one per kind of value, live in :mod:`depthguard.vali
 from __future__ import annotations
 
 
+def one_line(text: str) -> str:
+    """``text`` on one line: line breaks and other control characters (a file name may hold them) written as
+    escapes, so that an error message is one line in a log (docs/bad-input.md)."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+
+
 class DepthguardError(Exception):
-    """Base class of every error depthguard raises on purpose."""
+    """Base class of every error depthguard raises on purpose. Its message is one line (:func:`one_line`)."""
 
     def __init__(self, message: str, *, camera: str | None = None, field: str | None = None, source: str | None = None):
         parts = [str(source)] if source else []
@@ -26,7 +35,7 @@ class DepthguardError(Exception):
             parts.append(f"camera {camera!r}")
         if field is not None:
             parts.append(f"field {field!r}")
-        super().__init__(": ".join(parts + [message]))
+        super().__init__(one_line(": ".join(parts + [str(message)])))
         self.message = message
         self.camera = camera
         self.field = field
@@ -65,3 +74,12 @@ class SceneError(DepthguardError, ValueError):
     """A simulation scene (depthguard_lab.simulation) is malformed, names something that does not exist, or asks for
     the impossible (an unreachable trajectory). ``field`` is the path of the offending key, e.g.
     ``people[0].actions[2].reach.target``."""
+
+
+class WriteError(DepthguardError, OSError):
+    """A file (or standard output) could not be written: the disk is full, the folder read-only or missing, the pipe
+    closed. The message names the file (``source``) and says why, in one line; the file is left as it was
+    (:func:`depthguard.io.files.atomic_write`). An ``OSError`` too, for callers that catch those."""
+
+    def __str__(self) -> str:  # the one-line message, not OSError's "[Errno n] ..." form
+        return str(self.args[0]) if self.args else ""

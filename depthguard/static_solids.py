@@ -9,7 +9,7 @@ import numpy as np
 from depthguard import config
 from depthguard.cameras import PinholeCamera
 from depthguard.errors import InputError
-from depthguard.validation import check_real, short_repr
+from depthguard.validation import NOT_A_NUMBER, check_real, short_repr
 
 
 def ray_boxes(camera: PinholeCamera, boxes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -100,7 +100,7 @@ class StaticSolids:
                 values = np.concatenate([np.ravel(np.asarray(box.center, dtype=np.float64)),
                                          np.ravel(np.asarray(box.half_extents, dtype=np.float64)),
                                          np.ravel(np.asarray(box.R_world_box, dtype=np.float64))])
-            except (TypeError, ValueError):
+            except NOT_A_NUMBER:
                 values = np.full(1, np.nan)  # not numbers: refused below
             if values.size != 15 or not np.all(np.isfinite(values)) or np.any(np.asarray(box.half_extents) <= 0) \
                     or np.any(np.abs(values) > config.COORDINATE_LIMIT):

@@ -20,6 +20,12 @@ from depthguard import config
 from depthguard.errors import DepthguardError, InputError, RigError
 
 
+#: What converting a value to a float (``float()``, ``np.array(..., dtype=np.float64)``) raises when the value is not
+#: a real number (TypeError, ValueError) or is an integer beyond the float range (OverflowError): every conversion of
+#: a user's value catches all three and names the field (docs/bad-input.md, "numbers beyond a float").
+NOT_A_NUMBER = (TypeError, ValueError, OverflowError)
+
+
 def short_repr(value, limit: int = 40) -> str:
     """``repr(value)`` cut to ``limit`` characters, for one-line messages about a value the user gave (a 400-digit
     number or a long string stays readable; an integer too long for Python to print is described)."""
@@ -49,7 +55,7 @@ def check_real(value, name: str, *, minimum: float | None = None, maximum: float
         raise error(f"{name} must be {wanted}, got {short_repr(value)}", **context)
     try:
         number = float(value)
-    except (OverflowError, TypeError, ValueError):
+    except NOT_A_NUMBER:
         number = math.nan
     if not math.isfinite(number) or (minimum is not None and (number <= minimum if above_minimum else
                                                                number < minimum)) or \
@@ -73,7 +79,7 @@ def real_vector(values, n: int, field_name: str, unit: str = ""):
                                  field=field_name)
     try:
         array = np.asarray(values)
-    except (TypeError, ValueError):
+    except NOT_A_NUMBER:
         raise InputError(f"expected {n} numbers, got {short_repr(values)}", field=field_name) from None
     if array.dtype.kind not in "fiu":
         raise InputError(f"expected {n} real numbers{unit}, got {short_repr(values)} (dtype {array.dtype})",
@@ -94,13 +100,28 @@ def check_path(path, what: str, error: type[DepthguardError] | None = None, **co
     return Path(text)
 
 
+def check_count(values, limit: int, field: str, setting: str) -> None:
+    """Refuse, before anything is converted or allocated, an array or sequence ``values`` with more than ``limit``
+    rows (its first dimension; every element of a flat one): :class:`InputError` naming ``field`` and the limit
+    (``setting``, the config name that holds it). What has no length passes (the caller's checks judge it)."""
+    if isinstance(values, np.ndarray):
+        rows = values.shape[0] if values.ndim else 1
+    elif isinstance(values, (list, tuple)):
+        rows = len(values)
+    else:
+        return
+    if rows > limit:
+        raise InputError(f"{rows} rows; at most {limit} are taken at once ({setting})", field=field)
+
+
 def check_points(points_world) -> np.ndarray:
     """Return control points as a C-contiguous (n, 3) float64 array (metres, world frame).
 
     Accepts a sequence or array of real numbers of shape (n, 3), or (3,) for a single point; an empty list or an
     array of shape (0,) or (0, 3) gives a (0, 3) array. Raises :class:`InputError` for anything else: a string,
     a masked array, complex, bool, object or text values, another shape (an (n, 0) array among them), a coordinate
-    that is not finite or beyond ``config.COORDINATE_LIMIT`` metres (naming the point's index).
+    that is not finite or beyond ``config.COORDINATE_LIMIT`` metres (naming the point's index), more than
+    ``config.MAX_QUERY_POINTS`` points (before any of them is converted).
     """
     if isinstance(points_world, (str, bytes)):
         raise InputError(f"points must be numbers of shape (n, 3) (metres, world frame), got a string "
@@ -108,9 +129,10 @@ def check_points(points_world) -> np.ndarray:
     if isinstance(points_world, np.ma.MaskedArray):
         raise InputError("points must not be a masked array: a masked coordinate has no value (pass the points you "
                          "mean, as a plain array)", field="points")
+    check_count(points_world, config.MAX_QUERY_POINTS, "points", "config.MAX_QUERY_POINTS")
     try:
         array = np.asarray(points_world)
-    except (TypeError, ValueError) as exc:  # ragged lists, objects numpy cannot read
+    except NOT_A_NUMBER as exc:  # ragged lists, objects numpy cannot read
         raise InputError(f"points must be numbers of shape (n, 3) ({' '.join(str(exc).split())[:120]})",
                          field="points") from None
     if array.dtype.kind not in "fiu":  # checked before converting: complex, bool, object and text never pass
@@ -152,7 +174,7 @@ def check_transform(matrix, *, camera: str | None = None, field: str = "T_world_
     """
     try:
         T = np.array(matrix, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
+    except NOT_A_NUMBER as exc:
         raise RigError(f"not a 4x4 matrix of numbers ({exc})", camera=camera, field=field) from None
     if T.shape != (4, 4):
         raise RigError(f"expected a 4x4 matrix, got shape {T.shape}", camera=camera, field=field)

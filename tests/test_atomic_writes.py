@@ -107,13 +107,19 @@ def test_atomic_write_keeps_the_older_file_or_none(tmp_path):
 
 
 def test_atomic_write_errors_name_the_file_asked_for(tmp_path):
-    with pytest.raises(FileNotFoundError) as info:
+    import errno
+
+    from depthguard.errors import WriteError
+
+    with pytest.raises(WriteError) as info:
         io_files.write_whole(tmp_path / "no" / "such.yaml", "x")
-    assert info.value.filename == str(tmp_path / "no" / "such.yaml")
+    assert info.value.filename == str(tmp_path / "no" / "such.yaml") and info.value.errno == errno.ENOENT
+    assert str(info.value) == f"{tmp_path / 'no' / 'such.yaml'}: could not be written: No such file or directory"
     (tmp_path / "folder").mkdir()
-    with pytest.raises(IsADirectoryError) as info:
+    with pytest.raises(OSError) as info:  # a WriteError is an OSError too
         io_files.write_whole(tmp_path / "folder", "x")
     assert info.value.filename == str(tmp_path / "folder") and files_in(tmp_path) == ["folder"]
+    assert info.value.errno == errno.EISDIR and "could not be written" in str(info.value)
     with pytest.raises(ValueError):
         with io_files.atomic_write(tmp_path / "a", "a"):
             pass

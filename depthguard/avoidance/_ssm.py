@@ -69,7 +69,7 @@ from depthguard.config import (  # the SSM defaults (ISO/TS 15066, ISO 13855)
     SSM_UNIT_TOLERANCE,
 )
 from depthguard.errors import InputError
-from depthguard.validation import check_real
+from depthguard.validation import NOT_A_NUMBER, check_real
 from depthguard.results import DetectableResult, DistanceResult
 
 _UNITS = {"human_speed": "m/s", "human_speed_near": "m/s", "stopping_time": "seconds"}
@@ -187,7 +187,7 @@ def _array(value, name: str, *, shape=None, allow_inf: bool = False, nonnegative
     """``value`` as a float64 array after checking its shape (a tuple, None for any dimension) and values."""
     try:
         array = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except NOT_A_NUMBER:
         raise InputError(f"{name} must be an array of real numbers", field=name) from None
     if shape is not None and (array.ndim != len(shape) or
                               any(want is not None and got != want for got, want in zip(array.shape, shape))):

@@ -188,8 +188,9 @@ def _number(value, camera: str, field: str, finite: bool = True) -> float:
         raise RigError(f"must be a number, got {short_repr(value)}", camera=camera, field=field)
     try:
         number = float(value)
-    except OverflowError:  # an integer beyond float range
-        number = math.inf if value > 0 else -math.inf
+    except OverflowError:  # an integer beyond the float range: no number depthguard can use (not infinity)
+        raise RigError(f"must be a number within the float range (about 1.8e308), got {short_repr(value)}",
+                       camera=camera, field=field) from None
     if finite and not math.isfinite(number):
         raise RigError(f"must be finite, got {short_repr(value)}", camera=camera, field=field)
     return number

@@ -45,7 +45,7 @@ from depthguard.io.files import read_yaml, write_whole
 from depthguard.cameras._noise import NoiseModel
 from depthguard.cameras._pinhole import PinholeCamera
 from depthguard.errors import RigError
-from depthguard.validation import check_path, short_repr
+from depthguard.validation import NOT_A_NUMBER, check_path, short_repr
 
 _INTRINSIC_KEYS = ("width", "height", "fx", "fy", "cx", "cy")
 
@@ -275,7 +275,7 @@ def _workspace_box(value) -> np.ndarray:
     ``config.COORDINATE_LIMIT``, lo < hi on every axis; else :class:`RigError` naming the field."""
     try:
         box = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except NOT_A_NUMBER:
         raise RigError(f"must be [[x, y, z], [x, y, z]] (the box's lowest and highest corner, world frame, metres), "
                        f"got {short_repr(value)}", field="workspace") from None
     if box.shape != (2, 3) or not np.all(np.abs(box) <= config.COORDINATE_LIMIT):

@@ -31,7 +31,7 @@ import os
 import sys
 
 from depthguard.cli.options import Parser, attach_number_lists, parse_joints, real_option, whole_option
-from depthguard.errors import DepthguardError
+from depthguard.errors import DepthguardError, one_line
 
 __all__ = ["COMMANDS", "Parser", "attach_number_lists", "build_parser", "main", "parse_joints", "real_option", "run",
            "whole_option"]
@@ -71,17 +71,22 @@ def run(command, program: str) -> int:
     :class:`~depthguard.DepthguardError` (bad input) or an ``OSError`` ends with exit status 2 and one line on
     standard error, ``<program>: error: ...``; any other exception is a bug: exit status 3 and one line
     (``DEPTHGUARD_DEBUG=1`` raises it instead, with its traceback)."""
+    from depthguard.io.files import named_stdout
+
     try:
-        return command()
+        with named_stdout():  # standard output's write errors name it (docs/bad-input.md)
+            return command()
     except DepthguardError as exc:
-        print(f"{program}: error: {exc}", file=sys.stderr)
+        print(f"{program}: error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     except OSError as exc:
-        print(f"{program}: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"{program}: error: {one_line(where + str(exc.strerror or exc))}", file=sys.stderr)
         return 2
     except Exception as exc:  # a bug, not bad input: still one line, the traceback on request
         if os.environ.get("DEPTHGUARD_DEBUG"):
             raise
-        print(f"{program}: internal error: {type(exc).__name__}: {exc} (set DEPTHGUARD_DEBUG=1 for the traceback)",
+        print(f"{program}: internal error: {type(exc).__name__}: {one_line(str(exc))} (set DEPTHGUARD_DEBUG=1 for the "
+              "traceback)",
               file=sys.stderr)
         return 3

@@ -12,7 +12,7 @@ from depthguard import config
 from depthguard.kernels import collision_update as update_kernels
 from depthguard.collision._epipolar import TileGrid
 from depthguard.errors import InputError
-from depthguard.validation import real_vector
+from depthguard.validation import NOT_A_NUMBER, real_vector
 from depthguard.scenes import Box
 
 #: metres, optical depth: a box with a corner this near the camera's plane (or behind it) may be seen in every tile
@@ -39,7 +39,7 @@ def _checked_box(box, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         raise InputError(f"{name}.half_extents must be >= 0 metres, got {half.tolist()}", field=f"{name}.half_extents")
     try:
         R = np.array(box.R_world_box, dtype=np.float64)
-    except (TypeError, ValueError):
+    except NOT_A_NUMBER:
         R = None
     if R is None or R.shape != (3, 3) or not np.all(np.isfinite(R)) or \
             np.abs(R.T @ R - np.eye(3)).max() > config.ROTATION_TOLERANCE or \

@@ -16,7 +16,7 @@ from depthguard.kernels import collision as collision_kernels
 from depthguard.collision._epipolar import TileGrid
 from depthguard import config
 from depthguard.errors import InputError
-from depthguard.validation import check_real
+from depthguard.validation import NOT_A_NUMBER, check_real
 
 #: The 4-neighbourhood of the morphological closing (section 3.2).
 FOUR_NEIGHBOURS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=bool)
@@ -190,7 +190,7 @@ def _thresholds(thresholds, cam) -> np.ndarray:
     """The depth variant's (metres, fraction of a tile) as two finite numbers >= 0, else a named refusal."""
     try:
         thresholds = np.asarray(thresholds, dtype=np.float64)
-    except (TypeError, ValueError):  # words
+    except NOT_A_NUMBER:  # words
         thresholds = np.full(1, np.nan)
     if thresholds.shape != (2,) or not np.all(np.isfinite(thresholds)) or not np.all(thresholds >= 0.0):
         raise InputError(f"thresholds must be two finite numbers >= 0 (metres, fraction of a tile), got "

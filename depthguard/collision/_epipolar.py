@@ -14,7 +14,7 @@ from depthguard import config
 from depthguard.cameras import PinholeCamera
 from depthguard.kernels import collision as collision_kernels
 from depthguard.errors import InputError
-from depthguard.validation import short_repr
+from depthguard.validation import NOT_A_NUMBER, short_repr
 
 
 class TileGrid:
@@ -94,7 +94,7 @@ def _box(workspace) -> tuple[np.ndarray, np.ndarray]:
     +-``config.COORDINATE_LIMIT``, low < high."""
     try:
         box = np.array(workspace, dtype=np.float64)
-    except (TypeError, ValueError):
+    except NOT_A_NUMBER:
         box = None
     if box is None or box.shape != (2, 3) or not np.all(np.abs(box) <= config.COORDINATE_LIMIT) or \
             not np.all(box[0] < box[1]):

@@ -20,7 +20,7 @@ import numpy as np
 from depthguard import config
 from depthguard.errors import InputError
 from depthguard.results import CONCESSION_FLAGS, Flag
-from depthguard.validation import check_real_positive, short_repr
+from depthguard.validation import NOT_A_NUMBER, check_real_positive, short_repr
 
 #: Pixel footprints by which a depth grid distance may exceed the truth (the judges' tolerance), and metres for the
 #: float32 depth buffer: added to every sphere's radius.
@@ -82,7 +82,7 @@ class DepthGridCollisionTest:
                              f"{short_repr(prepared)}", field="prepared")
         try:
             qs = np.asarray(configurations, dtype=np.float64) if not isinstance(configurations, str) else None
-        except (TypeError, ValueError):  # words, ragged rows
+        except NOT_A_NUMBER:  # words, ragged rows
             qs = None
         if qs is None or qs.ndim != 2 or qs.shape[1] != self.robot.n_joints:
             raise InputError(f"configurations must be (n, {self.robot.n_joints}) joint vectors, got "

@@ -22,7 +22,7 @@ import numpy as np
 
 from depthguard.kernels import collision_plan as plan_kernels
 from depthguard.errors import InputError
-from depthguard.validation import real_vector, short_repr
+from depthguard.validation import NOT_A_NUMBER, real_vector, short_repr
 
 #: The most cells a configuration grid (and a free mask) may hold: the wave's work arrays take 8 bytes per cell
 #: (128 MiB at the cap), and its flat indices are 32-bit.
@@ -244,7 +244,7 @@ def _counts(counts, n: int) -> np.ndarray:
                 raise InputError(f"expected {n} integers >= 1, got {short_repr(c)} among them", field="counts")
     try:
         array = np.asarray(counts)
-    except (TypeError, ValueError):
+    except NOT_A_NUMBER:
         raise InputError(f"expected {n} integers >= 1, got {short_repr(counts)}", field="counts") from None
     if array.dtype.kind not in "iu":
         raise InputError(f"expected {n} integers >= 1, got {short_repr(counts)} (dtype {array.dtype})",
@@ -266,7 +266,7 @@ def _check_free(free) -> np.ndarray:
         raise InputError("free must be a plain bool array, not a masked array", field="free")
     try:
         array = np.asarray(free)
-    except (TypeError, ValueError):
+    except NOT_A_NUMBER:
         raise InputError(f"free must be a bool array, got {short_repr(free)}", field="free") from None
     if array.dtype != np.bool_:
         raise InputError(f"free must be a bool array (True = collision-free), got dtype {array.dtype}", field="free")

@@ -22,6 +22,7 @@ from depthguard import config
 from depthguard.kernels import collision as collision_kernels
 from depthguard.collision._epipolar import TileGrid
 from depthguard.errors import InputError
+from depthguard.validation import NOT_A_NUMBER
 
 
 class RobotProjector:
@@ -59,7 +60,7 @@ class RobotProjector:
         n = self.robot.n_joints
         try:
             q = np.asarray(configurations, dtype=np.float64)
-        except (TypeError, ValueError):
+        except NOT_A_NUMBER:
             raise InputError(f"{field} must be (K, {n}) joint positions, got {type(configurations).__name__}",
                              field=field) from None
         if q.ndim != 2 or q.shape[1] != n or not np.all(np.isfinite(q)):
@@ -128,7 +129,7 @@ class RobotProjector:
         ``config.MAX_MOTION_SAMPLES`` samples, else InputError (field ``path``)."""
         try:
             q = np.asarray(path, dtype=np.float64)
-        except (TypeError, ValueError):
+        except NOT_A_NUMBER:
             raise InputError(f"path must be (P, n) joint positions, got {type(path).__name__}", field="path") from None
         if q.ndim == 1:
             q = q[None]

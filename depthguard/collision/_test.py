@@ -31,6 +31,7 @@ from depthguard.collision._robot_image import RobotProjector
 from depthguard.collision._tables import (Verdict, camera_collisions, depth_ordered_collisions, obstacle_image,
                                           revised_obstacle_images, verdict)
 from depthguard.errors import InputError
+from depthguard.validation import NOT_A_NUMBER
 
 
 class ImageCollisionTest:
@@ -106,7 +107,7 @@ class ImageCollisionTest:
             thresholds = (6.0, 0.05) if images == "intensity" else (0.05, 0.25)
         try:
             self.thresholds = np.array(thresholds, dtype=np.float64)
-        except (TypeError, ValueError):
+        except NOT_A_NUMBER:
             self.thresholds = None
         if self.thresholds is None or self.thresholds.shape != (2,) or not np.all(self.thresholds >= 0.0) or \
                 not np.all(np.isfinite(self.thresholds)):

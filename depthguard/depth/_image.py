@@ -11,7 +11,7 @@ from depthguard import config
 from depthguard.cameras import PinholeCamera
 from depthguard.io.images import read_depth_file
 from depthguard.errors import DepthImageError, InputError
-from depthguard.validation import check_path, short_repr
+from depthguard.validation import NOT_A_NUMBER, check_path, short_repr
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,7 +107,7 @@ def _checked_data(data, camera: PinholeCamera) -> np.ndarray:
         data = np.ma.getdata(data)
     try:
         array = np.asarray(data)
-    except (TypeError, ValueError) as exc:  # ragged nested lists, objects numpy cannot read
+    except NOT_A_NUMBER as exc:  # ragged nested lists, objects numpy cannot read
         raise DepthImageError(f"not an image array ({' '.join(str(exc).split())[:120]})", camera=camera.name,
                               field="dtype") from None
     if array.ndim != 2:

@@ -53,7 +53,7 @@ from depthguard.io.files import atomic_write, read_bytes
 from depthguard.cameras import Rig
 from depthguard.depth import npy_header
 from depthguard.errors import DepthguardError, InputError
-from depthguard.validation import short_repr
+from depthguard.validation import check_real, short_repr
 
 MAP_FORMAT = "depthguard-depth-grid-map/2"
 _OLD_FORMATS = ("depthguard-depth-grid-map/1",)
@@ -524,9 +524,7 @@ def _check_affine(grid: DepthGridMap) -> None:
 
 
 def _real(value, name: str, error) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
-        raise error(f"{name} must be a finite number of metres, got {short_repr(value)}", field=name)
-    return float(value)
+    return check_real(value, name, unit="metres", error=error, field=name)
 
 
 def _read_only(array, name: str) -> np.ndarray:

@@ -46,7 +46,7 @@ from dataclasses import dataclass
 from depthguard.kernels import detectable as detectable_kernels
 from depthguard.kernels.detectable import erode_fits, mark_box_voxels, mark_capsule_voxels, nearest_fit
 from depthguard.errors import InputError
-from depthguard.validation import check_limit, check_real
+from depthguard.validation import NOT_A_NUMBER, check_limit, check_real
 from depthguard.freespace._buffers import reusable
 from depthguard.freespace._memory import CameraViews, VoxelBox, _check_box
 
@@ -137,7 +137,7 @@ class DetectableSpace:
         if beyond is not None:
             try:
                 self.beyond = np.array(beyond, dtype=np.float64).reshape(6)
-            except (TypeError, ValueError):
+            except NOT_A_NUMBER:
                 raise InputError(f"beyond must be 6 numbers of metres, got {beyond!r}", field="beyond") from None
             if not np.all(np.isfinite(self.beyond) & (self.beyond >= 0.0)):
                 raise InputError(f"beyond must be 6 finite metres >= 0, got {self.beyond.tolist()}", field="beyond")

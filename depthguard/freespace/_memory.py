@@ -18,7 +18,7 @@ import numpy as np
 from depthguard import config
 from depthguard.cameras import PinholeCamera
 from depthguard.errors import InputError
-from depthguard.validation import check_real, short_repr
+from depthguard.validation import NOT_A_NUMBER, check_real, short_repr
 from depthguard.kernels import freespace as freespace_kernels
 from depthguard.freespace._buffers import reusable
 
@@ -80,7 +80,7 @@ class VoxelBox:
 def _corner(value, name: str) -> np.ndarray:
     try:
         array = np.asarray(value)
-    except (TypeError, ValueError):
+    except NOT_A_NUMBER:
         array = None
     if array is None or array.dtype.kind not in "fiu" or array.shape != (3,):
         raise InputError(f"{name} must be 3 real numbers (metres, world frame), got {short_repr(value)}", field=name)

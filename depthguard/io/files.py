@@ -19,23 +19,30 @@ Every file depthguard writes is written whole or not at all (:func:`atomic_write
 :func:`atomic_folder`): into a temporary file beside it, flushed to disk, then renamed over it in one step. A process
 stopped while writing leaves the older file or none, never a shorter one that a reader would take for valid (a rig
 with one camera fewer). The temporary name, ``.<name>.<pid>.<n>.partial``, is hidden and ends in ``.partial``: no
-reader looks for it, and no glob such as ``*.png`` or ``*.yaml`` matches it.
+reader looks for it, and no glob such as ``*.png`` or ``*.yaml`` matches it. A write that fails (a full disk, a
+read-only or missing folder, a closed pipe) raises :class:`~depthguard.errors.WriteError` naming the file and why
+(:func:`write_error`); standard output's writes do the same within :func:`named_stdout`, which every command line
+runs in.
 """
 
 from __future__ import annotations
 
 import contextlib
+import csv
+import io
 import itertools
 import json
 import os
 import shutil
 import stat
+import sys
 from pathlib import Path
 
 import yaml
 
 from depthguard import config
-from depthguard.errors import DepthguardError, InputError
+from depthguard.errors import DepthguardError, InputError, WriteError
+from depthguard.validation import short_repr
 
 
 def read_bytes(path, *, what: str, max_bytes: int, error: type[DepthguardError] = InputError, **context) -> bytes:
@@ -203,6 +210,34 @@ def _one_line(exc: Exception) -> str:
     return " ".join(str(exc).split())
 
 
+def csv_table(text: str, *, source, error: type[DepthguardError] = InputError,
+              check_header=None) -> tuple[list[str], list]:
+    """(header, [(line number, cells), ...]) of a CSV text: the header's names stripped, and every row that is not
+    blank. Every row must hold exactly as many fields as the header (docs/bad-input.md, "tables with a wrong
+    shape"): a row with more is not cut short silently, one with fewer is not padded. Otherwise, and for malformed
+    CSV (a quote left open, a field longer than ``csv.field_size_limit()``), ``error`` naming ``source`` and the
+    line. ``check_header(names)``, when given, judges the header (stripped names) before any row is read."""
+    reader = csv.reader(io.StringIO(text, newline=""))
+    rows = []
+    try:
+        header = next(reader, None)
+        if header is None:
+            raise error("empty file; expected a header line", source=str(source))
+        if check_header is not None:
+            check_header([cell.strip() for cell in header])
+        for row in reader:
+            if not any(cell.strip() for cell in row):
+                continue
+            if len(row) != len(header):  # a short row names the first column it lacks
+                raise error(f"line {reader.line_num}: {len(row)} fields, but the header has {len(header)} "
+                            f"({short_repr(','.join(header), 60)})", source=str(source),
+                            field=header[len(row)].strip() if len(row) < len(header) else None)
+            rows.append((reader.line_num, row))
+    except csv.Error as exc:
+        raise error(f"line {reader.line_num}: malformed CSV ({_one_line(exc)})", source=str(source)) from None
+    return [cell.strip() for cell in header], rows
+
+
 # ---------------------------------------------------------------------------------------------------------- writing
 
 _partial_numbers = itertools.count()  # tells apart the temporary files of one process's threads
@@ -225,15 +260,15 @@ def atomic_write(path, mode: str = "w", *, newline: str | None = None):
         raise ValueError(f"atomic_write writes a new file: mode 'w' or 'wb', got {mode!r}")
     path = Path(path)
     partial = _partial_path(path)
-    with _naming(path):
+    with _writing(path, partial):
         # "x": the temporary file is new, never an existing file or a link planted under its name.
         file = open(partial, mode.replace("w", "x"), encoding=None if mode == "wb" else "utf-8", newline=newline)
     try:
-        with file:
-            yield file
-            file.flush()
-            os.fsync(file.fileno())
-        with _naming(path):
+        with _writing(path, partial):
+            with file:
+                yield file
+                file.flush()
+                os.fsync(file.fileno())
             os.replace(partial, path)
     finally:
         with contextlib.suppress(OSError):
@@ -257,28 +292,91 @@ def atomic_folder(path):
     temporary folder is removed. Missing folders above ``path`` are created."""
     path = Path(path)
     holder = _partial_path(path)
-    with _naming(path):
+    with _writing(path, holder):
         holder.mkdir(parents=True)
     try:
         folder = holder / path.name
-        yield folder
-        for file in sorted(folder.rglob("*")):
-            if file.is_file() and not file.is_symlink():
-                _sync_file(file)
-        with _naming(path):
+        with _writing(path, holder):
+            yield folder
+            for file in sorted(folder.rglob("*")):
+                if file.is_file() and not file.is_symlink():
+                    _sync_file(file)
             os.replace(folder, path)
     finally:
         shutil.rmtree(holder, ignore_errors=True)
     _sync_folder(path.parent)
 
 
+def write_error(name, exc: OSError) -> WriteError:
+    """The one error for a write that failed (docs/bad-input.md, "files the writer cannot finish"): ``name`` (a file,
+    or "standard output") could not be written, and why (the OS's words: "No space left on device", "Read-only file
+    system", "Broken pipe"), in one line."""
+    reason = exc.strerror or _one_line(exc) or type(exc).__name__
+    error = WriteError(f"could not be written: {reason}", source=str(name))
+    error.errno, error.strerror, error.filename = exc.errno, exc.strerror, str(name)  # as an OSError says it
+    return error
+
+
 @contextlib.contextmanager
-def _naming(path: Path):
-    """An :class:`OSError` within names ``path`` (what the caller asked for), not a temporary name."""
+def _writing(path: Path, temporary: Path):
+    """An :class:`OSError` of writing ``path`` (through its ``temporary`` name) within becomes :func:`write_error`
+    naming ``path``, what the caller asked for. An OSError about another file (one the block reads) passes as it
+    is: it carries that file's name."""
     try:
         yield
+    except WriteError:
+        raise
     except OSError as exc:
-        raise OSError(exc.errno, exc.strerror, str(path)) from None
+        if exc.filename is None or str(exc.filename) in (str(path), str(temporary)) or \
+                str(exc.filename).startswith(str(temporary)):
+            raise write_error(path, exc) from None
+        raise
+
+
+class _NamedOutput:
+    """A text stream whose write and flush errors are :func:`write_error` naming ``name`` ("standard output")."""
+
+    def __init__(self, stream, name: str):
+        self._stream = stream
+        self._name = name
+
+    def write(self, text):
+        try:
+            return self._stream.write(text)
+        except OSError as exc:
+            raise self._failed(exc) from None
+
+    def flush(self):
+        try:
+            self._stream.flush()
+        except OSError as exc:
+            raise self._failed(exc) from None
+
+    def _failed(self, exc: OSError) -> WriteError:
+        # What is still buffered would fail again when Python flushes at exit, with a traceback on standard error:
+        # the stream's file descriptor goes to os.devnull instead (as Python's documentation advises for SIGPIPE).
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self._stream.fileno())
+            os.close(devnull)
+        return write_error(self._name, exc)
+
+    def __getattr__(self, attribute):
+        return getattr(self._stream, attribute)
+
+
+@contextlib.contextmanager
+def named_stdout():
+    """Within, ``sys.stdout``'s write errors (a full disk, ``/dev/full``, a closed pipe) are :func:`write_error`
+    naming standard output; at the end it is flushed, so that such an error comes before the exit status is set."""
+    original = sys.stdout
+    sys.stdout = _NamedOutput(original, "standard output") if original is not None else original
+    try:
+        yield
+        if sys.stdout is not None:
+            sys.stdout.flush()
+    finally:
+        sys.stdout = original
 
 
 def _sync_file(path: Path) -> None:

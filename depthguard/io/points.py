@@ -6,7 +6,8 @@ finite number of metres with ``|x|, |y|, |z| <= config.COORDINATE_LIMIT``. Any p
 :class:`~depthguard.errors.InputError` naming the file and the line (CSV) or entry (JSON).
 
 - CSV: the first line is a header naming the columns ``x``, ``y`` and ``z`` (case-insensitive, once each; other
-  columns are ignored). Each further line holds plain decimal numbers in those columns (``1``, ``-0.25``, ``1e-3``;
+  columns are ignored). Every row holds as many fields as the header (:func:`depthguard.io.files.csv_table`). Each
+  further line holds plain decimal numbers in those columns (``1``, ``-0.25``, ``1e-3``;
   not ``nan``, ``inf``, ``1_000`` or non-ASCII digits). Blank lines are skipped. A file holding only the header has
   no points; an empty file is an error (the header is missing).
 - JSON: a list of ``[x, y, z]`` lists of numbers; ``[]`` has no points. Numbers are read as floats (a 400-digit
@@ -16,8 +17,6 @@ finite number of metres with ``|x|, |y|, |z| <= config.COORDINATE_LIMIT``. Any p
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 import re
 from pathlib import Path
@@ -25,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from depthguard import config
-from depthguard.io.files import load_json, read_text
+from depthguard.io.files import csv_table, load_json, read_text
 from depthguard.errors import InputError
 from depthguard.validation import short_repr
 
@@ -60,31 +59,25 @@ def _from_json(text: str, path: Path) -> np.ndarray:
 
 
 def _from_csv(text: str, path: Path) -> np.ndarray:
-    reader = csv.reader(io.StringIO(text, newline=""))
-    try:
-        header = next(reader, None)
-        if header is None:
-            raise InputError("empty CSV file; expected a header x,y,z", source=str(path))
-        names = [h.strip().lower() for h in header]
+    def check_header(header):
+        names = [h.lower() for h in header]
         for name in ("x", "y", "z"):
             if names.count(name) != 1:
                 raise InputError(f"line 1: CSV header must name each of the columns x, y, z once, got "
                                  f"{short_repr(header, 80)}", source=str(path))
-        columns = [names.index(k) for k in ("x", "y", "z")]
-        points = []
-        for row in reader:
-            line = reader.line_num
-            if all(not cell.strip() for cell in row):
-                continue
-            cells = [row[c].strip() if c < len(row) else "" for c in columns]
-            if not all(_NUMBER.fullmatch(cell) for cell in cells):
-                raise InputError(f"line {line}: expected numbers in columns x, y, z, got {short_repr(row, 80)}",
-                                 source=str(path))
-            values = [float(cell) for cell in cells]
-            _check_range(values, f"line {line}", path)
-            points.append(values)
-    except csv.Error as exc:  # a field longer than csv.field_size_limit(), a quote left open
-        raise InputError(f"line {reader.line_num}: malformed CSV ({exc})", source=str(path)) from None
+
+    header, rows = csv_table(text, source=path, error=InputError, check_header=check_header)
+    names = [h.lower() for h in header]
+    columns = [names.index(k) for k in ("x", "y", "z")]
+    points = []
+    for line, row in rows:
+        cells = [row[c].strip() for c in columns]
+        if not all(_NUMBER.fullmatch(cell) for cell in cells):
+            raise InputError(f"line {line}: expected numbers in columns x, y, z, got {short_repr(row, 80)}",
+                             source=str(path))
+        values = [float(cell) for cell in cells]
+        _check_range(values, f"line {line}", path)
+        points.append(values)
     return np.array(points, dtype=np.float64).reshape(-1, 3)
 
 

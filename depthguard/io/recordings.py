@@ -43,8 +43,6 @@ message names the file, the camera and the field.
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 import re
 from collections.abc import Iterator
@@ -54,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from depthguard import config
-from depthguard.io.files import atomic_folder, check_regular_file, load_yaml, read_text
+from depthguard.io.files import atomic_folder, check_regular_file, csv_table, load_yaml, read_text
 from depthguard.cameras import Rig, load_rig, save_rig
 from depthguard.depth import DepthImage, depth_image, load_depth
 from depthguard.errors import DepthguardError, DepthImageError, InputError
@@ -342,23 +340,9 @@ def _open_folder(path: Path, rig, replay: bool = False) -> Recording:
     return Recording(path, "folder", rig, names, times, positions, frames, str(joints_path), read, replay=replay)
 
 
-def _csv_rows(text: str, source: Path):
-    """(line number, cells) of every non-blank row after the header, and the header; InputError on malformed
-    CSV."""
-    reader = csv.reader(io.StringIO(text, newline=""))
-    try:
-        header = next(reader, None)
-        if header is None:
-            raise InputError("empty file; expected a header line", source=str(source))
-        rows = [(reader.line_num, row) for row in reader if any(cell.strip() for cell in row)]
-    except csv.Error as exc:  # a field longer than csv.field_size_limit(), a quote left open
-        raise InputError(f"line {reader.line_num}: malformed CSV ({exc})", source=str(source)) from None
-    return [cell.strip() for cell in header], rows
-
-
 def _read_frames_csv(path: Path, rig: Rig) -> list[FrameRecord]:
     text = read_text(path, what="frames file", max_bytes=MAX_CSV_BYTES)
-    header, rows = _csv_rows(text, path)
+    header, rows = csv_table(text, source=path)
     for name in ("camera", "frame", "time"):
         if header.count(name) != 1:
             raise InputError(f"line 1: the header must name each of the columns camera, frame, time once, got "
@@ -366,7 +350,7 @@ def _read_frames_csv(path: Path, rig: Rig) -> list[FrameRecord]:
     col = {name: header.index(name) for name in ("camera", "frame", "time")}
     frames, seen = [], {}
     for line, row in rows:
-        cells = {name: row[c].strip() if c < len(row) else "" for name, c in col.items()}
+        cells = {name: row[c].strip() for name, c in col.items()}
         camera = cells["camera"]
         if camera not in rig.cameras:
             raise InputError(f"line {line}: no such camera in the rig (cameras: {', '.join(rig.cameras)})",
@@ -388,7 +372,7 @@ def _read_frames_csv(path: Path, rig: Rig) -> list[FrameRecord]:
 def read_joint_states_csv(path: Path):
     """(names, (k,) times, (k, n) positions) from joint_states.csv."""
     text = read_text(path, what="joint states file", max_bytes=MAX_CSV_BYTES)
-    header, rows = _csv_rows(text, path)
+    header, rows = csv_table(text, source=path)
     if not header or header[0] != "time":
         raise InputError(f"line 1: the header must be time,<joint name>,..., got {short_repr(header, 80)}",
                          source=str(path), field="time")

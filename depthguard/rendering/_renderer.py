@@ -42,6 +42,7 @@ from depthguard import config
 from depthguard.cameras import PinholeCamera
 from depthguard.errors import InputError, RenderingError
 from depthguard.rendering._gl import GLContext
+from depthguard.validation import NOT_A_NUMBER
 
 _VERTEX_HEADER = """
 #version 330
@@ -125,7 +126,7 @@ class MeshInstance:
         object.__setattr__(self, "mesh_id", int(self.mesh_id))
         try:
             T = np.array(self.T_world_mesh, dtype=np.float64)
-        except (TypeError, ValueError):
+        except NOT_A_NUMBER:
             raise InputError(f"T_world_mesh must be a (4, 4) matrix of numbers, got {self.T_world_mesh!r}") from None
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise InputError(f"T_world_mesh must be a finite (4, 4) matrix, got shape {T.shape}")

@@ -16,7 +16,8 @@ import trimesh
 
 from depthguard import config
 from depthguard.errors import InputError, RigError, RobotError
-from depthguard.validation import check_real_positive, check_transform, real_vector, short_repr
+from depthguard.validation import (NOT_A_NUMBER, check_real, check_real_positive, check_transform, real_vector,
+                                   short_repr)
 from depthguard.robots._capsules import LinkCapsule, fit_capsule
 from depthguard.robots._urdf import UrdfDescription, collision_mesh, parse_urdf
 from depthguard.scenes import Capsule
@@ -82,17 +83,16 @@ class ControlPoint:
                              field="control_points")
         try:
             offset = np.array(self.offset, dtype=np.float64)
-        except (TypeError, ValueError):
+        except NOT_A_NUMBER:
             offset = None
         if offset is None or offset.shape != (3,) or not np.all(np.isfinite(offset)):
             raise RobotError(f"control point {self.name!r}: offset must be 3 finite numbers (metres, link frame), "
                              f"got {self.offset!r}", field="control_points")
         offset.setflags(write=False)
         object.__setattr__(self, "offset", offset)
-        if self.radius is not None and (isinstance(self.radius, bool) or not isinstance(self.radius, numbers.Real)
-                                        or not 0.0 <= float(self.radius) <= config.COORDINATE_LIMIT):
-            raise RobotError(f"control point {self.name!r}: radius must be a number of metres >= 0, got "
-                             f"{self.radius!r}", field="control_points")
+        if self.radius is not None:
+            check_real(self.radius, f"control point {self.name!r}: radius", minimum=0.0,
+                       maximum=config.COORDINATE_LIMIT, unit="metres", error=RobotError, field="control_points")
 
 
 class _Kinematics:
@@ -502,10 +502,15 @@ class RobotModel:
         if bad.any():
             names = [f"{self.joint_names[i]}={q[i]}" for i in np.flatnonzero(bad)]
             raise InputError(f"joint values must be finite: {', '.join(names)}", field=field_name)
-        if isinstance(limit_tolerance, bool) or not isinstance(limit_tolerance, numbers.Real) or \
-                not limit_tolerance >= 0:  # NaN fails too; +inf accepts any finite value
+        try:  # +inf accepts any finite value; NaN fails, and so does an integer beyond the float range
+            tolerance = float(limit_tolerance) if isinstance(limit_tolerance, numbers.Real) and \
+                not isinstance(limit_tolerance, bool) else math.nan
+        except NOT_A_NUMBER:
+            tolerance = math.nan
+        if not tolerance >= 0:
             raise InputError(f"limit_tolerance must be a number >= 0 (or inf), got {short_repr(limit_tolerance)}",
                              field="limit_tolerance")
+        limit_tolerance = tolerance
         out = (q < self.lower - limit_tolerance) | (q > self.upper + limit_tolerance)
         if out.any():
             names = [f"{self.joint_names[i]}={q[i]:.6g} not in [{self.lower[i]:.6g}, {self.upper[i]:.6g}]"

@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from depthguard.errors import SceneError
+from depthguard.validation import NOT_A_NUMBER, short_repr
 
 #: Marks a key without a default: it must be given.
 REQUIRED = object()
@@ -93,8 +94,12 @@ def kind_of(value) -> str:
 
 def as_number(value, field: str, positive=False, minimum=None, maximum=None) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(f"must be a number, got {value!r}", field=field)
-    value = float(value)
+        raise SceneError(f"must be a number, got {short_repr(value)}", field=field)
+    try:  # an integer beyond the float range is no number the simulation can use (docs/bad-input.md)
+        value = float(value)
+    except NOT_A_NUMBER:
+        raise SceneError(f"must be a number within the float range (about 1.8e308), got {short_repr(value)}",
+                         field=field) from None
     if not math.isfinite(value):
         raise SceneError(f"must be finite, got {value}", field=field)
     if positive and value <= 0:
