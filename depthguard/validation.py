@@ -100,10 +100,12 @@ def check_path(path, what: str, error: type[DepthguardError] | None = None, **co
     return Path(text)
 
 
-def check_count(values, limit: int, field: str, setting: str) -> None:
+def check_count(values, limit: int, field: str, setting: str, error: type[DepthguardError] = InputError,
+                **context) -> None:
     """Refuse, before anything is converted or allocated, an array or sequence ``values`` with more than ``limit``
     rows (its first dimension; every element of a flat one): :class:`InputError` naming ``field`` and the limit
-    (``setting``, the config name that holds it). What has no length passes (the caller's checks judge it)."""
+    (``setting``, the config name that holds it); ``error`` and ``context`` (``camera=``) as in :func:`check_real`.
+    What has no length passes (the caller's checks judge it)."""
     if isinstance(values, np.ndarray):
         rows = values.shape[0] if values.ndim else 1
     elif isinstance(values, (list, tuple)):
@@ -111,7 +113,7 @@ def check_count(values, limit: int, field: str, setting: str) -> None:
     else:
         return
     if rows > limit:
-        raise InputError(f"{rows} rows; at most {limit} are taken at once ({setting})", field=field)
+        raise error(f"{rows} rows, more than the {limit} of {setting}", field=field, **context)
 
 
 def check_points(points_world) -> np.ndarray:

@@ -89,6 +89,9 @@ def _entries() -> dict:
         "T_world_camera")
     out["Rig(workspace=)"] = (lambda v: dg.Rig(dict(RIG.cameras), workspace=[[0, 0, 0], [1, 1, v]]), "workspace")
     out["depth_image(timestamp=)"] = (lambda v: dg.depth_image(IMAGES["p"].data, CAMERA, timestamp=v), "timestamp")
+    out["query(a DepthImage's depth_scale)"] = (
+        lambda v: dg.DistanceMonitor(RIG).query({**IMAGES, "p": dg.DepthImage("p", IMAGES["p"].data, v, 1.0)},
+                                                [[0, 0, 0.5]], now=1.0), "depth_scale")
     out["query(now=)"] = (lambda v: dg.DistanceMonitor(RIG).query(IMAGES, [[0, 0, 0.5]], now=v), "now")
     out["query(points)"] = (lambda v: dg.DistanceMonitor(RIG).query(IMAGES, [[0, 0, v]], now=1.0), "points")
     out["single_camera_distances(rho=)"] = (
@@ -389,6 +392,22 @@ class _LongList(list):
 @pytest.fixture(scope="module")
 def point_entries():
     return _point_entries()
+
+
+@campaign(20)
+@given(rows=st.integers(CAMERA.height + 1, 10**9))
+@surveyed
+def test_an_image_list_with_more_rows_than_its_camera_is_refused_before_numpy_reads_it(rows):
+    try:
+        dg.depth_image(_LongList(rows), CAMERA)
+    except DepthguardError as exc:
+        if "'shape'" not in str(exc) or str(rows) not in str(exc):
+            violation("array sizes", "an image's rows not named", str(exc))
+        record("array sizes", "named (image)")
+        return
+    except Exception as exc:  # noqa: BLE001
+        violation("array sizes", f"an image list of {rows} rows: {type(exc).__name__}", str(exc)[:300])
+    violation("array sizes", f"an image list of {rows} rows accepted")
 
 
 def test_a_query_at_the_limit_is_not_refused_for_its_size():

@@ -121,3 +121,19 @@ def test_bridge_route_tokens_are_zenoh_plugin_ros2dds_s():
     assert wire.parse_bridge_liveliness_key("@ros2_lv/0/z/0/0/NN/%/%/n") is None
     with pytest.raises(InputError, match="MP or MS"):
         wire.bridge_liveliness_key("z", "NN", "/a", "std_msgs/msg/String")
+
+
+def test_subscription_token_is_rmw_zenoh_s():
+    """A golden token written by hand from rmw_zenoh's own source (ros2/rmw_zenoh, rolling branch, commit bfc065f of
+    2024-10-16, ``rmw_zenoh_cpp/src/detail/liveliness_utils.cpp``: ``Entity``'s key parts joined by ``/`` (admin
+    space ``@ros2_lv``, domain, zid, node id, entity id, ``MS``, then enclave, namespace, node, topic, type and hash,
+    each ``mangle_name``d, ``/`` written ``%``), and ``qos_to_keyexpr``: reliability:durability:history,depth:
+    deadline sec,nsec:lifespan sec,nsec:liveliness,lease sec,lease nsec, each field empty where it is the default
+    profile's (reliable, volatile, keep last, depth 42); RMW_QOS_POLICY_RELIABILITY_BEST_EFFORT is 2). Not a
+    released tag: the newest rmw_zenoh source reachable here."""
+    expected = ("@ros2_lv/0/1f2e3d/0/11/MS/%/%/depthguard/%cam%depth%image_raw/sensor_msgs::msg::dds_::Image_/"
+                f"{IMAGE_HASH}/2::,10:,:,:,,")
+    assert wire.liveliness_key("1f2e3d", 11, "MS", "depthguard", "/cam/depth/image_raw", "sensor_msgs/msg/Image",
+                               qos=wire.SENSOR_QOS) == expected
+    parsed = wire.parse_liveliness_key(expected)
+    assert (parsed.kind, parsed.topic, parsed.qos) == ("MS", "/cam/depth/image_raw", "2::,10:,:,:,,")

@@ -11,7 +11,7 @@ from depthguard import config
 from depthguard.cameras import PinholeCamera
 from depthguard.io.images import read_depth_file
 from depthguard.errors import DepthImageError, InputError
-from depthguard.validation import NOT_A_NUMBER, check_path, short_repr
+from depthguard.validation import NOT_A_NUMBER, check_count, check_path, short_repr
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,12 +90,16 @@ def checked_frame(frame: DepthImage, camera: PinholeCamera) -> DepthImage:
                          camera=name, field="camera")
     array = _checked_data(frame.data, camera)
     scale = frame.depth_scale
-    if isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating)) or \
-            not 0.0 < float(scale) <= config.DEPTH_SCALE_MAX:
+    try:
+        scale_value = float(scale) if isinstance(scale, (int, float, np.integer, np.floating)) and \
+            not isinstance(scale, bool) else math.nan
+    except NOT_A_NUMBER:  # an integer beyond the float range
+        scale_value = math.nan
+    if not 0.0 < scale_value <= config.DEPTH_SCALE_MAX:
         raise DepthImageError(f"must be a number of metres per unit in (0, {config.DEPTH_SCALE_MAX:g}], got "
                               f"{short_repr(scale)}", camera=name, field="depth_scale")
     timestamp = None if frame.timestamp is None else _seconds(frame.timestamp, name)
-    return DepthImage(camera=name, data=array, depth_scale=float(scale), timestamp=timestamp)
+    return DepthImage(camera=name, data=array, depth_scale=scale_value, timestamp=timestamp)
 
 
 def _checked_data(data, camera: PinholeCamera) -> np.ndarray:
@@ -105,6 +109,8 @@ def _checked_data(data, camera: PinholeCamera) -> np.ndarray:
     if isinstance(data, np.ma.MaskedArray):
         mask = np.ma.getmaskarray(data)
         data = np.ma.getdata(data)
+    if not isinstance(data, np.ndarray):  # a list is refused before numpy converts it (an array is already there)
+        check_count(data, camera.height, "shape", "the camera's height", DepthImageError, camera=camera.name)
     try:
         array = np.asarray(data)
     except NOT_A_NUMBER as exc:  # ragged nested lists, objects numpy cannot read
