@@ -9,7 +9,7 @@ Typical use::
     result = monitor.query({"right": depth}, points_world)   # (n, 3) metres, world frame
 """
 
-from depthguard._live import LiveMonitor
+from depthguard._background import LiveMonitor
 from depthguard._monitor import DistanceMonitor, PreparedSet
 from depthguard._settings import MonitorSettings
 from depthguard.cameras import NoiseModel, PinholeCamera, Rig, load_camera_info, load_rig, rig_from_dict, save_rig
