@@ -107,10 +107,11 @@ class MonitorSettings:
                                  "intrusion distance C is defined for it", field="detection_capability")
             values["detection_capability"] = capability
         # Checked whether or not it is used: every number a user gives is (docs/bad-input.md).
-        values["detectable_voxel"] = check_real(
-            self.detectable_voxel, "detectable_voxel", minimum=0.0, above_minimum=True, unit="metres",
-            maximum=config.COORDINATE_LIMIT if self.detection_capability is None else values["detection_capability"] / 2,
-            field="detectable_voxel")
+        largest = config.COORDINATE_LIMIT if self.detection_capability is None else \
+            values["detection_capability"] / 2
+        values["detectable_voxel"] = check_real(self.detectable_voxel, "detectable_voxel", minimum=0.0,
+                                                above_minimum=True, maximum=largest, unit="metres",
+                                                field="detectable_voxel")
         for name, value in values.items():
             object.__setattr__(self, name, value)
 

@@ -37,6 +37,17 @@ def short_repr(value, limit: int = 40) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
+def real_or_nan(value) -> float:
+    """``value`` as a float when it is a real number (not a bool) that a float holds (+-inf included), else NaN:
+    a string, a complex, an array, an integer beyond the float range. The callers' range checks refuse NaN."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return math.nan
+    try:
+        return float(value)
+    except NOT_A_NUMBER:
+        return math.nan
+
+
 def check_real(value, name: str, *, minimum: float | None = None, maximum: float | None = None,
                above_minimum: bool = False, unit: str = "", error: type[DepthguardError] | None = None,
                **context) -> float:
@@ -53,10 +64,7 @@ def check_real(value, name: str, *, minimum: float | None = None, maximum: float
     wanted = f"a finite number{' of ' + unit if unit else ''}{bounds}"
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise error(f"{name} must be {wanted}, got {short_repr(value)}", **context)
-    try:
-        number = float(value)
-    except NOT_A_NUMBER:
-        number = math.nan
+    number = real_or_nan(value)
     if not math.isfinite(number) or (minimum is not None and (number <= minimum if above_minimum else
                                                                number < minimum)) or \
             (maximum is not None and number > maximum):

@@ -32,18 +32,20 @@ class Stopped(Exception):
     """The writer stopping part way through a file."""
 
 
-class _CutFile:
-    """A file that takes ``budget`` bytes, writes them, and raises :class:`Stopped` at the write that goes past."""
+class CutFile:
+    """A file that takes ``budget`` bytes, writes them, and raises ``error`` (default :class:`Stopped`) at the write
+    that goes past."""
 
-    def __init__(self, file, budget: int):
+    def __init__(self, file, budget: int, error: BaseException | type[BaseException] = Stopped):
         self._file = file
         self._left = budget
+        self._error = error
 
     def write(self, data):
         if len(data) > self._left:
             self._file.write(data[:self._left])
             self._file.flush()
-            raise Stopped
+            raise self._error
         self._left -= len(data)
         return self._file.write(data)
 
@@ -61,7 +63,7 @@ def stop_writes_after(monkeypatch, budget: int) -> None:
     """From now on, every file depthguard opens for writing stops after ``budget`` bytes (characters for text)."""
     def cut_open(path, mode="r", *args, **kwargs):
         file = open(path, mode, *args, **kwargs)
-        return _CutFile(file, budget) if "x" in mode or "w" in mode else file
+        return CutFile(file, budget) if "x" in mode or "w" in mode else file
 
     monkeypatch.setattr(io_files, "open", cut_open, raising=False)
 

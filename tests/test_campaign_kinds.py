@@ -38,6 +38,7 @@ from depthguard import config
 from depthguard.errors import DepthguardError, WriteError
 from depthguard.io import files as io_files
 from depthguard.transforms import look_at
+from test_atomic_writes import CutFile
 
 # ------------------------------------------------------------------------------------------------------ the world
 
@@ -207,29 +208,13 @@ def test_any_os_error_at_any_stage_of_a_write_names_the_file(tmp_path_factory, c
     path, write = _writers(folder)[writer]
     path.write_bytes(b"the older file")
     failure = OSError(code, os.strerror(code))
-    real_open, real_fsync, real_replace = open, os.fsync, os.replace
-
-    class Failing:
-        def __init__(self, file):
-            self._file = file
-
-        def write(self, data):
-            raise failure
-
-        def __getattr__(self, name):
-            return getattr(self._file, name)
-
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *exc):
-            return self._file.__exit__(*exc)
+    real_open = open
 
     def fake_open(name, *args, **kwargs):
         if stage == "open" and str(name).endswith(".partial"):
             raise OSError(code, os.strerror(code), str(name))
         file = real_open(name, *args, **kwargs)
-        return Failing(file) if stage == "write" and str(name).endswith(".partial") else file
+        return CutFile(file, 0, failure) if stage == "write" and str(name).endswith(".partial") else file
 
     def fake_fsync(fd):
         raise failure

@@ -50,6 +50,17 @@ def wait_for(condition, timeout=30.0):
     return False
 
 
+def assert_withheld_once_the_node_is_gone(publisher, recording) -> None:
+    """After the node closed, its subscription tokens go away: the peer counts no subscriber of the first camera's
+    image topic and withholds that camera's next frame, as a driver that publishes only to counted subscribers."""
+    camera = next(iter(recording.rig.cameras))
+    assert wait_for(lambda: publisher.subscribers(f"/{camera}/depth/image_raw") == 0, timeout=10.0)
+    assert publisher.withheld == 0  # every frame published before went out
+    frame_set = next(recording.frame_sets())
+    assert publisher.publish_frame(camera, time.time_ns(), frame_set.images[camera].data) is False
+    assert publisher.withheld == 1
+
+
 def publish_first_set(publisher, recording, node) -> int:
     """Publish the recording's first set, restamped now: its joint state, and once ``node`` has it, the frames (each
     published: the peer counts the node's subscription). Returns the stamp, nanoseconds."""
@@ -462,13 +473,8 @@ def test_the_node_is_counted_as_a_subscriber_of_every_topic_it_reads(recording, 
         assert len({(t.zid, t.kind, t.topic) for t in ours}) == len(ours)
     finally:
         node.close()
-    image = f"/{next(iter(rig.cameras))}/depth/image_raw"
     try:
-        assert wait_for(lambda: publisher.subscribers(image) == 0, timeout=10.0)
-        frame_set = next(recording.frame_sets())
-        camera = next(iter(rig.cameras))
-        assert publisher.publish_frame(camera, time.time_ns(), frame_set.images[camera].data) is False
-        assert publisher.withheld == 1
+        assert_withheld_once_the_node_is_gone(publisher, recording)
     finally:
         publisher.close()
 
@@ -506,12 +512,8 @@ def test_in_the_bridge_layout_the_node_announces_its_routes_to_zenoh_bridge_ros2
         assert publisher.wait_answer(1)
     finally:
         node.close()
-    image = f"/{next(iter(rig.cameras))}/depth/image_raw"
     try:
-        assert wait_for(lambda: publisher.subscribers(image) == 0, timeout=10.0)
-        frame_set = next(recording.frame_sets())
-        camera = next(iter(rig.cameras))
-        assert publisher.publish_frame(camera, time.time_ns(), frame_set.images[camera].data) is False
+        assert_withheld_once_the_node_is_gone(publisher, recording)
     finally:
         publisher.close()
 

@@ -77,7 +77,7 @@ def run(command, program: str) -> int:
         with named_stdout():  # standard output's write errors name it (docs/bad-input.md)
             return command()
     except DepthguardError as exc:
-        print(f"{program}: error: {one_line(str(exc))}", file=sys.stderr)
+        print(f"{program}: error: {exc}", file=sys.stderr)  # one line already (DepthguardError)
         return 2
     except OSError as exc:
         where = f"{exc.filename}: " if exc.filename else ""

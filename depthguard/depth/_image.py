@@ -11,7 +11,7 @@ from depthguard import config
 from depthguard.cameras import PinholeCamera
 from depthguard.io.images import read_depth_file
 from depthguard.errors import DepthImageError, InputError
-from depthguard.validation import NOT_A_NUMBER, check_count, check_path, short_repr
+from depthguard.validation import NOT_A_NUMBER, check_count, check_path, real_or_nan, short_repr
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,11 +90,7 @@ def checked_frame(frame: DepthImage, camera: PinholeCamera) -> DepthImage:
                          camera=name, field="camera")
     array = _checked_data(frame.data, camera)
     scale = frame.depth_scale
-    try:
-        scale_value = float(scale) if isinstance(scale, (int, float, np.integer, np.floating)) and \
-            not isinstance(scale, bool) else math.nan
-    except NOT_A_NUMBER:  # an integer beyond the float range
-        scale_value = math.nan
+    scale_value = real_or_nan(scale)
     if not 0.0 < scale_value <= config.DEPTH_SCALE_MAX:
         raise DepthImageError(f"must be a number of metres per unit in (0, {config.DEPTH_SCALE_MAX:g}], got "
                               f"{short_repr(scale)}", camera=name, field="depth_scale")

@@ -327,8 +327,7 @@ def _writing(path: Path, temporary: Path):
     except WriteError:
         raise
     except OSError as exc:
-        if exc.filename is None or str(exc.filename) in (str(path), str(temporary)) or \
-                str(exc.filename).startswith(str(temporary)):
+        if exc.filename is None or str(exc.filename) == str(path) or str(exc.filename).startswith(str(temporary)):
             raise write_error(path, exc) from None
         raise
 

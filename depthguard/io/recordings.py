@@ -389,10 +389,6 @@ def read_joint_states_csv(path: Path):
     times = np.empty(len(rows))
     positions = np.empty((len(rows), len(names)))
     for i, (line, row) in enumerate(rows):
-        if len(row) != len(header):
-            missing = header[len(row)] if len(row) < len(header) else None
-            raise InputError(f"line {line}: {len(row)} values for the {len(header)} columns of the header",
-                             source=str(path), field=missing or "joints")
         times[i] = _finite(row[0], f"line {line}: a time", path, field="time")
         for j, name in enumerate(names):
             positions[i, j] = _finite(row[j + 1], f"line {line}: a joint value", path, field=name)

@@ -119,10 +119,8 @@ class _Publisher:
         self.publisher = session.declare_publisher(self.key)
         self.sequence = 0
         self.gid = (gid_seed + entity.to_bytes(4, "little"))[-16:].rjust(16, b"\x00")
-        zid = str(session.info.zid())
         self.token = session.liveliness().declare_token(
-            wire.liveliness_key(zid, entity, "MP", NODE_NAME, topic, msgtype, domain=domain, distro=distro)
-            if layout == "rmw_zenoh" else wire.bridge_liveliness_key(zid, "MP", topic, msgtype))
+            wire.entity_token(layout, str(session.info.zid()), entity, "MP", topic, msgtype, domain, distro))
 
     def put(self, message) -> None:
         payload = wire.serialize(message, self.msgtype)
@@ -336,7 +334,8 @@ class LiveNode:
                     self.unspeakable = (
                         f"{topic}: its publisher writes rmw_zenoh's attachment in another form "
                         f"({len(sample.attachment.to_bytes())} bytes, not the 33 of rmw_zenoh Jazzy 0.2.4 and "
-                        f"later): an older rmw_zenoh, whose subscribers cannot read depthguard's outputs; not supported")
+                        "later): an older rmw_zenoh, whose subscribers cannot read depthguard's outputs; not "
+                        "supported")
                 found = wire.key_type_hash(str(sample.key_expr))
                 if found is not None and found != expected and topic not in self._warned:
                     self._warned.add(topic)
@@ -360,12 +359,10 @@ class LiveNode:
         # Counted by the publisher's side as a subscriber (kind MS): by rmw_zenoh's graph, or, in the bridge layout,
         # by the DDS reader the bridge creates when it sees the route token (volatile: a camera_info that a DDS
         # driver only latches is not received through the bridge).
-        zid = str(self.session.info.zid())
         entity = _FIRST_SUBSCRIPTION + len(self._subscription_tokens)
-        self._subscription_tokens.append(self.session.liveliness().declare_token(
-            wire.liveliness_key(zid, entity, "MS", NODE_NAME, topic, msgtype, domain=self.options.domain,
-                                qos=wire.SENSOR_QOS, distro=self.distro)
-            if self.options.layout == "rmw_zenoh" else wire.bridge_liveliness_key(zid, "MS", topic, msgtype)))
+        self._subscription_tokens.append(self.session.liveliness().declare_token(wire.entity_token(
+            self.options.layout, str(self.session.info.zid()), entity, "MS", topic, msgtype, self.options.domain,
+            self.distro)))
 
     def _on_image(self, camera: str, sample) -> None:
         counts = self.counts[camera]

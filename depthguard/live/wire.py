@@ -45,7 +45,7 @@ from depthguard.errors import InputError
 __all__ = ["LAYOUTS", "Attachment", "Token", "type_store", "type_name", "type_hash", "ros_name", "data_key",
            "subscription_key", "key_type_hash", "attachment_bytes", "parse_attachment", "liveliness_key",
            "parse_liveliness_key", "hash_of", "distros_of", "DISTROS", "HUMBLE_HASH", "serialize", "deserialize",
-           "CDR_HEADER", "DEFAULT_QOS", "SENSOR_QOS", "bridge_liveliness_key", "parse_bridge_liveliness_key",
+           "CDR_HEADER", "DEFAULT_QOS", "SENSOR_QOS", "bridge_liveliness_key", "entity_token", "parse_bridge_liveliness_key",
            "BRIDGE_SENSOR_QOS", "BRIDGE_DEFAULT_QOS"]
 
 LAYOUTS = ("rmw_zenoh", "bridge")
@@ -264,6 +264,18 @@ def parse_bridge_liveliness_key(key: str) -> tuple[str, str, str, str, str] | No
         return None
     return (parts[1], parts[2], "/" + parts[3].replace(_BRIDGE_SLASH, "/"), parts[4].replace(_BRIDGE_SLASH, "/"),
             parts[5])
+
+
+def entity_token(layout: str, zid: str, entity: int, kind: str, topic: str, msgtype: str, domain: int = 0,
+                 distro: str = "jazzy") -> str:
+    """The liveliness token that announces one of the node's publishers (``kind`` ``"MP"``) or subscriptions
+    (``"MS"``) in ``layout``: rmw_zenoh's (:func:`liveliness_key`, QoS :data:`DEFAULT_QOS` or :data:`SENSOR_QOS`) or
+    zenoh-bridge-ros2dds's route (:func:`bridge_liveliness_key`, its QoS by kind)."""
+    _check_layout(layout)
+    if layout == "bridge":
+        return bridge_liveliness_key(zid, kind, topic, msgtype)
+    return liveliness_key(zid, entity, kind, NODE_NAME, topic, msgtype, domain=domain,
+                          qos=SENSOR_QOS if kind == "MS" else DEFAULT_QOS, distro=distro)
 
 
 @dataclass(frozen=True)

@@ -16,8 +16,8 @@ import trimesh
 
 from depthguard import config
 from depthguard.errors import InputError, RigError, RobotError
-from depthguard.validation import (NOT_A_NUMBER, check_real, check_real_positive, check_transform, real_vector,
-                                   short_repr)
+from depthguard.validation import (NOT_A_NUMBER, check_real, check_real_positive, check_transform, real_or_nan,
+                                   real_vector, short_repr)
 from depthguard.robots._capsules import LinkCapsule, fit_capsule
 from depthguard.robots._urdf import UrdfDescription, collision_mesh, parse_urdf
 from depthguard.scenes import Capsule
@@ -502,11 +502,7 @@ class RobotModel:
         if bad.any():
             names = [f"{self.joint_names[i]}={q[i]}" for i in np.flatnonzero(bad)]
             raise InputError(f"joint values must be finite: {', '.join(names)}", field=field_name)
-        try:  # +inf accepts any finite value; NaN fails, and so does an integer beyond the float range
-            tolerance = float(limit_tolerance) if isinstance(limit_tolerance, numbers.Real) and \
-                not isinstance(limit_tolerance, bool) else math.nan
-        except NOT_A_NUMBER:
-            tolerance = math.nan
+        tolerance = real_or_nan(limit_tolerance)  # +inf accepts any finite value; NaN and overflow fail
         if not tolerance >= 0:
             raise InputError(f"limit_tolerance must be a number >= 0 (or inf), got {short_repr(limit_tolerance)}",
                              field="limit_tolerance")
