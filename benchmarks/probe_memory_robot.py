@@ -26,6 +26,10 @@ earlier and reached by the erosion since; "never seen").
 margins) instead of its own memory's, beside the ideal rows: the gap between it and the ideal lies in the fused
 query, the rest in the memory.
 
+``--ideal-only`` (with ``--ideal-spacing 0.02``) runs only the ideal rows, on a finer grid: the layer the noise
+margins leave round the links is 2-4 cm thick, and a 4 cm grid samples little of it (scenario_b_four, ideal with
+noise: 0.0 % at 4 cm, 65.7 % at 2 cm). About 13 minutes per ideal and scene at 2 cm.
+
 ``--voxel 0.01`` is a diagnosis too: the memory alone at a finer voxel (1 cm costs about a second a set), to show
 whether finer voxels next to the robot would change the answers.
 
@@ -81,7 +85,7 @@ def fed_with(monitor, ideal: IdealMemory) -> None:
 
 
 def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_spacing: float = 0.04,
-          fed: bool = False, voxels: list | None = None) -> dict:
+          fed: bool = False, voxels: list | None = None, ideal_only: bool = False) -> dict:
     """configuration -> (far pairs, below rho, end-effector far, below rho, remembered answers, largest excess in
     metres, seconds per set, per measured frame the memory's certified shares by band (:func:`certified_by_band`),
     and how many of the far pairs read below rho carry each flag)."""
@@ -93,6 +97,8 @@ def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_
     rig = noise_free(workcell.rig) if exact else workcell.rig
     configurations = CONFIGURATIONS if not voxels else \
         {f"memory {v * 100:g} cm": dict(memory=True, memory_voxel=v) for v in voxels}
+    if ideal_only:
+        configurations = {}
     monitors = {name: dg.DistanceMonitor(rig, **options, **extra) for name, extra in configurations.items()}
     ideals = {} if exact or voxels else {name: IdealMemory(workcell, spacing=ideal_spacing, noise_margin=noisy)
                                for name, noisy in IDEALS.items()}
@@ -193,6 +199,8 @@ def main() -> None:
     parser.add_argument("--fed", action="store_true",
                         help="a diagnosis: the fused query given the ideal memory's free space (with noise margins)")
     parser.add_argument("--ideal-spacing", type=float, default=0.04, help="grid spacing of the ideal memory (metres)")
+    parser.add_argument("--ideal-only", action="store_true",
+                        help="only the ideal rows (with --ideal-spacing 0.02: the noise margins' layer sampled finer)")
     parser.add_argument("--voxel", type=float, action="append",
                         help="a diagnosis: only the memory at this voxel side (metres; repeatable), no ideal rows")
     args = parser.parse_args()
@@ -203,10 +211,11 @@ def main() -> None:
           f"padded capsules: {bands}")
     for path in fw.scene_paths(tuple(names)):
         rows = probe(path, args.step, args.exact, args.calibrated, args.ideal_spacing, args.fed,
-                     args.voxel).items()
+                     args.voxel, args.ideal_only).items()
         for name, (far, below, ee_far, ee_below, kept, excess, seconds, shares, flags) in rows:
             certified = "  ".join(f"{share:9.1%}" for share in np.mean(shares, axis=0)) if shares else "-"
-            label = path.stem + (" exact" if args.exact else "") + (" calibrated" if args.calibrated else "")
+            label = path.stem + (" exact" if args.exact else "") + (" calibrated" if args.calibrated else "") + \
+                (f" {args.ideal_spacing * 100:g} cm" if args.ideal_only else "")
             print(f"{label:22s} {name:14s} {below:>6d}/{far:<5d} {below / max(far, 1):6.1%} "
                   f"{ee_below:>5d}/{ee_far:<5d} {kept:10d} {excess * 1e3:+11.1f} mm "
                   f"{np.median(seconds) * 1e3 if seconds else np.nan:10.1f}   {certified}", flush=True)
@@ -218,6 +227,7 @@ if __name__ == "__main__":
     import sys
 
     diagnosis = ("_exact" * ("--exact" in sys.argv) + "_calibrated" * ("--calibrated" in sys.argv)
-                 + "_fed" * ("--fed" in sys.argv) + "_voxel" * ("--voxel" in sys.argv))
+                 + "_fed" * ("--fed" in sys.argv) + "_voxel" * ("--voxel" in sys.argv)
+                 + "_ideal" * ("--ideal-only" in sys.argv))
     with report(__file__, name=f"probe_memory_robot{diagnosis}" if diagnosis else None):
         main()

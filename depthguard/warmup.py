@@ -165,8 +165,8 @@ def _single_camera() -> None:
 
 
 def _fusion() -> None:
-    """The depth grid's fusion of two cameras (with the robot filtered out, without, with a blind secondary camera),
-    the monitor on both, and with the free-space memory."""
+    """The depth grid's fusion of two cameras (with the robot filtered out, without, with a blind secondary camera)
+    and the monitor on both (with the free-space memory: :func:`_memory_and_detectable`)."""
     import depthguard as dg
     from depthguard.depthgrid import FusedFrames, build_map, seen_free
 
@@ -189,10 +189,6 @@ def _fusion() -> None:
         monitor = dg.DistanceMonitor(rig, rho=0.3)
         for pts in (one, several):
             monitor.query(images, pts)
-    # The monitor with the free-space memory: its fused queries (the memory's own kernels: _memory_and_detectable).
-    remembering = _remembering_monitor(rig)
-    for k, (stamped, pts) in enumerate(_stamped_sets(rig, frames, (one, several))):
-        remembering.query(stamped, pts, now=0.1 * k)
 
 
 def _prepared_frames(rig, frames, robot, kind: str):
@@ -235,7 +231,11 @@ def _memory_and_detectable() -> None:
     # The monitor with the memory (a rig with a workspace, stamped frames): its sets and their detectable space.
     remembering = _remembering_monitor(rig)
     for k, (stamped, pts) in enumerate(_stamped_sets(rig, frames, (one, several))):
-        remembering.prepare_set(stamped, now=0.1 * k).detectable_distances(pts)
+        prepared = remembering.prepare_set(stamped, now=0.1 * k)
+        prepared.detectable_distances(pts)
+        # Its fused queries last: the fused kernels, which _fusion compiles (without the memory's kernels, compiled
+        # here only), are in the cache by then.
+        prepared.query(pts, now=0.1 * k)
     voxels_within(np.ones(box.shape, dtype=bool), box, several, np.full(len(several), 0.2))
     # Where a ball of the detection capability fits (SSM), with the robot's and a solid's voxels free.
     from depthguard.freespace import DetectableSpace, VoxelBox, robot_voxels, solid_voxels
