@@ -36,7 +36,7 @@ def runs(reach_workcell):
     """Modes none and avoid over the contact window; the avoidance on to the scene's end (the person walks away).
     SSM cannot run soundly in these cells (test_ssm_is_refused_where_its_distances_can_hide_more_than_iso_covers)."""
     start, duration = CONTACT_WINDOW
-    logs = {"none": run_closed_loop(reach_workcell, "none", start=start, duration=duration)}
+    logs = {"none": run_closed_loop(reach_workcell, "none", start=start, duration=duration, measure=False)}
     logs["avoid"] = run_closed_loop(reach_workcell, "avoid", start=start)
     return logs
 
@@ -86,7 +86,8 @@ def _every_mode(name: str, window, to_the_end=(), windows=None) -> dict:
     ``to_the_end`` run from the window's start to the scene's end; ``windows``: mode -> a window of its own."""
     workcell = load_workcell(_packaged(name))
     windows = {**{mode: window for mode in ("none", "avoid")}, **(windows or {})}
-    return {mode: run_closed_loop(workcell, mode, start=start, duration=None if mode in to_the_end else duration)
+    return {mode: run_closed_loop(workcell, mode, start=start, duration=None if mode in to_the_end else duration,
+                                  measure=mode != "none")  # the task alone reads no distance
             for mode, (start, duration) in windows.items()}
 
 
@@ -172,6 +173,19 @@ def test_distances_from_the_links_surface_keep_the_arm_clear_of_the_box_with_fou
     log = run_closed_loop(four, "avoid", start=start, duration=duration,
                           settings=LoopSettings(avoidance=AvoidanceParams(from_surface=True)))
     assert log.clearance.min() >= CLEARANCE, log.clearance.min()
+
+
+def test_the_task_alone_runs_the_same_without_measuring(reach_workcell):
+    """Mode none's commands read no distance: run with measure=False (no monitor), its joints, commands and truth
+    are those of the measured run, and it reports what a loop reports before its first set."""
+    start = CONTACT_WINDOW[0]
+    measured = run_closed_loop(reach_workcell, "none", start=start, duration=0.2)
+    alone = run_closed_loop(reach_workcell, "none", start=start, duration=0.2, measure=False)
+    np.testing.assert_array_equal(alone.q, measured.q)
+    np.testing.assert_array_equal(alone.dq, measured.dq)
+    np.testing.assert_array_equal(alone.clearance, measured.clearance)
+    assert np.isfinite(measured.data_age).any() and not np.isfinite(alone.data_age).any()
+    assert np.all(alone.reported == 0.0)
 
 
 def test_the_board_is_mostly_hidden_from_the_principal_camera():
@@ -291,6 +305,8 @@ def test_the_loop_runs_cameras_at_their_rate_and_answers_from_frames_no_younger_
     ("duration", dict(duration="1")),
     ("seed", dict(seed=-1)),
     ("seed", dict(seed="0")),
+    ("measure", dict(measure=False)),  # in mode avoid
+    ("measure", dict(mode="none", measure=0)),
 ])
 def test_bad_loop_arguments_are_refused_before_any_work(reach_workcell, field, kwargs):
     from depthguard.errors import InputError

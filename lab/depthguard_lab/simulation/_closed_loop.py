@@ -198,17 +198,22 @@ class LoopLog:
 
 def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None, start: float = 0.0,
                     settings: LoopSettings | None = None, seed: int | None = None, progress: bool = False,
-                    renderer=None, keep_frames: bool = False) -> LoopLog:
+                    renderer=None, keep_frames: bool = False, measure: bool = True) -> LoopLog:
     """Run ``workcell`` (:class:`~depthguard_lab.simulation.Workcell`) in closed loop from ``start`` for ``duration``
     seconds (default: to the episode's end) with ``mode`` ("none", "avoid", "ssm"). See the module's docstring.
     ``keep_frames``: keep every captured set of depth images in the log (``LoopLog.captures``, for a recording:
-    about 0.6 MB per 640x480 image)."""
+    about 0.6 MB per 640x480 image). ``measure=False`` (mode "none" only, whose commands do not read the distances):
+    no monitor runs, so the log's reported distances stay what a loop reports before its first set (0, flagged
+    missing) and only the truth is kept (a run that asks only whether the task alone meets the person)."""
     import depthguard as dg
     from depthguard_lab.simulation._episode import SceneRenderer, check_seed, sense
     from depthguard_lab.simulation._truth import TruthComputer
 
     if mode not in MODES:
         raise InputError(f"mode must be one of {', '.join(MODES)}, got {mode!r}", field="mode")
+    if measure is not True and (measure is not False or mode != "none"):
+        raise InputError(f"measure must be True, or False in mode none only (got {measure!r} in mode {mode})",
+                         field="measure")
     settings = LoopSettings() if settings is None else settings
     seed = check_seed(workcell.seed if seed is None else seed)
     start = check_real(start, "start", minimum=0.0, maximum=workcell.duration, unit="seconds", field="start")
@@ -284,8 +289,9 @@ def run_closed_loop(workcell, mode: str = "avoid", duration: float | None = None
             captured = t >= next_frame - 1e-9
             if captured:
                 frame = sense(workcell, scene, truth, part_names, q.copy(), t, int(round(t * workcell.rate)), seed)
-                prepared = monitor.prepare_set(frame.depth, joints=q.copy(), now=t)
-                pending.append((t + settings.latency, prepared, t))
+                if measure:
+                    prepared = monitor.prepare_set(frame.depth, joints=q.copy(), now=t)
+                    pending.append((t + settings.latency, prepared, t))
                 next_frame += camera_period
                 frames += 1
                 if keep_frames:
