@@ -96,10 +96,8 @@ def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_
     if calibrated:  # no calibration margin: a camera clears what it sees beyond, to the pixel
         options.update(fusion_margin=0.0, fusion_pixels=0)
     rig = noise_free(workcell.rig) if exact else workcell.rig
-    configurations = CONFIGURATIONS if not voxels else \
+    configurations = {} if ideal_only else CONFIGURATIONS if not voxels else \
         {f"memory {v * 100:g} cm": dict(memory=True, memory_voxel=v) for v in voxels}
-    if ideal_only:
-        configurations = {}
     monitors = {name: dg.DistanceMonitor(rig, **options, **extra) for name, extra in configurations.items()}
     ideals = {} if exact or voxels else {name: IdealMemory(workcell, spacing=ideal_spacing, noise_margin=noisy)
                                for name, noisy in IDEALS.items()}

@@ -126,9 +126,9 @@ def test_a_fresh_virtual_environment_with_the_library_alone_answers_a_fused_quer
     from the package registries (pip's cache makes it quick after ./dev.sh), and its own ``depthguard distance`` on
     two cameras: the same answers as this process gives. What pip installed there, every dependency resolved by pip
     itself transitively, holds the library's own (numpy, numba, pin) and no physics engine, plotting library,
-    progress bars, the lab, open3d or torch. The kernels run
-    as plain Python there (``NUMBA_DISABLE_JIT=1``: compiling them afresh would add a minute to the suite; the
-    kernel-cache tests compile in fresh processes), which gives the same numbers bit for bit."""
+    progress bars, the lab, open3d or torch. The kernels run as plain Python there (``NUMBA_DISABLE_JIT=1``:
+    compiling them afresh would add a minute to the suite; the kernel-cache tests compile in fresh processes), which
+    gives the same numbers bit for bit."""
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
     python = venv / "bin" / "python"
