@@ -7,8 +7,8 @@ two). The one honest way to reach every combination the product uses is to run t
 (each invalid-pixel policy, with and without a robot rendered, uint16 and float32 frames), single-camera queries
 of one point (the serial kernel) and of several (the parallel one), the depth grid's fusion of two cameras with and
 without a robot and with a blind secondary camera, the monitor, the frustum distance, the baselines, the capsule
-fit, the free-space memory and SSM's detectable space. ``tests/test_warmup.py`` checks that after it the command line and the monitor compile
-nothing.
+fit, the free-space memory and SSM's detectable space. ``tests/test_warmup.py`` checks that the command line and the monitor call no kernel
+signature it does not (:func:`loaded_signatures`).
 
 Once the kernels are cached it takes a few seconds (mostly imports and loading the cached kernels).
 """
@@ -123,6 +123,24 @@ def _run_workload(index: int) -> list[Compile]:
     with jit.quiet_compiles(), CompileRecorder() as recorder:
         WORKLOADS[index]()
     return recorder.compiles
+
+
+def loaded_signatures() -> list[str]:
+    """Every argument-type signature that this process's kernels have compiled or loaded from the cache so far, as
+    sorted ``"module.function (types)"`` strings: what the process has called them with. (A kernel that runs inside
+    another shows a signature of its own only if the outer one compiled here, not if it was loaded.) Imports every
+    module of :data:`depthguard.kernels.jit.KERNEL_MODULES`."""
+    import importlib
+
+    from numba.core.dispatcher import Dispatcher
+
+    found = set()
+    for name in jit.KERNEL_MODULES:
+        for attribute in vars(importlib.import_module(name)).values():
+            if isinstance(attribute, Dispatcher) and attribute.py_func.__module__ == name:
+                found.update(f"{name}.{attribute.py_func.__qualname__} {tuple(map(str, signature))}"
+                             for signature in attribute.signatures)
+    return sorted(found)
 
 
 def _cold() -> bool:
