@@ -18,14 +18,18 @@ still there, and is withdrawn while the robot moves. Control points: the robot's
 What memory can do here, and why the second camera drops out. A voxel seen free at t stays certified free until
 t + D / v_max, D its cube's distance to the nearest voxel where a person may be; at 30 Hz it outlives one frame only
 if D > 6.7 cm. The pockets no camera sees in this scene (behind each link, for both cameras) move with the
-links by a few centimetres a frame and border the links, whose volume the monitor counts as possible people (it does
-not pass design §8a's Robot_k to the memory): a correct memory then has nothing to remember there (measured: it raises
+links by a few centimetres a frame and border the links' padded capsules, which the memory never certifies (design
+§8a's Robot_k lies inside the meshes, and the layer round it is seen by no camera): a correct memory then has
+nothing to remember there (measured: it raises
 no distance in a frame without a dropout). Space becomes unseen at once when a camera loses part of its image: the
 second camera reads 0 (no measurement, as an infrared dropout gives) over the part of its image that shows the robot
 (``DROPOUT``) for three frames while the hand is away and again while it reaches in at 1.9 m/s; the memory then keeps
 what it saw a frame before, and the hand reaches into space that no camera sees.
 
-The whole file takes 20-35 s on the shared 2-core machine (numba limited to one thread, see ``world``).
+Scenario 4 (issue 35's judge): a hand 25 mm thick slides into the space both cameras' views of a link hide, at up to
+v_max and at three times v_max, and rests there 5 mm from the link while the robot moves.
+
+The whole file takes 30-45 s on the shared 2-core machine (numba limited to one thread, see ``world``).
 """
 
 from __future__ import annotations
@@ -92,6 +96,8 @@ class Step:
     hand: np.ndarray
     dropout: bool = False
     phase: str = ""
+    hand_R: np.ndarray | None = None  # the hand's orientation (world from hand; its axis the third column)
+    hand_size: tuple | None = None  # (radius, axis length), metres; None: HAND
 
 
 class World:
@@ -132,8 +138,9 @@ class World:
         p.disconnect(self.robot_only)
         p.disconnect(self.client)
 
-    def hand(self, centre) -> ps.Primitive:
-        return ps.Primitive("capsule", HAND, ps.pose(self.hand_R, centre))
+    def hand(self, centre, R=None, size=None) -> ps.Primitive:
+        return ps.Primitive("capsule", HAND if size is None else size,
+                            ps.pose(self.hand_R if R is None else R, centre))
 
     def pose_robot(self, q):
         for joint in range(7):
@@ -209,7 +216,7 @@ def play(world: World, steps, monitors: dict, rng, before_query=None):
     for index, step in enumerate(steps):
         if before_query is not None:
             before_query(index, step)
-        hand = world.hand(step.hand)
+        hand = world.hand(step.hand, step.hand_R, step.hand_size)
         world.pose_robot(step.q)
         scene = ps.PybulletScene(world.client, world.room + [hand])
         try:
@@ -517,3 +524,163 @@ def test_the_judge_catches_a_memory_that_remembers_too_long(reaching):
           f"{sum(c for _, c, _, _ in found)} in all (flagged remembered: {sum(r for *_, r in found)}); largest excess "
           f"{max(e for _, _, e, _ in found) * 1e3:.1f} mm; phases {sorted({ph for ph, *_ in found})}")
     assert len(failures) >= 1 and all("optimistic" in failure for failure in failures)
+
+
+# ------------------------------------------- 4. a thin hand resting in the space every camera's view of a link hides
+
+#: Issue 35's thin hand: a capsule 25 mm thick (radius, axis length, metres) that rests against lbr_iiwa_link_4
+#: (pybullet's link 3), in the space that both cameras' views of the link hide, and moves with the link. Its place in
+#: the link's frame: its axis along the frame's z axis, its centre SHADOW_ALONG metres along that axis and
+#: SHADOW_RADIUS metres out from it, at SHADOW_ANGLE from the frame's x axis towards its y axis. Found by searching
+#: the link's surroundings for places 3-10 mm from the link where pybullet's renderings show the hand to neither
+#: camera; ``test_the_thin_hand_scene_is_what_it_claims`` checks it in every frame.
+THIN_HAND = (0.0125, 0.08)
+SHADOW_LINK = 3
+SHADOW_ALONG, SHADOW_RADIUS, SHADOW_ANGLE = 0.05, 0.09, math.radians(15.0)
+#: How far (metres) out from its resting place the hand waits, seen by both cameras, before it slides in along the
+#: same direction; and the frames it waits and rests.
+SHADOW_REACH = 0.25
+SHADOW_WAIT, SHADOW_REST = 6, 24
+
+
+def link_pose(world: World, q) -> tuple[np.ndarray, np.ndarray]:
+    """(position (3,), rotation (3, 3)) of pybullet's link SHADOW_LINK at joints q, world frame."""
+    world.pose_robot(q)
+    state = p.getLinkState(world.bodies[1], SHADOW_LINK, computeForwardKinematics=True,
+                           physicsClientId=world.robot_only)
+    return np.array(state[4]), np.array(p.getMatrixFromQuaternion(state[5])).reshape(3, 3)
+
+
+def shadow_steps(world: World, speed: float) -> list[Step]:
+    """The robot swings (``joints_at``); the thin hand waits SHADOW_REACH metres out from its place against the link
+    for SHADOW_WAIT frames, slides in at ``speed`` m/s relative to the link, then rests there for SHADOW_REST frames,
+    moving with the link (its speed in the world: ``speed`` plus the link's, at most 0.15 m/s more here)."""
+    out = np.array([math.cos(SHADOW_ANGLE), math.sin(SHADOW_ANGLE), 0.0])  # in the link's frame, as all below
+    place = np.array([0.0, 0.0, SHADOW_ALONG]) + SHADOW_RADIUS * out
+    hand_R = np.eye(3)  # its axis along the link's z axis
+    n_in = int(math.ceil(SHADOW_REACH / speed * FPS))
+    steps = []
+    for k in range(SHADOW_WAIT + n_in + SHADOW_REST):
+        t = k / FPS
+        q = joints_at(t)
+        s = SHADOW_REACH if k < SHADOW_WAIT else max(0.0, SHADOW_REACH - (k - SHADOW_WAIT) * speed / FPS)
+        pos, R = link_pose(world, q)
+        phase = "waits" if k < SHADOW_WAIT else ("slides in" if s > 0.0 else "rests")
+        steps.append(Step(t, q, pos + R @ (place + s * out), phase=phase, hand_R=R @ hand_R, hand_size=THIN_HAND))
+    return steps
+
+
+#: A broken memory for the judge to catch: its Robot_k (design §8a, where no person can be) is the padded capsules
+#: grown by this much (metres), so that it takes the space round the links, where the hand waits, for the robot.
+SWALLOWING = 0.3
+
+
+def swallowing_monitor(world: World) -> dg.DistanceMonitor:
+    robot = RobotModel.default()
+    radii = np.array([capsule.radius for capsule in robot.capsules]) + SWALLOWING
+
+    def inner_capsules_world(q, *, check=True):
+        return np.column_stack([robot.capsule_segments(q, check=False).reshape(-1, 6), radii])
+
+    object.__setattr__(robot, "inner_capsules_world", inner_capsules_world)  # RobotModel is a frozen dataclass
+    return dg.DistanceMonitor(world.rig, rho=RHO, aggregate="min", robot=robot, fusion_margin=MARGIN,
+                              fusion_pixels=PAD)
+
+
+def hand_gap(world: World, f: Frame) -> float:
+    """The true distance (metres, pybullet) from the frame's hand to the robot at the frame's joints."""
+    world.pose_robot(f.step.q)
+    radius, length = f.hand.size
+    shape = p.createCollisionShape(p.GEOM_CAPSULE, radius=radius, height=length, physicsClientId=world.robot_only)
+    try:
+        found = p.getClosestPoints(bodyA=-1, bodyB=world.bodies[1], distance=1.0, collisionShapeA=shape,
+                                   collisionShapePositionA=f.hand.centre.tolist(),
+                                   collisionShapeOrientationA=ps._matrix_to_quaternion(f.hand.T_world_obstacle[:3, :3]),
+                                   physicsClientId=world.robot_only)
+    finally:
+        p.removeCollisionShape(shape, physicsClientId=world.robot_only)
+    return min(point[8] for point in found)
+
+
+@pytest.fixture(scope="module")
+def shadow(world):
+    """Scenario 4 at 1.5 m/s (relative to the link) to the default memory, none and the swallowing one."""
+    monitors = {"memory": monitor(world), "none": monitor(world, memory=False), "swallowing": swallowing_monitor(world)}
+    return list(play(world, shadow_steps(world, 1.5), monitors, np.random.default_rng(4)))
+
+
+def test_the_thin_hand_scene_is_what_it_claims(world, shadow):
+    """Scenario 4 (``shadow_steps``) holds what it says: the hand never moves faster than 1.9 m/s in the world; both
+    cameras show it while it waits; while it rests the principal camera shows none of its pixels, the second at most
+    one, and in at least half the frames neither shows any; it rests 2-10 mm from the robot and never touches it."""
+    speeds = [np.linalg.norm(b.step.hand - a.step.hand) * FPS for a, b in zip(shadow[:-1], shadow[1:])]
+    gaps = np.array([hand_gap(world, f) for f in shadow])
+    resting = np.array([f.step.phase == "rests" for f in shadow])
+    print(f"\nscenario 4: {len(shadow)} frames; hand speed up to {max(speeds):.2f} m/s; gap to the robot while it "
+          f"rests {gaps[resting].min() * 1e3:.1f}-{gaps[resting].max() * 1e3:.1f} mm; pixels while it waits "
+          f"{[tuple(f.hand_pixels.values()) for f in shadow if f.step.phase == 'waits']}")
+    assert max(speeds) <= 1.9
+    assert all(min(f.hand_pixels.values()) > 0 for f in shadow if f.step.phase == "waits")
+    pixels = np.array([(f.hand_pixels["p"], f.hand_pixels["s"]) for f in shadow if f.step.phase == "rests"])
+    assert np.all(pixels[:, 0] == 0) and np.all(pixels[:, 1] <= 1) and np.mean(pixels.sum(1) == 0) >= 0.5
+    assert resting.sum() == SHADOW_REST
+    assert np.all(gaps > 0.0) and 0.002 <= gaps[resting].min() and gaps[resting].max() <= 0.01
+
+
+def test_a_thin_hand_resting_where_no_camera_sees_is_never_read_too_far(shadow):
+    """Issue 35's judge (its item 7): the 25 mm hand slides at up to v_max into the space that both cameras' views of
+    a link hide and rests there within 1 cm of the link while the robot moves. At every frame and point, flagged or
+    not: memory <= truth + tolerance, memory >= no memory, and a distance the memory raised carries ``remembered``
+    (``check_memory_frame``).
+
+    Why it holds today: the hand at rest lies within the self-filter's shell round the link, which every answer counts
+    as possibly occupied, and the memory clears nothing there (design §8a). The judge is for the day it does: a memory
+    that clears the shell must still leave this hand (``test_the_judge_catches_a_memory_that_swallows_the_hand``).
+
+    Measured: 35 frames, the largest memory - (truth + tolerance) -0.66 mm; the memory raises no distance here.
+    """
+    worst, raised = -np.inf, 0
+    for f in shadow:
+        check_memory_frame(f)
+        over = f.over("memory")
+        worst = max(worst, float(over[np.isfinite(over)].max()))
+        raised += int(np.count_nonzero(np.minimum(f.results["memory"].distance, RHO)
+                                       > np.minimum(f.results["none"].distance, RHO) + 1e-3))
+    print(f"\nscenario 4: largest memory - (truth + tolerance) {worst * 1e3:.2f} mm; distances raised by memory "
+          f"{raised}")
+
+
+def test_faster_than_v_max_a_thin_hand_read_too_far_is_flagged_remembered(world):
+    """Scenario 4 with the hand sliding in at 6 m/s (three times v_max): outside the guarantee, so an answer above
+    truth + tolerance may come, but only with ``remembered``; without memory none comes. Measured: none comes (the
+    hand is in the self-filter's shell, as at v_max)."""
+    monitors = {"memory": monitor(world), "none": monitor(world, memory=False)}
+    optimistic = 0
+    for f in play(world, shadow_steps(world, 6.0), monitors, np.random.default_rng(5)):
+        over, over_none = f.over("memory"), f.over("none")
+        assert not np.any(over_none > EPS), f"without memory: {f.describe('none', int(np.argmax(over_none)))}"
+        bad = np.flatnonzero(over > EPS)
+        unflagged = bad[~f.remembered("memory")[bad]]
+        assert len(unflagged) == 0, f"optimistic and not flagged: {f.describe('memory', unflagged[0])}"
+        optimistic += len(bad)
+    print(f"\nscenario 4 at 6 m/s: {optimistic} points above truth + tolerance, all flagged remembered")
+
+
+def test_the_judge_catches_a_memory_that_swallows_the_hand(shadow):
+    """The judge of scenario 4 can fail: a memory whose Robot_k is the padded capsules grown by SWALLOWING (it takes
+    the space where the hand waits for the robot's inside) fails ``check_memory_frame``: it reads points too far while
+    the hand slides in, and raises distances without ``remembered``. Measured: the check fails in all 35 frames;
+    points too far in 3 frames while the hand slides in, by up to 12.6 mm."""
+    failures, optimistic, worst = [], [], -np.inf
+    for f in shadow:
+        try:
+            check_memory_frame(f, "swallowing")
+        except (AssertionError, pytest.fail.Exception) as failure:
+            failures.append(str(failure))
+        over = f.over("swallowing")
+        if np.any(over > EPS):
+            optimistic.append(f.step.phase)
+        worst = max(worst, float(over[np.isfinite(over)].max()))
+    print(f"\nswallowing memory: the check fails in {len(failures)} of {len(shadow)} frames; points too far in "
+          f"{len(optimistic)} frames ({sorted(set(optimistic))}), by up to {worst * 1e3:.1f} mm")
+    assert optimistic and len(failures) >= len(optimistic)
