@@ -233,9 +233,14 @@ def main(argv=None) -> None:
     if args.ssm and answers:
         factor = np.array([float(r["speed_factor"]) for r in answers])
         reaction = np.array([float(r["reaction_ms"]) for r in answers])
+        starting = np.array([r.get("starting") == "true" for r in answers])
+        times = np.array([float(r["time"]) for r in answers])
+        last_minute = times >= times.max() - 60.0
         print(f"  speed factor: 0 in {100 * (factor == 0).mean():.1f} % of the answers, 1 in "
               f"{100 * (factor == 1).mean():.1f} %, median {np.median(factor):.3f}; reaction time T_r p50 "
-              f"{np.percentile(reaction, 50):.0f}, p99 {np.percentile(reaction, 99):.0f} ms")
+              f"{np.percentile(reaction, 50):.0f}, p99 {np.percentile(reaction, 99):.0f} ms; \"starting\" (may rest "
+              f"on space not seen since start-up) in {100 * starting.mean():.1f} % of the answers, in the last "
+              f"minute's {100 * starting[last_minute].mean():.1f} %")
     if said:
         print(f"  the node also said ({len(said)} lines): " + " | ".join(line[:160] for line in said[:5]))
     if len(samples) >= 3:

@@ -414,7 +414,7 @@ def test_memory_refuses_bad_arguments():
             call()
         assert info.value.field == "t"
     assert memory.time == 2.0
-    assert memory.nbytes == box.size * 15
+    assert memory.nbytes == box.size * 16
     with pytest.raises(ValueError):
         memory.arrival[0, 0, 0] = 1e9  # read-only
 

@@ -122,6 +122,59 @@ def test_speed_scaling_is_zero_without_joints_frames_or_an_agreeing_clock(scalin
     assert (behind.factor, behind.why) == (0.0, "clock")
 
 
+def test_a_factor_that_may_rest_on_space_never_seen_says_starting(scaling, robot):
+    """``ScalingAnswer.starting`` (issue 35, start-up stated): a factor below 1 is "starting" exactly when space the
+    memory has never seen free (``FreeSpaceMemory.never_seen``) lies within the limiting point's detectable distance
+    (give or take a voxel's diagonal); judged against the distance from that point to the nearest cube of never-seen
+    voxels, found by brute force. A factor of 1 never is."""
+    from depthguard.freespace import FreeSpaceMemory
+
+    q = np.zeros(robot.n_joints)
+    monitor_memory = scaling.memory
+    assert monitor_memory is not None and monitor_memory.time is None
+    box = monitor_memory.box
+    near = scaling.factor(_Prepared(0.5), q, clock=lambda: 10.03)
+    assert near.factor == 0.0 and near.starting  # nothing seen yet
+    assert not scaling.factor(_Prepared(np.inf), q, clock=lambda: 10.03).starting  # factor 1
+    points, _ = scaling.surface.control_point_kinematics(q)
+    rng = np.random.default_rng(11)
+    outcomes = []
+    try:
+        for trial in range(24):
+            # one voxel never seen, its cube about as far from the limiting point as the rule's reach (+- 12 cm)
+            distance = rng.uniform(0.3, 0.6)
+            memory = FreeSpaceMemory(box)
+            memory.update(1.0, np.ones(box.shape, dtype=bool))
+            scaling.memory = memory
+            k = scaling.names.index(scaling.factor(_Prepared(distance), q, clock=lambda: 10.03).limiting)
+            direction = rng.normal(size=3)
+            target = distance + box.voxel * math.sqrt(3.0) + rng.uniform(-0.12, 0.12)
+            at = points[k] + direction / np.linalg.norm(direction) * (target + box.voxel / 2)
+            index = np.floor((at - box.lo) / box.voxel).astype(int)
+            if np.any(index < 0) or np.any(index >= box.shape):
+                continue
+            seen = np.ones(box.shape, dtype=bool)
+            seen[tuple(index)] = False
+            memory = FreeSpaceMemory(box)
+            memory.update(1.0, seen)
+            scaling.memory = memory
+            answer = scaling.factor(_Prepared(distance), q, clock=lambda: 10.03)
+            assert answer.factor < 1.0 and answer.limiting == scaling.names[k]
+            lo = box.lo + index * box.voxel
+            gap = np.linalg.norm(np.maximum(np.maximum(lo - points[k], points[k] - (lo + box.voxel)), 0.0))
+            want = gap < distance + box.voxel * math.sqrt(3.0)
+            assert answer.starting == want, (trial, answer, gap, distance)
+            outcomes.append(want)
+        memory = FreeSpaceMemory(box)
+        memory.update(1.0, np.ones(box.shape, dtype=bool))
+        scaling.memory = memory
+        seen_all = scaling.factor(_Prepared(0.5), q, clock=lambda: 10.03)
+        assert seen_all.factor == 0.0 and not seen_all.starting  # 0 from the distances, everything seen once
+        assert True in outcomes and False in outcomes, outcomes
+    finally:
+        scaling.memory = monitor_memory
+
+
 def test_speed_scaling_needs_a_detectable_space_of_at_most_70_mm(robot):
     from depthguard_lab.simulation import default_workcell
 

@@ -37,6 +37,7 @@ from depthguard import config
 from depthguard.avoidance._limits import JointLimits
 from depthguard.avoidance._ssm import SpeedSeparationMonitor, SSMParams, protective_separation_distance
 from depthguard.errors import InputError
+from depthguard.freespace import voxels_within
 from depthguard.validation import check_real
 
 
@@ -55,6 +56,10 @@ class ScalingAnswer:
         why: "" when the factor comes from the distances; else why it is 0 ("blind", "clock", "no joints").
         limiting: the name of the surface point that set the factor ("" when 1 or 0 for a reason).
         distance: metres, that point's distance from its sphere's surface (inf: none).
+        starting: the factor is below 1 and may rest on space that the monitor's free-space memory has not seen
+            free since it was made (``FreeSpaceMemory.never_seen`` within that point's distance): at start-up, until
+            the cameras have seen round the robot as it moves through its poses; where it lasts, space no camera
+            sees (``depthguard coverage`` shows which). False without a memory.
     """
 
     factor: float
@@ -62,6 +67,7 @@ class ScalingAnswer:
     why: str = ""
     limiting: str = ""
     distance: float = math.inf
+    starting: bool = False
 
 
 class SpeedScaling:
@@ -109,6 +115,7 @@ class SpeedScaling:
         self.params = replace(params, detection_capability=band, robot_uncertainty=tolerance,
                               sensing_uncertainty=params.sensing_uncertainty + monitor.robot_zone)
         self.hidden = why
+        self.memory = monitor.memory  # for ScalingAnswer.starting
         try:
             limits = JointLimits.from_robot(robot, velocity=joint_speed, acceleration=braking)
         except InputError as error:  # named for this class's arguments
@@ -165,4 +172,13 @@ class SpeedScaling:
                                                check=False)
         k = verdict.limiting
         return ScalingAnswer(verdict.factor, reaction, "", self.names[k] if k >= 0 else "",
-                             float(surface[k]) if k >= 0 else float(np.min(surface, initial=math.inf)))
+                             float(surface[k]) if k >= 0 else float(np.min(surface, initial=math.inf)),
+                             starting=k >= 0 and verdict.factor < 1.0 and self._near_never_seen(points[k], distance[k]))
+
+    def _near_never_seen(self, point: np.ndarray, distance: float) -> bool:
+        """Whether space the memory has never seen free lies within ``distance`` (metres, the detectable distance
+        of the limiting point, world frame) of ``point``, give or take the diagonal of a memory voxel."""
+        if self.memory is None or not math.isfinite(distance):
+            return self.memory is not None and self.memory.time is None
+        reach = distance + self.memory.box.voxel * math.sqrt(3.0)
+        return bool(voxels_within(self.memory.never_seen, self.memory.box, point[None], np.array([reach]))[0])

@@ -275,8 +275,8 @@ class FreeSpaceMemory:
         v_max: the fastest a person may move, metres/second, finite and > 0 (``config.FREESPACE_V_MAX``). A body part
             moving faster is outside the guarantee.
 
-    Memory: 8 bytes a voxel for ``arrival``, 4 for the distance transform's work space, 2 for the grown set and 1 for
-    the last update's seen-free and robot voxels (``nbytes``).
+    Memory: 8 bytes a voxel for ``arrival``, 4 for the distance transform's work space, 2 for the grown set, 1 for
+    the last update's seen-free and robot voxels and 1 for those of every update (``nbytes``, ``never_seen``).
     """
 
     def __init__(self, box: VoxelBox, v_max: float = config.FREESPACE_V_MAX):
@@ -288,6 +288,7 @@ class FreeSpaceMemory:
         self._grown = np.empty(box.shape, dtype=bool)  # U grown by one voxel (the distance transform's sites)
         self._scratch = np.empty(box.shape, dtype=bool)
         self._now = np.zeros(box.shape, dtype=bool)  # Seen_k | Robot_k of the last update: free at its time
+        self._known = np.zeros(box.shape, dtype=bool)  # the union of every update's Seen_k | Robot_k
         self._time: float | None = None
         self._no_robot = np.zeros((1, 1, 1), dtype=bool)
 
@@ -307,6 +308,12 @@ class FreeSpaceMemory:
         return view
 
     @property
+    def never_seen(self) -> np.ndarray:
+        """(nx, ny, nz) bool: the voxels that no update has taken as seen free or inside the robot since the memory
+        was made (what start-up has not shown yet, or no camera ever sees)."""
+        return ~self._known
+
+    @property
     def time(self) -> float | None:
         """The time of the last :meth:`update` (seconds), None before the first."""
         return self._time
@@ -314,7 +321,8 @@ class FreeSpaceMemory:
     @property
     def nbytes(self) -> int:
         """Bytes the memory holds: the arrival times and the distance transform's work space."""
-        return self._arrival.nbytes + self._d2.nbytes + self._grown.nbytes + self._scratch.nbytes + self._now.nbytes
+        return (self._arrival.nbytes + self._d2.nbytes + self._grown.nbytes + self._scratch.nbytes + self._now.nbytes
+                + self._known.nbytes)
 
     def update(self, t: float, seen: np.ndarray, robot: np.ndarray | None = None, check: bool = True) -> None:
         """Take in the frames of time ``t``.
@@ -350,6 +358,7 @@ class FreeSpaceMemory:
         freespace_kernels.advance_arrival(self._d2, t, self.box.voxel, 0.0, self.v_max, config.FREESPACE_ROUNDING,
                                           self._arrival)
         np.logical_or(seen, robot, out=self._now) if use_robot else np.copyto(self._now, seen)
+        np.logical_or(self._known, self._now, out=self._known)
         self._time = t
 
     def forget(self, occupied: np.ndarray) -> None:

@@ -61,6 +61,20 @@ _FIRST_SUBSCRIPTION = 10
 CSV_HEADER = RESULT_COLUMNS + ["cameras", "latency_ms"]
 
 
+def speed_scaling_status(scaling) -> tuple[int, str, list[tuple[str, str]]]:
+    """(level, message, [(key, value)]) of ``/diagnostics``' "depthguard: speed scaling" status for the last factor
+    published (a :class:`~depthguard.avoidance.ScalingAnswer`): ERROR at 0, WARN below 1; the message says why (its
+    ``why``, or the surface point that limits it), prefixed "starting: " while the factor may rest on space not seen
+    since start-up (``ScalingAnswer.starting``)."""
+    level = ERROR if scaling.factor == 0.0 else (WARN if scaling.factor < 1.0 else OK)
+    message = scaling.why or (f"limited by {scaling.limiting}" if scaling.limiting else "full speed")
+    if scaling.starting:
+        message = f"starting: {message}, next to space not seen since start-up (move the robot slowly through its poses)"
+    return level, message, [("factor", repr(float(scaling.factor))), ("starting", str(scaling.starting).lower()),
+                            ("reaction_ms", f"{scaling.reaction_time * 1e3:.3f}"),
+                            ("distance", repr(float(scaling.distance)))]
+
+
 @dataclass
 class Topics:
     """Where the node listens. cameras: camera -> (image topic, camera_info topic); joints: the JointState topic."""
@@ -516,7 +530,8 @@ class LiveNode:
         out_file = open(self._out_path, "w", newline="") if self._out_path is not None else None  # noqa: SIM115
         writer = csv.writer(out_file) if out_file is not None else None
         if writer is not None:
-            writer.writerow(CSV_HEADER + (["speed_factor", "reaction_ms"] if self.scaling is not None else []))
+            writer.writerow(CSV_HEADER + (["speed_factor", "reaction_ms", "starting"] if self.scaling is not None
+                                          else []))
         try:
             while not self._stop.is_set():
                 self._wake.wait(0.005)
@@ -589,7 +604,8 @@ class LiveNode:
             scaling = self.scaling.factor(answer.prepared, answer.joints, clock=clock.time)
             self._publish_scaling(scaling)
         if writer is not None:
-            extra = [] if scaling is None else [repr(scaling.factor), f"{scaling.reaction_time * 1e3:.3f}"]
+            extra = [] if scaling is None else [repr(scaling.factor), f"{scaling.reaction_time * 1e3:.3f}",
+                                                str(scaling.starting).lower()]
             for row in answer.rows(self.robot.control_point_names):
                 writer.writerow(row + [";".join(answer.seen), f"{latency * 1e3:.3f}"] + extra)
 
@@ -655,14 +671,10 @@ class LiveNode:
                                    value(key="answers", value=str(self.answers)),
                                    value(key="sets_dropped", value=str(self.dropped)),
                                    value(key="deadline_misses", value=str(self.deadline_misses))]))
-        scaling = self.last_scaling
-        if scaling is not None:
-            level = ERROR if scaling.factor == 0.0 else (WARN if scaling.factor < 1.0 else OK)
-            message = scaling.why or (f"limited by {scaling.limiting}" if scaling.limiting else "full speed")
+        if self.last_scaling is not None:
+            level, message, pairs = speed_scaling_status(self.last_scaling)
             statuses.append(status(level=level, name="depthguard: speed scaling", message=message, hardware_id="",
-                                   values=[value(key="factor", value=repr(float(scaling.factor))),
-                                           value(key="reaction_ms", value=f"{scaling.reaction_time * 1e3:.3f}"),
-                                           value(key="distance", value=repr(float(scaling.distance)))]))
+                                   values=[value(key=k, value=v) for k, v in pairs]))
         self._diagnostics.put(types[STATUS_TYPE](header=ros_header(store, clock.time_ns(), ""), status=statuses))
 
     def _publish(self, answer, loop) -> None:
