@@ -43,8 +43,11 @@ behind the robot as that camera sees it, and every sample there is not clearable
 Left out: sensor dropouts, other objects and walls (their shadows), people, and the free-space memory (design section
 8a), which clears more over time.
 
+One more camera (:func:`suggest_camera`, ``--suggest``): of 36 places round the robot, the one whose line of sight
+reaches past most of the samples the rig cannot clear; the command then runs the coverage again with it.
+
     depthguard coverage --rig RIG.yaml [--robot URDF|iiwa|panda] [--trajectory joint_states.csv] [--rho 0.4]
-                        [--out DIR]
+                        [--out DIR] [--suggest]
 """
 
 from __future__ import annotations
@@ -293,15 +296,17 @@ def empty_room_frames(rig, silhouette, joints, floor, timestamp: float = 0.0) ->
     room seen up to there)."""
     from depthguard.scenes import render_depth
 
-    frames = {}
-    for name, camera in rig.cameras.items():
-        ground = render_depth(camera, [floor])
-        arm = silhouette.render(camera, joints)
-        depth = np.where(arm > 0, np.minimum(arm, np.where(ground > 0, ground, np.inf)), ground)
-        far = _float32_range(camera.depth_range[0], _far_end(camera))[1]
-        depth = np.where((depth <= 0) | (depth > far), far, depth).astype(np.float32)
-        frames[name] = dg.depth_image(depth, camera, timestamp=timestamp)
-    return frames
+    return {name: dg.depth_image(_room_depth(camera, render_depth(camera, [floor]), silhouette.render(camera, joints)),
+                                 camera, timestamp=timestamp)
+            for name, camera in rig.cameras.items()}
+
+
+def _room_depth(camera, ground: np.ndarray, arm: np.ndarray) -> np.ndarray:
+    """(h, w) float32 metres: the nearer of the floor's and the robot's rendered depths (0: nothing), the range's far
+    end where neither lies within it."""
+    depth = np.where(arm > 0, np.minimum(arm, np.where(ground > 0, ground, np.inf)), ground)
+    far = _float32_range(camera.depth_range[0], _far_end(camera))[1]
+    return np.where((depth <= 0) | (depth > far), far, depth).astype(np.float32)
 
 
 def with_noise(frames: dict, rig, rng: np.random.Generator) -> dict:
@@ -400,6 +405,113 @@ def coverage(rig, robot, poses, rho: float = config.DEFAULT_RHO, spacing: float 
     eyes = {name: camera.T_world_camera[:3, 3].copy() for name, camera in rig.cameras.items()}
     return Coverage(cameras=eyes, robot=robot.name, rho=rho, spacing=spacing, clearance=clearance, floor=floor,
                     poses=results, seconds=time.perf_counter() - start)
+
+
+# ---------------------------------------------------------------------------------------------- one more camera
+
+#: Where :func:`suggest_camera` tries one more camera: heights above the floor (metres) and how many azimuths round
+#: the robot, at the rig's cameras' median horizontal distance from the robot (at least SUGGEST_MIN_RADIUS metres).
+SUGGEST_HEIGHTS = (0.6, 1.4, 2.2)
+SUGGEST_AZIMUTHS = 12
+SUGGEST_MIN_RADIUS = 1.5
+
+
+@dataclass
+class Suggestion:
+    """One more camera for the rig, and what it would clear.
+
+    Attributes:
+        camera: a :class:`~depthguard.PinholeCamera` named "suggested": the principal's intrinsics, range and noise
+            model, at ``eye`` looking at ``target`` (world, metres).
+        sees_past: the share of the rig's not-clearable samples, over every pose, that this camera sees past: each
+            one's line of sight from the camera meets neither the robot nor the floor before the sample, and the
+            nearest surface the camera measures within a pixel of it lies beyond it by more than twice its noise
+            margin, the monitor's fusion margin and a sample spacing (:func:`sees_past`).
+        tried: how many candidate places were tried.
+    """
+
+    camera: object
+    eye: np.ndarray
+    target: np.ndarray
+    sees_past: float
+    tried: int
+
+
+def candidate_cameras(rig, robot, poses, floor: float) -> list:
+    """The places :func:`suggest_camera` tries (see SUGGEST_HEIGHTS): cameras named "suggested" with the principal's
+    intrinsics, range and noise, looking at the centre of the robot's control points over ``poses``."""
+    from depthguard.transforms import look_at
+
+    model = rig.cameras[rig.principal]
+    target = np.mean([robot.control_point_positions(robot.joint_vector(q)) for _, q in poses], axis=(0, 1))
+    eyes = np.array([camera.T_world_camera[:3, 3] for camera in rig.cameras.values()])
+    radius = max(SUGGEST_MIN_RADIUS, float(np.median(np.linalg.norm(eyes[:, :2] - target[:2], axis=1))))
+    out = []
+    for height in SUGGEST_HEIGHTS:
+        for k in range(SUGGEST_AZIMUTHS):
+            angle = 2.0 * np.pi * k / SUGGEST_AZIMUTHS
+            eye = np.array([target[0] + radius * np.cos(angle), target[1] + radius * np.sin(angle), floor + height])
+            out.append(model.replace(name="suggested", T_world_camera=look_at(eye, target)))
+    return out
+
+
+def sees_past(camera, depth: np.ndarray, samples: np.ndarray, spacing: float) -> np.ndarray:
+    """(s,) bool: whether ``camera`` sees past each of ``samples`` ((s, 3) world metres) in its noise-free ``depth``
+    ((h, w) optical z, metres; the far end of its range where it sees nothing): the sample lies in its view and
+    range, and every pixel within one of the sample's reads farther than the sample by more than twice the noise
+    margin there, the monitor's default fusion margin and ``spacing`` (metres)."""
+    local = camera.world_to_camera(np.asarray(samples, dtype=np.float64))
+    z = local[:, 2]
+    out = np.zeros(len(local), dtype=bool)
+    ahead = z > camera.depth_range[0]
+    u = np.full(len(local), -1, dtype=np.int64)
+    v = np.full(len(local), -1, dtype=np.int64)
+    u[ahead] = np.round(camera.fx * local[ahead, 0] / z[ahead] + camera.cx).astype(np.int64)
+    v[ahead] = np.round(camera.fy * local[ahead, 1] / z[ahead] + camera.cy).astype(np.int64)
+    inside = ahead & (u >= 1) & (u < camera.width - 1) & (v >= 1) & (v < camera.height - 1)
+    if not inside.any():
+        return out
+    nearest = depth.astype(np.float64)
+    for axis in (0, 1):  # the smallest depth within one pixel (3 x 3)
+        nearest = np.minimum(np.minimum(nearest, np.roll(nearest, 1, axis)), np.roll(nearest, -1, axis))
+    seen = nearest[v[inside], u[inside]]
+    need = z[inside] + 2.0 * camera.noise.margin(seen) + config.DEFAULT_FUSION_MARGIN + spacing
+    out[inside] = seen > need
+    return out
+
+
+def suggest_camera(rig, robot, poses, result: "Coverage") -> "Suggestion | None":
+    """Where one more camera would see past most of what ``rig`` cannot clear (``result``, its :func:`coverage` at
+    ``poses``): of :func:`candidate_cameras`, the one that :func:`sees_past` the largest share of the not-clearable
+    samples over every pose; None when every sample is clearable. A proxy, fast enough to try many places: run
+    :func:`coverage` on the rig with the suggested camera to know what it clears (``depthguard coverage --suggest``
+    does)."""
+    from depthguard.self_filter import RobotSilhouette
+
+    targets = [(p.joints, p.samples[p.not_clearable]) for p in result.poses]
+    total = sum(len(samples) for _, samples in targets)
+    if total == 0:
+        return None
+    from depthguard.scenes import Box, render_depth
+
+    candidates = candidate_cameras(rig, robot, poses, result.floor)
+    eyes = np.array([camera.T_world_camera[:3, 3] for camera in list(rig.cameras.values()) + candidates])
+    reach = float(np.abs(eyes[:, :2]).max()) + max(_far_end(camera) for camera in candidates)
+    ground = Box.from_bounds([-reach, -reach, result.floor - 0.05], [reach, reach, result.floor])
+    silhouette = RobotSilhouette(robot, geometry="meshes", padding=0.0)
+    best, best_count = None, -1
+    for camera in candidates:
+        floor_depth = render_depth(camera, [ground])
+        count = 0
+        for joints, samples in targets:
+            if len(samples):
+                depth = _room_depth(camera, floor_depth, silhouette.render(camera, joints))
+                count += int(np.count_nonzero(sees_past(camera, depth, samples, result.spacing)))
+        if count > best_count:
+            best, best_count = camera, count
+    eye = best.T_world_camera[:3, 3].copy()
+    target = np.mean([robot.control_point_positions(robot.joint_vector(q)) for _, q in poses], axis=(0, 1))
+    return Suggestion(camera=best, eye=eye, target=target, sees_past=best_count / total, tried=len(candidates))
 
 
 # ---------------------------------------------------------------------------------------------------- picture

@@ -212,6 +212,53 @@ def test_samples_lie_where_they_should(results, robot):
 
 
 # --------------------------------------------------------------------------------------------------------------------
+# one more camera
+
+
+def test_sees_past_is_the_stated_rule_on_a_wall_with_a_post():
+    """``sees_past``: a camera facing a wall 4 m away, a post 2 m away covering a band of columns; a sample sees past
+    exactly when it is in view and the nearest surface within a pixel of its own (the post or the wall) lies beyond
+    it by more than twice the noise margin there, the fusion margin and the spacing."""
+    cam = camera("principal").replace(T_world_camera=np.eye(4))
+    depth = np.full(cam.shape, 4.0, dtype=np.float32)
+    depth[:, 70:80] = 2.0
+    spacing = 0.06
+
+    def need(surface):
+        return surface - (2.0 * float(cam.noise.margin(surface)) + dg.config.DEFAULT_FUSION_MARGIN + spacing)
+
+    rng = np.random.default_rng(2)
+    u = rng.uniform(-5, 165, 400)
+    v = rng.uniform(-5, 125, 400)
+    z = rng.uniform(0.2, 4.5, 400)
+    samples = np.column_stack([(u - cam.cx) * z / cam.fx, (v - cam.cy) * z / cam.fy, z])
+    got = cov.sees_past(cam, depth, samples, spacing)
+    q, r = np.round(u), np.round(v)
+    inside = (q >= 1) & (q <= cam.width - 2) & (r >= 1) & (r <= cam.height - 2) & (z > cam.depth_range[0])
+    post = (q >= 69) & (q <= 80)
+    want = inside & (z < np.where(post, need(2.0), need(4.0)))
+    np.testing.assert_array_equal(got, want)
+    assert want.sum() > 50 and (inside & post & want).sum() > 3 and (inside & post & ~want & (z < need(4.0))).sum() > 3
+
+
+def test_the_suggested_camera_clears_most_of_what_the_rig_cannot(results, robot):
+    """``suggest_camera`` on the two front cameras: the suggested camera, added to the rig, leaves far fewer samples
+    not clearable when the coverage is computed again (measured: 147 -> 15 of 13983), and the share it claimed to see
+    past is most of them (the far control points below rho: 18 -> 10 of 18)."""
+    rig, before = results["two"]
+    suggestion = cov.suggest_camera(rig, robot, POSES, before)
+    assert suggestion is not None and suggestion.tried == len(cov.SUGGEST_HEIGHTS) * cov.SUGGEST_AZIMUTHS
+    bigger = dg.Rig({**rig.cameras, "suggested": suggestion.camera}, principal="principal", workspace=WORKSPACE)
+    after = cov.coverage(bigger, robot, POSES, rho=RHO, spacing=SPACING)
+    n_before = cov.figures(before.poses)["not_clearable"]
+    n_after = cov.figures(after.poses)["not_clearable"]
+    alarms = [cov.figures(c.poses)["control_points_below_rho"] for c in (before, after)]
+    print(f"\nsuggested {suggestion.eye.round(2)}: sees past {suggestion.sees_past:.3f}; not clearable {n_before} -> "
+          f"{n_after}; far control points below rho {alarms[0]} -> {alarms[1]}")
+    assert suggestion.sees_past > 0.5 and n_after <= 0.5 * n_before and alarms[1] <= alarms[0]
+
+
+# --------------------------------------------------------------------------------------------------------------------
 # the command
 
 
@@ -248,6 +295,20 @@ def test_command_writes_the_picture_and_the_numbers(files, capsys, tmp_path, rob
     assert numbers["control_points_far"] == 18
     assert 0 <= numbers["control_points_below_rho"] <= 18 and 0 <= numbers["control_points_below_rho_noisy"] <= 18
     assert "all poses" in text and "row 2, t=0.5 s" in text
+
+
+def test_suggest_writes_the_rig_with_one_more_camera_and_its_coverage(files, capsys, tmp_path):
+    out = tmp_path / "cov"
+    status, text, err = run_cli(["coverage", "--rig", files / "rig.yaml", "--trajectory", files / "joint_states.csv",
+                                 "--out", out, "--suggest"], capsys)
+    assert status == 0, err
+    numbers = json.loads((out / "coverage.json").read_text())
+    suggestion = numbers["suggestion"]
+    bigger = dg.load_rig(out / "rig_suggested.yaml")
+    assert list(bigger.cameras) == ["principal", "second", "suggested"] and bigger.principal == "principal"
+    np.testing.assert_allclose(bigger.cameras["suggested"].T_world_camera[:3, 3], suggestion["eye"], atol=1e-9)
+    assert suggestion["with_it"]["not_clearable"] < numbers["not_clearable"]
+    assert "--suggest" in text and "sees past" in text
 
 
 def _bad_cases(files, tmp):

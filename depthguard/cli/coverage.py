@@ -17,6 +17,7 @@ from depthguard.coverage import (
     coverage,
     default_poses,
     plot,
+    suggest_camera,
     table_row,
     trajectory_poses,
 )
@@ -39,6 +40,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--rho", type=real_option(*RHO_RANGE, "metres"), default=config.DEFAULT_RHO,
                         help=f"surveillance radius, metres, in [{RHO_RANGE[0]:g}, {RHO_RANGE[1]:g}]")
     parser.add_argument("--out", default="out/coverage", help="output folder for coverage.json and coverage.png")
+    parser.add_argument("--suggest", action="store_true",
+                        help="also find where one more camera (the principal's model) would clear most of what the "
+                             "rig cannot, check it by running the coverage again with it, and write that rig to "
+                             "rig_suggested.yaml")
 
 
 def run(args) -> int:
@@ -66,6 +71,8 @@ def run(args) -> int:
     numbers = {"rig": str(rig_path), **result.summary()}
     print("  " + table_row("all poses", numbers))
     out.mkdir(parents=True, exist_ok=True)
+    if args.suggest:
+        numbers["suggestion"] = _suggest(rig, model, poses, result, rho, out)
     try:
         import matplotlib  # noqa: F401 - the plots extra
     except ImportError:
@@ -77,3 +84,27 @@ def run(args) -> int:
     drawn = f"and {picture}" if picture is not None else "(no picture: matplotlib is not installed, depthguard[plots])"
     print(f"{len(result.poses)} poses in {result.seconds:.1f} s; wrote {out / 'coverage.json'} {drawn}")
     return 0
+
+
+def _suggest(rig, model, poses, result, rho, out: Path) -> dict | None:
+    """``--suggest``: print and return where one more camera would clear most (:func:`suggest_camera`), with the
+    coverage of the rig with that camera, and write that rig to ``out``/rig_suggested.yaml."""
+    suggestion = suggest_camera(rig, model, poses, result)
+    if suggestion is None:
+        print("--suggest: every sample is clearable already; no camera suggested")
+        return None
+    eye, target = (", ".join(f"{x:.2f}" for x in point) for point in (suggestion.eye, suggestion.target))
+    print(f"\n--suggest: of {suggestion.tried} places round the robot, one more camera at ({eye}) looking at "
+          f"({target}) sees past {100 * suggestion.sees_past:.0f} % of the samples this rig cannot clear. With it:")
+    bigger = dg.Rig({**rig.cameras, "suggested": suggestion.camera}, principal=rig.principal,
+                    workspace=rig.workspace)
+    print("  " + TABLE_HEADER)
+    with_it = coverage(bigger, model, poses, rho=rho, progress=True)
+    figures_with_it = with_it.summary()
+    print("  " + table_row("all poses", figures_with_it))
+    path = out / "rig_suggested.yaml"
+    dg.save_rig(bigger, path)
+    print(f"  wrote {path}")
+    return {"eye": [float(x) for x in suggestion.eye], "target": [float(x) for x in suggestion.target],
+            "sees_past": suggestion.sees_past, "places_tried": suggestion.tried, "rig": str(path),
+            "with_it": {k: v for k, v in figures_with_it.items() if k != "poses"}}
