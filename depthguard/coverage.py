@@ -262,12 +262,13 @@ def floor_height(rig, robot, poses) -> float:
     return float(min(min(min(c.p0[2], c.p1[2]) - c.radius for c in robot.capsules_world(q)) for _, q in poses))
 
 
-def floor_box(rig, floor: float):
-    """The floor: a box 5 cm thick whose top is at ``floor``, wide enough for every camera's view."""
+def floor_box(cameras, floor: float):
+    """The floor: a box 5 cm thick whose top is at ``floor``, wide enough for the view of each of ``cameras``."""
     from depthguard.scenes import Box
 
-    eyes = np.array([camera.T_world_camera[:3, 3] for camera in rig.cameras.values()])
-    reach = float(np.abs(eyes[:, :2]).max()) + max(_far_end(camera) for camera in rig.cameras.values())
+    cameras = list(cameras)
+    eyes = np.array([camera.T_world_camera[:3, 3] for camera in cameras])
+    reach = float(np.abs(eyes[:, :2]).max()) + max(_far_end(camera) for camera in cameras)
     return Box.from_bounds([-reach, -reach, floor - 0.05], [reach, reach, floor])
 
 
@@ -376,7 +377,7 @@ def coverage(rig, robot, poses, rho: float = config.DEFAULT_RHO, spacing: float 
         raise InputError("no robot poses to check", field="poses")
     start = time.perf_counter()
     floor = floor_height(rig, robot, poses)
-    ground = floor_box(rig, floor)
+    ground = floor_box(rig.cameras.values(), floor)
     samples_monitor = dg.DistanceMonitor(rig, rho=spacing, aggregate="min", robot=robot, memory=False)
     control_monitor = dg.DistanceMonitor(rig, rho=rho, robot=robot, memory=False)
     silhouette = RobotSilhouette(robot, geometry="meshes", padding=0.0)
@@ -437,9 +438,10 @@ class Suggestion:
     tried: int
 
 
-def candidate_cameras(rig, robot, poses, floor: float) -> list:
-    """The places :func:`suggest_camera` tries (see SUGGEST_HEIGHTS): cameras named "suggested" with the principal's
-    intrinsics, range and noise, looking at the centre of the robot's control points over ``poses``."""
+def candidate_cameras(rig, robot, poses, floor: float) -> tuple[np.ndarray, list]:
+    """(target, cameras): the places :func:`suggest_camera` tries (see SUGGEST_HEIGHTS), cameras named "suggested"
+    with the principal's intrinsics, range and noise, each looking at ``target``, the centre of the robot's control
+    points over ``poses`` ((3,) world metres)."""
     from depthguard.transforms import look_at
 
     model = rig.cameras[rig.principal]
@@ -452,7 +454,7 @@ def candidate_cameras(rig, robot, poses, floor: float) -> list:
             angle = 2.0 * np.pi * k / SUGGEST_AZIMUTHS
             eye = np.array([target[0] + radius * np.cos(angle), target[1] + radius * np.sin(angle), floor + height])
             out.append(model.replace(name="suggested", T_world_camera=look_at(eye, target)))
-    return out
+    return target, out
 
 
 def sees_past(camera, depth: np.ndarray, samples: np.ndarray, spacing: float) -> np.ndarray:
@@ -486,18 +488,15 @@ def suggest_camera(rig, robot, poses, result: "Coverage") -> "Suggestion | None"
     samples over every pose; None when every sample is clearable. A proxy, fast enough to try many places: run
     :func:`coverage` on the rig with the suggested camera to know what it clears (``depthguard coverage --suggest``
     does)."""
+    from depthguard.scenes import render_depth
     from depthguard.self_filter import RobotSilhouette
 
     targets = [(p.joints, p.samples[p.not_clearable]) for p in result.poses]
     total = sum(len(samples) for _, samples in targets)
     if total == 0:
         return None
-    from depthguard.scenes import Box, render_depth
-
-    candidates = candidate_cameras(rig, robot, poses, result.floor)
-    eyes = np.array([camera.T_world_camera[:3, 3] for camera in list(rig.cameras.values()) + candidates])
-    reach = float(np.abs(eyes[:, :2]).max()) + max(_far_end(camera) for camera in candidates)
-    ground = Box.from_bounds([-reach, -reach, result.floor - 0.05], [reach, reach, result.floor])
+    target, candidates = candidate_cameras(rig, robot, poses, result.floor)
+    ground = floor_box(list(rig.cameras.values()) + candidates, result.floor)
     silhouette = RobotSilhouette(robot, geometry="meshes", padding=0.0)
     best, best_count = None, -1
     for camera in candidates:
@@ -509,9 +508,8 @@ def suggest_camera(rig, robot, poses, result: "Coverage") -> "Suggestion | None"
                 count += int(np.count_nonzero(sees_past(camera, depth, samples, result.spacing)))
         if count > best_count:
             best, best_count = camera, count
-    eye = best.T_world_camera[:3, 3].copy()
-    target = np.mean([robot.control_point_positions(robot.joint_vector(q)) for _, q in poses], axis=(0, 1))
-    return Suggestion(camera=best, eye=eye, target=target, sees_past=best_count / total, tried=len(candidates))
+    return Suggestion(camera=best, eye=best.T_world_camera[:3, 3].copy(), target=target,
+                      sees_past=best_count / total, tried=len(candidates))
 
 
 # ---------------------------------------------------------------------------------------------------- picture

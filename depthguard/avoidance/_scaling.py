@@ -178,7 +178,9 @@ class SpeedScaling:
     def _near_never_seen(self, point: np.ndarray, distance: float) -> bool:
         """Whether space the memory has never seen free lies within ``distance`` (metres, the detectable distance
         of the limiting point, world frame) of ``point``, give or take the diagonal of a memory voxel."""
-        if self.memory is None or not math.isfinite(distance):
-            return self.memory is not None and self.memory.time is None
+        if self.memory is None:
+            return False
+        if not math.isfinite(distance):  # nothing within reach: only a memory that has seen nothing is starting
+            return self.memory.time is None
         reach = distance + self.memory.box.voxel * math.sqrt(3.0)
         return bool(voxels_within(self.memory.never_seen, self.memory.box, point[None], np.array([reach]))[0])
