@@ -29,10 +29,17 @@ query, the rest in the memory.
 ``--ideal-only`` (with ``--ideal-spacing 0.02``) runs only the ideal rows, on a finer grid: the layer the noise
 margins leave round the links is 2-4 cm thick, and a 4 cm grid samples little of it (the ideal with noise margins:
 scenario_b 57.3 % at 4 cm, 85.6 % at 2 cm; scenario_b_four 0.0 %, 65.7 %). About 13 minutes per ideal and scene at
-2 cm; with one ``--scene``, the figures go to a file of that scene's own.
+2 cm. With one ``--scene`` (any rows), the figures go to a file of that scene's own.
 
 ``--voxel 0.01`` is a diagnosis too: the memory alone at a finer voxel (1 cm costs about a second a set), to show
 whether finer voxels next to the robot would change the answers.
+
+``--ideal-meshes`` measures the ideal's distances to every possibly-occupied point outside the robot's meshes (the
+issue's definition: the robot's exact volume, nothing more, given to the robot), instead of outside the padded
+capsules.
+
+``--zone 0.08`` is a diagnosis too: the memory with a robot zone of that thickness as well (a flagged concession,
+not a default): how much of what is left lies right next to the padded capsules.
 
 ``--exact`` is a diagnosis, not a layout: the simulation's noise-free frames, cameras without a noise margin (and
 without the sensor's dropouts), to show what the noise margin alone costs the memory next to the robot; with
@@ -86,7 +93,8 @@ def fed_with(monitor, ideal: IdealMemory) -> None:
 
 
 def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_spacing: float = 0.04,
-          fed: bool = False, voxels: list | None = None, ideal_only: bool = False) -> dict:
+          fed: bool = False, voxels: list | None = None, ideal_only: bool = False, zones: list | None = None,
+          meshes: bool = False) -> dict:
     """configuration -> (far pairs, below rho, end-effector far, below rho, remembered answers, largest excess in
     metres, seconds per set, per measured frame the memory's certified shares by band (:func:`certified_by_band`),
     and how many of the far pairs read below rho carry each flag)."""
@@ -98,8 +106,11 @@ def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_
     rig = noise_free(workcell.rig) if exact else workcell.rig
     configurations = {} if ideal_only else CONFIGURATIONS if not voxels else \
         {f"memory {v * 100:g} cm": dict(memory=True, memory_voxel=v) for v in voxels}
+    if zones and not ideal_only:  # a diagnosis: the robot zone's concession on top of the memory
+        configurations = {**configurations, **{f"mem.+zone {z * 100:g} cm": dict(memory=True, robot_zone=z)
+                                               for z in zones}}
     monitors = {name: dg.DistanceMonitor(rig, **options, **extra) for name, extra in configurations.items()}
-    ideals = {} if exact or voxels else {name: IdealMemory(workcell, spacing=ideal_spacing, noise_margin=noisy)
+    ideals = {} if exact or voxels or zones else {name: IdealMemory(workcell, spacing=ideal_spacing, noise_margin=noisy)
                                for name, noisy in IDEALS.items()}
     if fed:  # the fused query given the ideal memory's free space (with the noise margins)
         monitors = {"fed the ideal": dg.DistanceMonitor(rig, **options, memory=True)}
@@ -123,7 +134,8 @@ def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_
             ideal.update(frame.time, frame.joints, frame.depth_exact, frame.label)
             if not ask:
                 continue
-            reported, kinds = ideal.distances(points, robot.capsules_world(frame.joints), fw.RHO)
+            conceded = [] if meshes else robot.capsules_world(frame.joints)
+            reported, kinds = ideal.distances(points, conceded, fw.RHO)
             row = out[name]
             row[0] += int(far.sum())
             row[1] += int((far & (reported < fw.RHO)).sum())
@@ -202,6 +214,10 @@ def main() -> None:
                         help="only the ideal rows (with --ideal-spacing 0.02: the noise margins' layer sampled finer)")
     parser.add_argument("--voxel", type=float, action="append",
                         help="a diagnosis: only the memory at this voxel side (metres; repeatable), no ideal rows")
+    parser.add_argument("--zone", type=float, action="append",
+                        help="a diagnosis: also the memory with this robot zone (metres; repeatable), no ideal rows")
+    parser.add_argument("--ideal-meshes", action="store_true",
+                        help="the ideal's distances from the robot's meshes (the padded capsules not the robot's)")
     args = parser.parse_args()
     names = args.scene or ["scenario_b.yaml", "scenario_b_four.yaml"]
     bands = "  ".join(f"{lo * 100:g}-{hi * 100:g} cm" for lo, hi in zip(BANDS[:-1], BANDS[1:]))
@@ -210,11 +226,12 @@ def main() -> None:
           f"padded capsules: {bands}")
     for path in fw.scene_paths(tuple(names)):
         rows = probe(path, args.step, args.exact, args.calibrated, args.ideal_spacing, args.fed,
-                     args.voxel, args.ideal_only).items()
+                     args.voxel, args.ideal_only, args.zone, args.ideal_meshes).items()
         for name, (far, below, ee_far, ee_below, kept, excess, seconds, shares, flags) in rows:
             certified = "  ".join(f"{share:9.1%}" for share in np.mean(shares, axis=0)) if shares else "-"
             label = path.stem + (" exact" if args.exact else "") + (" calibrated" if args.calibrated else "") + \
-                (f" {args.ideal_spacing * 100:g} cm" if args.ideal_only else "")
+                (f" {args.ideal_spacing * 100:g} cm" if args.ideal_only else "") + \
+                (" meshes" if args.ideal_meshes else "")
             print(f"{label:22s} {name:14s} {below:>6d}/{far:<5d} {below / max(far, 1):6.1%} "
                   f"{ee_below:>5d}/{ee_far:<5d} {kept:10d} {excess * 1e3:+11.1f} mm "
                   f"{np.median(seconds) * 1e3 if seconds else np.nan:10.1f}   {certified}", flush=True)
@@ -228,8 +245,9 @@ if __name__ == "__main__":
 
     diagnosis = ("_exact" * ("--exact" in sys.argv) + "_calibrated" * ("--calibrated" in sys.argv)
                  + "_fed" * ("--fed" in sys.argv) + "_voxel" * ("--voxel" in sys.argv)
-                 + "_ideal" * ("--ideal-only" in sys.argv))
-    if "--ideal-only" in sys.argv and sys.argv.count("--scene") == 1:  # one figures file per scene
+                 + "_ideal" * ("--ideal-only" in sys.argv) + "_zone" * ("--zone" in sys.argv)
+                 + "_meshes" * ("--ideal-meshes" in sys.argv))
+    if sys.argv.count("--scene") == 1:  # one --scene: that scene's own figures file (the default file holds both)
         diagnosis += "_" + Path(sys.argv[sys.argv.index("--scene") + 1]).stem
     with report(__file__, name=f"probe_memory_robot{diagnosis}" if diagnosis else None):
         main()

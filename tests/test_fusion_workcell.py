@@ -256,3 +256,19 @@ def test_the_packaged_layouts_differ_only_where_they_say():
         a, b = dict(a), dict(b)
         assert b.pop("noise") == {"a": 0.001, "b": 0.0, "c": 0.0005, "k": 3.0} != a.pop("noise")
         assert a == b
+
+
+def test_the_three_camera_layout_is_scenario_b_with_the_suggested_camera():
+    """scenario_b_three.yaml is scenario_b.yaml with one more camera of the principal's model, where `coverage
+    --suggest` places it for scenario B's rig (probe_coverage_suggest.md: (-1.78, 1.18, 0.90)), and nothing else."""
+    from depthguard_lab.simulation import default_workcell
+
+    three = dict(load_workcell(fw.scene_paths(("scenario_b_three.yaml",))[0]).scene)
+    reference = dict(default_workcell().scene)
+    ref_cams, cams = reference.pop("cameras"), three.pop("cameras")
+    assert three == reference
+    assert cams[:2] == ref_cams and [c["name"] for c in cams] == ["principal", "second", "third"]
+    third, principal = dict(cams[2]), dict(ref_cams[0])
+    assert third.pop("look_at")["eye"] == [-1.78, 1.18, 0.90]
+    for key in ("width", "height", "fx", "fy", "cx", "cy", "depth_range", "noise"):
+        assert third[key] == principal[key]
