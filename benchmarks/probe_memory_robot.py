@@ -38,6 +38,10 @@ whether finer voxels next to the robot would change the answers.
 issue's definition: the robot's exact volume, nothing more, given to the robot), instead of outside the padded
 capsules.
 
+``--ideal-measured`` (with ``--ideal-only``) runs one ideal on the frames as the cameras measured them (the
+simulated sensor's noise and dropouts; a dropout sees nothing free) less each camera's noise margin, point by
+point: what the frames themselves allow, before the project's footprints, pads, cells and calibration margin.
+
 ``--zone 0.08`` is a diagnosis too: the memory with a robot zone of that thickness as well (a flagged concession,
 not a default): how much of what is left lies right next to the padded capsules.
 
@@ -94,7 +98,7 @@ def fed_with(monitor, ideal: IdealMemory) -> None:
 
 def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_spacing: float = 0.04,
           fed: bool = False, voxels: list | None = None, ideal_only: bool = False, zones: list | None = None,
-          meshes: bool = False) -> dict:
+          meshes: bool = False, measured: bool = False) -> dict:
     """configuration -> (far pairs, below rho, end-effector far, below rho, remembered answers, largest excess in
     metres, seconds per set, per measured frame the memory's certified shares by band (:func:`certified_by_band`),
     and how many of the far pairs read below rho carry each flag)."""
@@ -112,6 +116,8 @@ def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_
     monitors = {name: dg.DistanceMonitor(rig, **options, **extra) for name, extra in configurations.items()}
     ideals = {} if exact or voxels or zones else {name: IdealMemory(workcell, spacing=ideal_spacing, noise_margin=noisy)
                                for name, noisy in IDEALS.items()}
+    if measured and ideals:  # the ideal on the frames as the cameras measured them
+        ideals = {"ideal, measured": IdealMemory(workcell, spacing=ideal_spacing, noise_margin=True, measured=True)}
     if fed:  # the fused query given the ideal memory's free space (with the noise margins)
         monitors = {"fed the ideal": dg.DistanceMonitor(rig, **options, memory=True)}
         fed_with(monitors["fed the ideal"], ideals["ideal, noise"])
@@ -125,13 +131,16 @@ def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_
         ask = frame.index in measured
         frames = {name: dg.depth_image(depth, rig.cameras[name], timestamp=frame.time)
                   for name, depth in frame.depth_exact.items()} if exact else dict(frame.depth)
+        measured_depths = {name: np.nan_to_num(np.asarray(image.metres(), dtype=np.float64), nan=0.0)
+                           for name, image in frame.depth.items()} if measured else None
         if ask:
             truth = np.minimum(frame.truth.distance, scene_distance(background, points))
             depth = np.maximum(principal.world_to_camera(points)[:, 2], 0.1)
             tolerance = 2.5 * (depth + fw.RHO) / principal.fx + 1e-3
             far = truth >= fw.RHO + USEFUL_MARGIN
         for name, ideal in ideals.items():
-            ideal.update(frame.time, frame.joints, frame.depth_exact, frame.label)
+            ideal.update(frame.time, frame.joints, measured_depths if ideal.measured else frame.depth_exact,
+                         frame.label)
             if not ask:
                 continue
             conceded = [] if meshes else robot.capsules_world(frame.joints)
@@ -218,6 +227,8 @@ def main() -> None:
                         help="a diagnosis: also the memory with this robot zone (metres; repeatable), no ideal rows")
     parser.add_argument("--ideal-meshes", action="store_true",
                         help="the ideal's distances from the robot's meshes (the padded capsules not the robot's)")
+    parser.add_argument("--ideal-measured", action="store_true",
+                        help="with --ideal-only: one ideal on the frames as measured (noise, dropouts) less the margin")
     args = parser.parse_args()
     names = args.scene or ["scenario_b.yaml", "scenario_b_four.yaml"]
     bands = "  ".join(f"{lo * 100:g}-{hi * 100:g} cm" for lo, hi in zip(BANDS[:-1], BANDS[1:]))
@@ -226,7 +237,7 @@ def main() -> None:
           f"padded capsules: {bands}")
     for path in fw.scene_paths(tuple(names)):
         rows = probe(path, args.step, args.exact, args.calibrated, args.ideal_spacing, args.fed,
-                     args.voxel, args.ideal_only, args.zone, args.ideal_meshes).items()
+                     args.voxel, args.ideal_only, args.zone, args.ideal_meshes, args.ideal_measured).items()
         for name, (far, below, ee_far, ee_below, kept, excess, seconds, shares, flags) in rows:
             certified = "  ".join(f"{share:9.1%}" for share in np.mean(shares, axis=0)) if shares else "-"
             label = path.stem + (" exact" if args.exact else "") + (" calibrated" if args.calibrated else "") + \
@@ -235,7 +246,8 @@ def main() -> None:
             print(f"{label:22s} {name:14s} {below:>6d}/{far:<5d} {below / max(far, 1):6.1%} "
                   f"{ee_below:>5d}/{ee_far:<5d} {kept:10d} {excess * 1e3:+11.1f} mm "
                   f"{np.median(seconds) * 1e3 if seconds else np.nan:10.1f}   {certified}", flush=True)
-            print(f"{'':37s} {'where the nearest possibly-occupied point lies' if name in IDEALS else 'flags'} of those below rho: "
+            why = "where the nearest possibly-occupied point lies" if name.startswith("ideal") else "flags"
+            print(f"{'':37s} {why} of those below rho: "
                   f"{', '.join(f'{k} {v}' for k, v in sorted(flags.items(), key=lambda x: -x[1])) or 'none'}")
 
 
@@ -246,7 +258,7 @@ if __name__ == "__main__":
     diagnosis = ("_exact" * ("--exact" in sys.argv) + "_calibrated" * ("--calibrated" in sys.argv)
                  + "_fed" * ("--fed" in sys.argv) + "_voxel" * ("--voxel" in sys.argv)
                  + "_ideal" * ("--ideal-only" in sys.argv) + "_zone" * ("--zone" in sys.argv)
-                 + "_meshes" * ("--ideal-meshes" in sys.argv))
+                 + "_meshes" * ("--ideal-meshes" in sys.argv) + "_measured" * ("--ideal-measured" in sys.argv))
     if sys.argv.count("--scene") == 1:  # one --scene: that scene's own figures file (the default file holds both)
         diagnosis += "_" + Path(sys.argv[sys.argv.index("--scene") + 1]).stem
     with report(__file__, name=f"probe_memory_robot{diagnosis}" if diagnosis else None):

@@ -1,6 +1,7 @@
 """The lab's ideal memory (issue 35's bound, ``depthguard_lab.experiments.ideal_memory``) does what its docstring
 says on scenario B's first frame: the robot's inside and what a camera's exact ray passes are never possibly
-occupied, everything else is at start-up, and with the cameras blind the possibly-occupied space grows at v_max."""
+occupied (on the measured frames: what the measured ray passes, a dropout passing nothing), everything else is at
+start-up, and with the cameras blind the possibly-occupied space grows at v_max."""
 
 import numpy as np
 import pytest
@@ -17,30 +18,41 @@ def start():
     return workcell, frame
 
 
-def exact_seen(ideal, workcell, frame, noise_margin):
-    """The grid points some camera's exact ray passes before its first surface (less the noise margin)."""
+def measured_depths(frame):
+    """Each camera's frame as the simulated sensor measured it: metres, 0 where it measured nothing."""
+    return {name: np.nan_to_num(np.asarray(image.metres(), dtype=np.float64), nan=0.0)
+            for name, image in frame.depth.items()}
+
+
+def exact_seen(ideal, workcell, frame, noise_margin, measured=False):
+    """The grid points some camera's exact ray passes before its first surface (less the noise margin); with
+    ``measured``, its measured depth (noise, dropouts), where a pixel without a measurement sees nothing."""
     seen = np.zeros(len(ideal.points), bool)
+    depths = measured_depths(frame) if measured else frame.depth_exact
     for name, camera in workcell.rig.cameras.items():
-        depth = frame.depth_exact[name]
+        depth = depths[name]
         local = camera.world_to_camera(ideal.points)
         z = local[:, 2]
         u = np.rint(camera.fx * local[:, 0] / np.maximum(z, 1e-9) + camera.cx)
         v = np.rint(camera.fy * local[:, 1] / np.maximum(z, 1e-9) + camera.cy)
         for p in np.flatnonzero((z > 1e-3) & (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)):
             d = float(depth[int(v[p]), int(u[p])])
-            reach = np.inf if d == 0.0 else d - (float(camera.noise.margin(d)) if noise_margin else 0.0)
+            reach = (0.0 if measured else np.inf) if d == 0.0 else \
+                d - (float(camera.noise.margin(d)) if noise_margin else 0.0)
             seen[p] |= z[p] < reach
     return seen.reshape(ideal.shape)
 
 
-@pytest.mark.parametrize("noise_margin", [False, True])
-def test_the_ideal_memory_at_start_up_and_blind(start, noise_margin):
+@pytest.mark.parametrize("noise_margin, measured", [(False, False), (True, False), (True, True)])
+def test_the_ideal_memory_at_start_up_and_blind(start, noise_margin, measured):
     workcell, frame = start
-    ideal = IdealMemory(workcell, spacing=0.1, noise_margin=noise_margin)
-    ideal.update(frame.time, frame.joints, frame.depth_exact, frame.label)
+    ideal = IdealMemory(workcell, spacing=0.1, noise_margin=noise_margin, measured=measured)
+    ideal.update(frame.time, frame.joints, measured_depths(frame) if measured else frame.depth_exact, frame.label)
     robot = ideal.inside_robot(frame.joints)
-    seen = exact_seen(ideal, workcell, frame, noise_margin)
+    seen = exact_seen(ideal, workcell, frame, noise_margin, measured)
     assert robot.sum() >= 3 and 0.3 < seen.mean() < 0.99  # the test says something
+    if measured:  # the sensor's dropouts see nothing free: fewer points seen than on the exact frames
+        assert seen.sum() < exact_seen(ideal, workcell, frame, noise_margin).sum()
     assert not np.any(ideal.possibly & (robot | ideal.solid))
     # Seen free now is not possibly occupied, unless a camera sees a surface that is not the robot's in that cell.
     assert not np.any(ideal.possibly & seen & ~ideal.surfaces) and np.mean(ideal.surfaces[seen]) < 0.1

@@ -45,12 +45,15 @@ class IdealMemory:
         spacing: grid spacing, metres.
         noise_margin: subtract each camera's noise margin from its exact depths (else none).
         v_max: metres/second (``config.FREESPACE_V_MAX``).
+        measured: the depths given to :meth:`update` are the simulated sensor's frames (noise and dropouts), not the
+            exact renders: a pixel without a measurement (0) sees nothing free, rather than everything.
     """
 
     def __init__(self, workcell, spacing: float = SPACING, noise_margin: bool = False,
-                 v_max: float = config.FREESPACE_V_MAX):
+                 v_max: float = config.FREESPACE_V_MAX, measured: bool = False):
         lo, hi = (np.asarray(c, dtype=np.float64) for c in workcell.rig.workspace)
         self.spacing, self.v_max, self.noise_margin = float(spacing), float(v_max), bool(noise_margin)
+        self.measured = bool(measured)
         self.shape = tuple(int(n) for n in np.maximum(np.floor((hi - lo) / spacing), 1))
         self.lo = lo
         axes = [lo[i] + (np.arange(self.shape[i]) + 0.5) * spacing for i in range(3)]
@@ -88,8 +91,9 @@ class IdealMemory:
         return out.reshape(self.shape)
 
     def update(self, time: float, joints, depth_exact: dict, labels: dict) -> None:
-        """Take in one frame: its time (seconds), joints, each camera's exact depth ((h, w) metres, 0 = nothing)
-        and label image ((h, w), indices into the workcell's labels)."""
+        """Take in one frame: its time (seconds), joints, each camera's exact depth ((h, w) metres, 0 = nothing;
+        with ``measured``, its measured depth, 0 = no measurement) and label image ((h, w), indices into the
+        workcell's labels)."""
         seen = np.zeros(len(self.points), dtype=bool)
         surfaces = np.zeros(len(self.points), dtype=bool)
         for name, camera in self.cameras.items():
@@ -104,7 +108,8 @@ class IdealMemory:
             v[front] = np.rint(camera.fy * local[front, 1] / z[front] + camera.cy).astype(np.int64)
             inside = front & (u >= 0) & (u < w) & (v >= 0) & (v < h)
             d = depth[v[inside], u[inside]]
-            reach = np.where(d > 0.0, d - (camera.noise.margin(d) if self.noise_margin else 0.0), np.inf)
+            reach = np.where(d > 0.0, d - (camera.noise.margin(d) if self.noise_margin else 0.0),
+                             0.0 if self.measured else np.inf)
             seen[np.flatnonzero(inside)[z[inside] < reach]] = True
             # what this camera sees that is not the robot: a surface is there now
             label = np.asarray(labels[name])
