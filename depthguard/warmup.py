@@ -118,8 +118,14 @@ def warm_up(progress=None, processes: int | None = None) -> WarmupReport:
                         processes=processes)
 
 
+#: Whether this process is one of the warm-up's pool (:func:`_run_workload`), not the process that asked for it.
+_IN_POOL = False
+
+
 def _run_workload(index: int) -> list[Compile]:
     """Run workload ``index`` of :data:`WORKLOADS` (in a process of the warm-up's pool): the compiles it made."""
+    global _IN_POOL
+    _IN_POOL = True
     with jit.quiet_compiles(), CompileRecorder() as recorder:
         WORKLOADS[index]()
     return recorder.compiles
@@ -251,9 +257,11 @@ def _memory_and_detectable() -> None:
     for k, (stamped, pts) in enumerate(_stamped_sets(rig, frames, (one, several))):
         prepared = remembering.prepare_set(stamped, now=0.1 * k)
         prepared.detectable_distances(pts)
-        # Its fused queries last: the fused kernels, which _fusion compiles (without the memory's kernels, compiled
-        # here only), are in the cache by then.
-        prepared.query(pts, now=0.1 * k)
+        # Its fused queries: the fused kernels, which _fusion compiles (the memory's kernels are compiled here
+        # only). In the pool they are left to the pass that follows it in the asking process, which loads them
+        # from the cache: here they would be compiled a second time (about 20 s) while _fusion compiles them.
+        if not _IN_POOL:
+            prepared.query(pts, now=0.1 * k)
     voxels_within(np.ones(box.shape, dtype=bool), box, several, np.full(len(several), 0.2))
     # Where a ball of the detection capability fits (SSM), with the robot's and a solid's voxels free.
     from depthguard.freespace import DetectableSpace, VoxelBox, robot_voxels, solid_voxels
