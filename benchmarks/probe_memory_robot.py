@@ -60,7 +60,7 @@ import numpy as np
 
 import depthguard as dg
 from depthguard_lab.experiments import fusion_workcell as fw
-from depthguard_lab.experiments.ideal_memory import IdealMemory
+from depthguard_lab.experiments.ideal_memory import IdealMemory, measured_depths
 from depthguard_lab.experiments.workcell import scene_distance
 from depthguard_lab.simulation import load_workcell, simulate
 from _common import report
@@ -131,16 +131,14 @@ def probe(path, step: int, exact: bool = False, calibrated: bool = False, ideal_
         ask = frame.index in measured
         frames = {name: dg.depth_image(depth, rig.cameras[name], timestamp=frame.time)
                   for name, depth in frame.depth_exact.items()} if exact else dict(frame.depth)
-        measured_depths = {name: np.nan_to_num(np.asarray(image.metres(), dtype=np.float64), nan=0.0)
-                           for name, image in frame.depth.items()} if measured else None
+        depths = measured_depths(frame.depth) if measured else None
         if ask:
             truth = np.minimum(frame.truth.distance, scene_distance(background, points))
             depth = np.maximum(principal.world_to_camera(points)[:, 2], 0.1)
             tolerance = 2.5 * (depth + fw.RHO) / principal.fx + 1e-3
             far = truth >= fw.RHO + USEFUL_MARGIN
         for name, ideal in ideals.items():
-            ideal.update(frame.time, frame.joints, measured_depths if ideal.measured else frame.depth_exact,
-                         frame.label)
+            ideal.update(frame.time, frame.joints, depths if ideal.measured else frame.depth_exact, frame.label)
             if not ask:
                 continue
             conceded = [] if meshes else robot.capsules_world(frame.joints)

@@ -45,19 +45,16 @@ RANK = {"beyond": 0, "beyond, within the margins": 1, "in front": 2, "no depth":
 def ray_view(camera, depth: np.ndarray, labels: np.ndarray, names: list, q: np.ndarray) -> tuple[str, bool, float]:
     """(what camera's frame shows along its ray through the world point q, whether that surface is the robot,
     metres measured beyond q (nan without a measurement))."""
-    local = camera.world_to_camera(q[None])[0]
-    if local[2] <= 0.0:
+    x, y, z_q = (float(c[0]) for c in camera.project(camera.world_to_camera(q[None])))
+    if not (z_q > 0.0 and -0.5 <= x < camera.width - 0.5 and -0.5 <= y < camera.height - 0.5):
         return "outside", False, np.nan
-    u = int(round(camera.fx * local[0] / local[2] + camera.cx))
-    v = int(round(camera.fy * local[1] / local[2] + camera.cy))
-    if not (0 <= u < camera.width and 0 <= v < camera.height):
-        return "outside", False, np.nan
+    u, v = int(round(x)), int(round(y))
     z = float(depth[v, u])
     label = int(labels[v, u])
     robot = label >= 0 and names[label][0].startswith("robot/")
     if not np.isfinite(z) or z <= 0.0:
         return "no depth", robot, np.nan
-    beyond = z - local[2]
+    beyond = z - z_q
     if beyond <= 0.0:
         return "in front", robot, beyond
     margin = float(camera.noise.margin(np.array([z]))[0]) + config.DEFAULT_FUSION_MARGIN

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from depthguard_lab.experiments import fusion_workcell as fw
-from depthguard_lab.experiments.ideal_memory import IdealMemory
+from depthguard_lab.experiments.ideal_memory import IdealMemory, measured_depths
 from depthguard_lab.simulation import load_workcell, simulate
 
 
@@ -18,17 +18,11 @@ def start():
     return workcell, frame
 
 
-def measured_depths(frame):
-    """Each camera's frame as the simulated sensor measured it: metres, 0 where it measured nothing."""
-    return {name: np.nan_to_num(np.asarray(image.metres(), dtype=np.float64), nan=0.0)
-            for name, image in frame.depth.items()}
-
-
 def exact_seen(ideal, workcell, frame, noise_margin, measured=False):
     """The grid points some camera's exact ray passes before its first surface (less the noise margin); with
     ``measured``, its measured depth (noise, dropouts), where a pixel without a measurement sees nothing."""
     seen = np.zeros(len(ideal.points), bool)
-    depths = measured_depths(frame) if measured else frame.depth_exact
+    depths = measured_depths(frame.depth) if measured else frame.depth_exact
     for name, camera in workcell.rig.cameras.items():
         depth = depths[name]
         local = camera.world_to_camera(ideal.points)
@@ -47,7 +41,8 @@ def exact_seen(ideal, workcell, frame, noise_margin, measured=False):
 def test_the_ideal_memory_at_start_up_and_blind(start, noise_margin, measured):
     workcell, frame = start
     ideal = IdealMemory(workcell, spacing=0.1, noise_margin=noise_margin, measured=measured)
-    ideal.update(frame.time, frame.joints, measured_depths(frame) if measured else frame.depth_exact, frame.label)
+    depths = measured_depths(frame.depth) if measured else frame.depth_exact
+    ideal.update(frame.time, frame.joints, depths, frame.label)
     robot = ideal.inside_robot(frame.joints)
     seen = exact_seen(ideal, workcell, frame, noise_margin, measured)
     assert robot.sum() >= 3 and 0.3 < seen.mean() < 0.99  # the test says something

@@ -37,6 +37,14 @@ SPACING = 0.03
 ROBOT_PITCH = 0.005
 
 
+def measured_depths(frames: dict) -> dict:
+    """Camera name -> (h, w) float64 metres, 0 where the camera measured nothing: ``frames`` (camera name ->
+    :class:`depthguard.depth.DepthImage`, as the simulated sensor made them) in the form :meth:`IdealMemory.update`
+    takes with ``measured``."""
+    return {name: np.nan_to_num(np.asarray(image.metres(), dtype=np.float64), nan=0.0)
+            for name, image in frames.items()}
+
+
 class IdealMemory:
     """SPEC §8a's memory on exact geometry, for one simulated workcell (:func:`depthguard_lab.simulation.load_workcell`).
 
