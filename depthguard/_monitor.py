@@ -213,6 +213,11 @@ class DistanceMonitor:
             capsules = [[tuple(c.p0) + tuple(c.p1) + (c.radius,) for c in self.robot.capsules_world(q, check=False)]
                         for q in joints.values()]
             robot = (np.array(capsules, dtype=np.float64).reshape(len(capsules), -1, 7), self.robot_zone)
+        elif self.robot is not None and joints:
+            # design §8a's Robot_k: the robot's own volume at every frame's joints holds no person (capsules inside
+            # the links' meshes, never their padding); the truth, not a concession
+            inner = [self.robot.inner_capsules_world(q, check=False) for q in joints.values()]
+            robot = (np.ascontiguousarray(np.stack(inner)), 0.0)
         remembered = None
         if self.memory is not None and self.memory.time is not None:
             times = [state.occupancy.timestamp for state in states if state.occupancy.timestamp is not None]

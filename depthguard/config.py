@@ -97,9 +97,14 @@ CAPSULE_GAP_CONFIGURATIONS = 4
 CAPSULE_GAP_MESH_SAMPLES = 300_000
 CAPSULE_GAP_SURFACE_SAMPLES = 4000
 CAPSULE_GAP_SEED = 20261126
-#: Metres between the samples of a link's capsule axis at which the robot's inner volume is found (balls inside the
-#: link's mesh, RobotModel.inner_capsules_world; design §8a's Robot_k).
-INNER_CAPSULE_STEP = 0.01
+#: The robot's inner volume (RobotModel.inner_capsules_world; design §8a's Robot_k) as balls inside each link's mesh
+#: (depthguard.robots._inner.inner_balls): the grid of candidate centres (metres), the most balls a link, the voxel
+#: side they are chosen to hold wholly (metres: the detectable space's and the memory's pieces, 1 cm), and the spacing
+#: of the surface samples (metres) that bound each centre's distance to the mesh.
+INNER_BALL_SPACING = 0.01
+INNER_BALLS = 64
+INNER_BALL_COVER_VOXEL = 0.01
+INNER_SURFACE_SAMPLE = 0.0015
 
 #: The default robot's 9 control points (the papers' count: Flacco et al. 2015 section 5, 2016 section VIII), as
 #: (name, link, offset (3,) metres in the link frame). They lie on the arm's centre line about 0.1 m apart: three on

@@ -345,7 +345,8 @@ def test_a_watched_space_gives_the_whole_masks_answers_bit_for_bit(zone, monkeyp
     twin computes every voxel of the box with the whole-box kernels (FreeSources.mask, then update): every distance,
     with and without a limit, at the robot's control points and anywhere in the box, and every voxel of E_vox agree
     exactly, so the speed-up clears nothing the twin keeps. Four cameras of scenario B, known solids, the memory,
-    and with a robot zone the robot's capsules at two joint sets (frames captured at different joints)."""
+    the robot's inside, and with a robot zone the robot's capsules at two joint sets (frames captured at different
+    joints)."""
     import depthguard as dg
 
     if zone:  # the mechanism only (with the iiwa's capsules any zone makes d = 4 cm refused, see above)
@@ -364,7 +365,8 @@ def test_a_watched_space_gives_the_whole_masks_answers_bit_for_bit(zone, monkeyp
         space = monitor.prepare_set(frame.depth, camera_joints=joints, now=t).detectable
         sources = space._watched[0]
         assert sources.views.count == 4 and sources.static is not None
-        assert (sources.robot is not None) == bool(zone) and sources.remembered is not None
+        # with a zone the padded capsules grown by it, without one the robot's inside (Robot_k, design §8a)
+        assert sources.robot is not None and sources.robot[1] == zone and sources.remembered is not None
         remembered += int(sources.remembered[0].sum())
         if zone:
             assert sources.robot[0].shape[0] == 2

@@ -324,8 +324,8 @@ def certify_mixed_voxels(lo, voxel, candidates, poses, intrinsics, z_near, sizes
     optical (rotation rows, translation in metres); intrinsics (n, 4) float64, fx, fy, cx, cy, pixels; z_near (n,)
     float64, metres, the nearest depth a corner may have; sizes (n, 2) width, height; tables (n, levels, >= w, >= h)
     float32, metres, each free image's row-minimum table (:func:`row_min_tables`). A voxel's capsules are those whose
-    segment passes within their radius plus half the voxel's diagonal of its centre (at most 64 are looked at: a
-    voxel with more is judged by its first 64, which can only pass fewer pieces)."""
+    segment passes within their radius plus half the voxel's diagonal of its centre (at most 256 are looked at: a
+    voxel with more is judged by its first 256, which can only pass fewer pieces)."""
     n_cameras = poses.shape[0]
     n = np.int64(1) << levels
     half_diagonal = 0.5 * np.sqrt(3.0) * voxel
@@ -336,11 +336,11 @@ def certify_mixed_voxels(lo, voxel, candidates, poses, intrinsics, z_near, sizes
         cx = lo[0] + (i + 0.5) * voxel
         cy = lo[1] + (j + 0.5) * voxel
         cz = lo[2] + (k + 0.5) * voxel
-        near = np.empty(64, dtype=np.int64)
+        near = np.empty(256, dtype=np.int64)
         n_near = 0
         for c in range(capsules.shape[0]):
             reach = capsules[c, 6] + half_diagonal
-            if _segment_distance2(cx, cy, cz, capsules, c) < reach * reach and n_near < 64:
+            if _segment_distance2(cx, cy, cz, capsules, c) < reach * reach and n_near < 256:
                 near[n_near] = c
                 n_near += 1
         world = np.empty((8, 3))

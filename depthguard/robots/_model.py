@@ -593,9 +593,9 @@ class RobotModel:
     def inner_capsules_world(self, q, *, check: bool = True) -> np.ndarray:
         """(k, 7) float64, metres, world frame: capsules (p0 (3), p1 (3), radius) that lie inside the robot's collision
         meshes at ``q``, never in their padding: the robot's own volume, where no person can be (design §8a's
-        Robot_k). Along each link's capsule axis, every ``config.INNER_CAPSULE_STEP`` metres, the balls and capsules
-        that fit in the link's mesh with its open ends closed (:mod:`depthguard.robots._inner`); found once per model
-        and cached. A link whose mesh they cannot close adds none."""
+        Robot_k). Balls (p0 = p1), up to ``config.INNER_BALLS`` a link, that fit in the link's mesh with its open ends
+        closed (:func:`depthguard.robots._inner.inner_balls`); found once per model and cached. A link whose mesh the
+        fans cannot close adds none."""
         radii, anchors = self._inner_capsules()
         out = np.empty((len(radii), 7))
         if len(radii):
@@ -606,14 +606,16 @@ class RobotModel:
         return out
 
     def _inner_capsules(self) -> tuple[np.ndarray, "_Anchors"]:
-        from depthguard.robots._inner import inner_capsules
+        from depthguard.robots._inner import inner_balls
 
         key = (str(self.urdf_path), tuple((c.link, tuple(c.p0), tuple(c.p1), c.radius) for c in self.capsules))
         with _GAP_LOCK:
             if key not in _INNER_CAPSULES:
+                cover = 0.5 * math.sqrt(3.0) * config.INNER_BALL_COVER_VOXEL
                 pieces = [piece for capsule in self.capsules
-                          for piece in inner_capsules(self.collision_meshes[capsule.link], capsule,
-                                                      config.INNER_CAPSULE_STEP)]
+                          for piece in inner_balls(self.collision_meshes[capsule.link], capsule.link,
+                                                   config.INNER_BALL_SPACING, config.INNER_BALLS, cover,
+                                                   config.INNER_SURFACE_SAMPLE)]
                 anchors = self._kinematics.anchors([c.link for c in pieces for _ in (0, 1)],
                                                    [end for c in pieces for end in (c.p0, c.p1)])
                 _INNER_CAPSULES[key] = (np.array([c.radius for c in pieces], dtype=np.float64), anchors)
