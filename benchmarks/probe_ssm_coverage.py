@@ -6,8 +6,9 @@ prints, per layout, that distance for every control point and the nearest possib
 ``min`` answer: the point minus distance times direction), so that what stands in the way can be read off; what those
 answers may hide next to a surface (``DistanceMonitor.query_hidden_band``: SSM on them is refused above ISO 13855's
 70 mm); whether the detectable space with the loop's settings is allowed; and the distances SSM may use with the
-settings that are sound, ``DistanceMonitor(detection_capability=0.04)`` with no robot zone (possibly occupied regions
-thinner than the detection capability left out: ``depthguard.freespace.DetectableSpace``):
+settings that are sound, ``DistanceMonitor(detection_capability=d)`` with no robot zone (possibly occupied regions
+thinner than the detection capability left out: ``depthguard.freespace.DetectableSpace``; the robot's inside counts
+free), for d = 40 mm, and in the SSM layout also 55 and 70 mm (ISO 13855's largest; C = 8 (d - 14) mm grows with it):
 
     .venv/bin/python benchmarks/probe_ssm_coverage.py [--time 5.2] [--rho 1.5]
 
@@ -73,15 +74,15 @@ def _variant(directory: Path, name: str, ceiling: bool, wide_pedestal: bool) -> 
     return path
 
 
-def probe(path: Path, t: float, rho: float, known: bool, layout: Path | None = None):
+def probe(path: Path, t: float, rho: float, known: bool, layout: Path | None = None, capabilities=(0.04,)):
     """At time t with the person gone: (the depth grid's distances from each link's surface, its nearest possibly
-    occupied point per control point, the detectable distances from each link's surface (None when refused), what
-    the loop's settings would hide (band, why), names).
+    occupied point per control point, the detectable distances from each link's surface by detection capability
+    (metres -> (9,) metres), what the loop's settings would hide (band, why, refusal), names).
 
     The depth grid's answers use the loop's settings (robot zone 6 cm, invalid="neighbors"). SSM's detectable space
     with those settings is refused (d + the band they hide is above ISO 13855's 70 mm), so its distances here are
-    those of the settings that are sound: no robot zone, holes occupied; the robot's own body then counts as
-    possibly occupied."""
+    those of the settings that are sound: no robot zone, holes occupied; the robot's inside (Robot_k) counts free,
+    the layer between it and what the cameras see free does not."""
     workcell = load_workcell(path, layout=layout)
     robot = workcell.robot
     static = workcell.background_parts() if known else None
@@ -94,17 +95,19 @@ def probe(path: Path, t: float, rho: float, known: bool, layout: Path | None = N
         refusal = None
     except dg.InputError as error:
         refusal = str(error)
-    sound = dg.DistanceMonitor(workcell.rig, rho=rho, robot=robot, aggregate="min", static=static,
-                               detection_capability=config.SSM_DETECTION_CAPABILITY)
     q = workcell.joints_at(t)
     (frame,) = sense_at(workcell, [t])
     points = robot.control_point_positions(q)
     result = monitor.prepare_set(frame.depth, joints=q, now=t).query(points)
-    detectable = sound.prepare_set(frame.depth, joints=q, now=t).detectable_distances(points, limit=rho).distance
-    nearest = points - np.where(np.isfinite(result.distance), result.distance, 0.0)[:, None] * result.direction
     radii = robot.control_point_radii
-    return (result.distance - radii, nearest, np.maximum(detectable - radii, 0.0), (band, why, refusal),
-            list(robot.control_point_names))
+    detectable = {}
+    for d in capabilities:
+        sound = dg.DistanceMonitor(workcell.rig, rho=rho, robot=robot, aggregate="min", static=static,
+                                   detection_capability=d)
+        distance = sound.prepare_set(frame.depth, joints=q, now=t).detectable_distances(points, limit=rho).distance
+        detectable[d] = np.maximum(distance - radii, 0.0)
+    nearest = points - np.where(np.isfinite(result.distance), result.distance, 0.0)[:, None] * result.direction
+    return (result.distance - radii, nearest, detectable, (band, why, refusal), list(robot.control_point_names))
 
 
 def main(argv=None) -> None:
@@ -117,14 +120,15 @@ def main(argv=None) -> None:
             ("four+ceiling", True, False, False, None), ("four+ceiling known", True, False, True, None),
             ("four+ceiling known wide pedestal", True, True, True, None),
             ("scenario_b_ssm.yaml known (ToF noise)", False, False, True, ssm_layout)]
-    print(f"distances from the links' surfaces, metres; t = {args.time} s; "
-          f"detectable: d = {config.SSM_DETECTION_CAPABILITY * 1000:.0f} mm\n")
+    print(f"distances from the links' surfaces, metres; t = {args.time} s; detectable: the detection capability d "
+          "on each row\n")
     with tempfile.TemporaryDirectory() as tmp:
         for label, ceiling, wide, known, layout in rows:
             base = "two" if label == "two" else "four"
             path = _variant(Path(tmp), base, ceiling, wide) if layout is None else PACKAGE / "scenario_b_reach.yaml"
+            capabilities = (0.04, 0.055, 0.07) if layout is not None else (0.04,)
             distance, nearest, detectable, (band, why, refusal), names = probe(Path(str(path)), args.time,
-                                                                                 args.rho, known, layout)
+                                                                                 args.rho, known, layout, capabilities)
             worst = int(np.argmin(distance))
             print(f"{label:38s} grid       {' '.join(f'{d:5.2f}' for d in distance)}   least {distance[worst]:.2f} "
                   f"({names[worst]}), nearest possibly occupied point {np.round(nearest[worst], 2).tolist()}")
@@ -132,8 +136,9 @@ def main(argv=None) -> None:
                   f"{'refused' if band > config.SSM_INTRUSION_LIMIT else 'allowed'}")
             print(f"{'':38s} detectable with the loop's settings: "
                   f"{'refused: ' + refusal.split(': ', 1)[-1][:110] if refusal else 'allowed'}")
-            print(f"{'':38s} detectable, sound (no zone) {' '.join(f'{d:5.2f}' for d in detectable)}   least "
-                  f"{detectable.min():.2f} ({names[int(np.argmin(detectable))]})")
+            for d, row in detectable.items():
+                print(f"{'':38s} detectable, sound, d {d * 1000:2.0f} mm {' '.join(f'{x:5.2f}' for x in row)}   "
+                      f"least {row.min():.2f} ({names[int(np.argmin(row))]})")
     print("\ncolumns: " + " ".join(names))
 
 

@@ -102,12 +102,14 @@ def _inside_samples(triangles: np.ndarray, spacing: float, sample: float) -> tup
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
     # Coarse samples for the grouping, the fine ones for the depths of the shallow points inside (a KD query costs
     # with the samples' density and the distance it searches). The grouping needs only whether a point is deeper
-    # than spacing / 2, so its queries stop at spacing; the depths' queries stop at 10 cm (no link is thicker than
-    # 20 cm). A query that stops at a bound returns inf: the bound is then a lower bound of the distance.
+    # than spacing / 2, so its queries stop at spacing plus the samples' slack; the depths' queries stop at 10 cm
+    # (no link is thicker than 20 cm). A query that stops at a bound returns inf: the bound is then a lower bound of
+    # the distance.
     coarse = 2.0 * sample
     tree = cKDTree(_surface_samples(triangles, coarse))
-    reach = tree.query(grid.reshape(-1, 3), distance_upper_bound=spacing, workers=-1)[0]
-    depth = np.minimum(reach, spacing).reshape(grid.shape[:3]) - coarse
+    enough = spacing + coarse
+    reach = tree.query(grid.reshape(-1, 3), distance_upper_bound=enough, workers=-1)[0]
+    depth = np.minimum(reach, enough).reshape(grid.shape[:3]) - coarse
     groups, n_groups = ndimage.label(depth > 0.5 * spacing)  # six-connected
     rim = np.unique(np.concatenate([groups[0].ravel(), groups[-1].ravel(), groups[:, 0].ravel(),
                                     groups[:, -1].ravel(), groups[:, :, 0].ravel(), groups[:, :, -1].ravel()]))
