@@ -10,7 +10,7 @@ settings that are sound, ``DistanceMonitor(detection_capability=d)`` with no rob
 thinner than the detection capability left out: ``depthguard.freespace.DetectableSpace``; the robot's inside counts
 free), for d = 40 mm, and in the SSM layout also 55 and 70 mm (ISO 13855's largest; C = 8 (d - 14) mm grows with it):
 
-    .venv/bin/python benchmarks/probe_ssm_coverage.py [--time 5.2] [--rho 1.5]
+    .venv/bin/python benchmarks/probe_ssm_coverage.py [--time 5.2] [--rho 1.5] [--loop]
 
 Layouts (the variants are written from the packaged scene files into a temporary directory):
 - ``two``: the scene's two front cameras, workspace top z = 1.5 m (the principal sees up to about z = 1.5 there);
@@ -114,6 +114,8 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--time", type=float, default=5.2, help="seconds into scenario_b_reach.yaml (default 5.2)")
     parser.add_argument("--rho", type=float, default=1.5, help="the monitor's rho, metres (default 1.5)")
+    parser.add_argument("--loop", action="store_true",
+                        help="also run the demo's mode ssm in its cell with the sound settings (about a minute per d)")
     args = parser.parse_args(argv)
     ssm_layout = Path(str(PACKAGE / "scenario_b_ssm.yaml"))
     rows = [("two", False, False, False, None), ("four", False, False, False, None),
@@ -140,6 +142,29 @@ def main(argv=None) -> None:
                 print(f"{'':38s} detectable, sound, d {d * 1000:2.0f} mm {' '.join(f'{x:5.2f}' for x in row)}   "
                       f"least {row.min():.2f} ({names[int(np.argmin(row))]})")
     print("\ncolumns: " + " ".join(names))
+    if args.loop:
+        closed_loop()
+
+
+def closed_loop(capabilities=(0.04, 0.07)) -> None:
+    """The demo's mode ssm in its cell (``avoidance_demo.ssm_scene``) over the scene's whole span, with the settings
+    that are sound there (no robot zone, unmeasured pixels occupied, SSM's C for d): the speed factor it applied."""
+    import dataclasses
+
+    from depthguard.avoidance import SSMParams
+    from depthguard_lab.experiments.avoidance_demo import ssm_scene
+    from depthguard_lab.simulation._closed_loop import run_closed_loop
+
+    cell, settings = ssm_scene()
+    print(f"\nclosed loop, mode ssm in its cell (scenario_b_ssm.yaml), {cell.duration:g} s, the person reaching in "
+          "and leaving, no robot zone, holes occupied: the speed factor applied at the control steps")
+    print(f"  {'d mm':>5s} {'C mm':>5s} {'steps':>6s} {'factor > 0':>10s} {'mean':>6s} {'p90':>6s} {'max':>6s}")
+    for d in capabilities:
+        run = dataclasses.replace(settings, monitor=dict(aggregate="min", invalid="occupied", robot_zone=0.0),
+                                  ssm=SSMParams(detection_capability=d))
+        scale = run_closed_loop(cell, "ssm", settings=run).scale
+        print(f"  {d * 1000:5.0f} {8 * (d * 1000 - 14):5.0f} {len(scale):6d} {np.mean(scale > 0):10.1%} "
+              f"{scale.mean():6.2f} {np.quantile(scale, 0.9):6.2f} {scale.max():6.2f}")
 
 
 if __name__ == "__main__":
