@@ -21,6 +21,13 @@ defaults but rho = 0.3 m, the free-space memory on; unmeasured pixels occupied, 
 neighbours). ``no slack`` is a diagnosis, not a rule: the same without the slack of 2.5 pixel footprints + 1 mm; it
 can miss what the pixel grid places beyond the truth.
 ``disagree`` counts the configurations on which a rule and the default image rule differ.
+
+``--ideal SPACING`` adds the bound (issue 35): an ideal sound memory (:mod:`depthguard_lab.experiments.ideal_memory`:
+exact ray casts per frame, the robot's exact volume free, the erosion at v_max, on a grid of SPACING metres), fed
+the same observed frames as the depth grid's monitor, once on the exact depths and once less each camera's noise
+margin. A configuration collides by it when a grid point it leaves possibly occupied lies inside the robot's meshes
+at that configuration. ``--ideal-only`` prints only those rows (and the depth grid's, with holes occupied, beside
+them).
 """
 
 from __future__ import annotations
@@ -47,6 +54,10 @@ def main() -> None:
     parser.add_argument("--future", type=int, default=40, help="random future configurations per observed frame")
     parser.add_argument("--images", nargs="+", default=["intensity", "depth"], choices=["intensity", "depth"])
     parser.add_argument("--verbose", action="store_true", help="print every missed collision")
+    parser.add_argument("--ideal", type=float, metavar="SPACING",
+                        help="also the ideal sound memory's verdicts on a grid of SPACING metres (the bound)")
+    parser.add_argument("--ideal-only", action="store_true",
+                        help="with --ideal: only the ideal rows and the depth grid's (holes occupied)")
     args = parser.parse_args()
     workcell, reference_frames, observed, frames, futures, clearances = scenario_c(args.every, args.future)
     robot = workcell.robot
@@ -59,6 +70,11 @@ def main() -> None:
     rules = [("paper (theta 1, B free)", 1, "free"), ("theta 1, B occupied", 1, "occupied"),
              ("theta 2, B occupied", 2, "occupied"), ("default (C-1, occupied)", None, "occupied")]
     defaults = {}
+    if args.ideal and args.ideal_only:
+        depth_grid_rule(workcell, frames, observed, futures, clearances, "occupied", defaults)
+        for noise_margin in (False, True):
+            ideal_rule(workcell, frames, observed, futures, clearances, args.ideal, noise_margin)
+        return
     for kind in args.images:
         source = (lambda f: f.intensity) if kind == "intensity" else (lambda f: {n: d.data for n, d in f.depth.items()})
         ordered = [("theta 1 + depth order", 1, "occupied"), ("theta 2 + depth order", 2, "occupied"),
@@ -99,6 +115,34 @@ def main() -> None:
         # hand next to the robot): what the sound rule gives up to be useful
         depth_grid_rule(workcell, frames, observed, futures, clearances, "neighbors", defaults,
                         robot_zone=config.LOOP_ROBOT_ZONE)
+    if args.ideal:
+        for noise_margin in (False, True):
+            ideal_rule(workcell, frames, observed, futures, clearances, args.ideal, noise_margin)
+
+
+def ideal_rule(workcell, frames, observed, futures, clearances, spacing: float, noise_margin: bool) -> None:
+    """The bound's verdicts (the module's docstring, ``--ideal``), printed as a row: what an ideal sound memory fed
+    the observed frames leaves possibly occupied inside the robot at each future configuration."""
+    from depthguard_lab.experiments.ideal_memory import IdealMemory
+
+    ideal = IdealMemory(workcell, spacing=spacing, noise_margin=noise_margin)
+    touching = missed = free = alarms = 0
+    times = []
+    for i in observed:
+        frame = frames[i]
+        start = time.perf_counter()
+        ideal.update(frame.time, frame.joints, frame.depth_exact, frame.label)
+        possibly = ideal.possibly
+        collision = np.array([bool(np.any(possibly & ideal.inside_robot(q))) for q in futures[i]])
+        times.append(time.perf_counter() - start)
+        c = clearances[i]
+        touching += int((c < 0).sum())
+        missed += int(((c < 0) & ~collision).sum())
+        free += int((c > FALSE_ALARM_CLEARANCE).sum())
+        alarms += int(((c > FALSE_ALARM_CLEARANCE) & collision).sum())
+    rule = f"ideal {spacing * 100:g} cm, {'noise' if noise_margin else 'exact'}"
+    print(f"{'depth':10s} {rule:22s} {touching:9d} {missed:7d} {free:14d} {alarms:7d} ({alarms / max(free, 1):4.0%}) "
+          f"{'-':>11s} {np.median(times) * 1e3:11.1f}   (the bound: exact geometry, not a rule)")
 
 
 def scenario_c(every: int = 3, future: int = 40):
