@@ -225,5 +225,7 @@ def depth_grid_rule(workcell, frames, observed, futures, clearances, invalid: st
 
 
 if __name__ == "__main__":
-    with report(__file__):
+    import sys
+
+    with report(__file__, name="probe_collision_scenario_c_ideal" if "--ideal-only" in sys.argv else None):
         main()
