@@ -194,7 +194,8 @@ class DistanceMonitor:
     def _find_detectable(self, usable: dict):
         """A new DetectableSpace for the usable frames (None without detection_capability): the voxels some usable
         camera sees entirely free now, the memory's, the robot's capsules grown by the robot zone at every usable
-        frame's joints (the space that is the robot at all of them) and the static solids' inside are free."""
+        frame's joints (the space that is the robot at all of them; without a zone, the robot's inside at all of
+        them, ``RobotModel.inner_capsules_world``) and the static solids' inside are free."""
         if self.detectable is None:
             return None
         from depthguard.freespace import CameraViews, DetectableSpace, FreeSources
@@ -214,7 +215,7 @@ class DistanceMonitor:
                         for q in joints.values()]
             robot = (np.array(capsules, dtype=np.float64).reshape(len(capsules), -1, 7), self.robot_zone)
         elif self.robot is not None and joints:
-            # design §8a's Robot_k: the robot's own volume at every frame's joints holds no person (capsules inside
+            # design §8a's Robot_k: the robot's own volume at every frame's joints holds no person (balls inside
             # the links' meshes, never their padding); the truth, not a concession
             inner = [self.robot.inner_capsules_world(q, check=False) for q in joints.values()]
             robot = (np.ascontiguousarray(np.stack(inner)), 0.0)
