@@ -72,6 +72,16 @@ def test_a_closed_mesh_with_an_inner_shell_counts_only_what_lies_inside():
         assert np.linalg.norm(ball.p0 - nearest) >= ball.radius - 1e-9, ball
 
 
+def test_a_thin_flange_gets_its_balls_from_a_finer_grid():
+    """A closed slab 30 mm thick: no point of the 1 cm grid lies deep enough for a 1 cm voxel round it to fit in a
+    ball, so the grid is halved; the balls then found lie inside the slab."""
+    slab = trimesh.creation.box((0.08, 0.08, 0.03))
+    balls = _balls(slab)
+    assert balls
+    for ball in balls:
+        assert np.all(np.abs(ball.p0) + ball.radius <= np.array([0.04, 0.04, 0.015]) + 1e-9), ball
+
+
 def test_the_iiwa_inner_balls_lie_inside_its_meshes():
     """coal: no inner ball meets its link's collision mesh; pybullet: rays from each ball's centre in six directions
     all hit that mesh (it lies round the ball, which therefore lies inside it). And they fill the links: every link

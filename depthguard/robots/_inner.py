@@ -47,8 +47,8 @@ def inner_balls(mesh: trimesh.Trimesh, link: str, spacing: float, count: int, co
     fill it: each a sample of a grid ``spacing`` metres a side with the ball of its distance to the mesh (a lower
     bound: less ``sample`` and 1 mm), at most ``count`` of them, picked greedily so that as many grid points as
     possible lie at least ``cover`` metres deep in one ball (the half-diagonal of the voxels that must fit wholly in
-    one: ``robot_inside_voxels``). Each a :class:`LinkCapsule` with p0 = p1 and ``padding`` 0; empty when the mesh is
-    not closed.
+    one: ``robot_inside_voxels``; where no grid point lies that deep, the grid is halved while it stays coarser than
+    4 ``sample``). Each a :class:`LinkCapsule` with p0 = p1 and ``padding`` 0; empty when the mesh is not closed.
 
     Sound for a closed mesh, by three steps each of which only errs towards "not inside":
     1. Distance: every triangle is cut into equal pieces whose edges are at most ``sample`` metres, so every point
@@ -69,8 +69,8 @@ def inner_balls(mesh: trimesh.Trimesh, link: str, spacing: float, count: int, co
         return []
     centres, radii = _inside_samples(triangles, spacing, sample)
     targets = centres[radii + _CLEARANCE >= cover]  # points that lie at least ``cover`` deep in the mesh
-    if not len(targets):
-        return []
+    if not len(targets):  # a thin link (a flange) the grid's points miss the middle of: a grid half as fine
+        return inner_balls(mesh, link, 0.5 * spacing, count, cover, sample) if spacing > 4.0 * sample else []
     useful = np.flatnonzero(radii > cover)
     reached = cKDTree(targets).query_ball_point(centres[useful], radii[useful] - cover)
     rows = np.repeat(useful, [len(r) for r in reached])
