@@ -17,8 +17,8 @@ link a set of balls is found that lies inside the link's collision mesh (:func:`
 Sound for a mesh whose triangles bound the link; a mesh with faces inside its body (the iiwa's flange) gets smaller
 balls, never larger. Computed once per model (a few seconds for the iiwa), in the link frame. Until 2026-11-29 the
 inner volume was capsules along each link's enclosing capsule's axis; that axis runs along the edge of the iiwa's
-links where they bend round a joint, and those capsules filled 7-57 % of what these balls fill 50-76 % of (the points
-a 1 cm voxel fits round).
+links where they bend round a joint, and those capsules held a 1 cm voxel round 7-57 % of a link's points deep enough
+for one, these balls 44-73 % (the flange aside; ``benchmarks/probe_robot_inside.py``).
 """
 
 from __future__ import annotations
