@@ -11,14 +11,13 @@ of them round which a 1 cm voxel (any orientation) lies wholly inside one ball, 
 from __future__ import annotations
 
 import argparse
-import math
 import time
 
 import numpy as np
 
 from depthguard import config
 from depthguard.robots import RobotModel
-from depthguard.robots._inner import closed_triangles, points_inside, triangle_distances
+from depthguard.robots._inner import _COVER, closed_triangles, inner_balls, points_inside, triangle_distances
 from _common import report
 
 ROBOTS = {"iiwa": RobotModel.default, "panda": RobotModel.panda, "xarm6": RobotModel.xarm6}
@@ -30,7 +29,7 @@ def main(argv=None) -> None:
                         help="robot (repeatable; default: all three)")
     parser.add_argument("--samples", type=int, default=1500, help="uniform samples in each link's bounds")
     args = parser.parse_args(argv)
-    cover = 0.5 * math.sqrt(3.0) * config.INNER_BALL_COVER_VOXEL
+    cover = _COVER
     print(f"points at least {cover * 1000:.1f} mm inside each link's mesh, and the share of them that lie at least "
           "that deep in one inner ball (a 1 cm voxel round them is then Robot_k);\n"
           f"balls: a {config.INNER_BALL_SPACING * 100:g} cm grid of centres, at most {config.INNER_BALLS} a link, "
@@ -38,15 +37,14 @@ def main(argv=None) -> None:
     print(f"{'robot':6s} {'link':28s} {'balls':>5s} {'deepest mm':>10s} {'points':>6s} {'filled':>7s}")
     for name in args.robot or list(ROBOTS):
         robot = ROBOTS[name]()
-        start = time.perf_counter()
-        robot.inner_capsules_world(np.zeros(robot.n_joints), check=False)
-        seconds = time.perf_counter() - start
         rng = np.random.default_rng(20261129)
-        filled_all, points_all = 0, 0
+        filled_all, points_all, seconds = 0, 0, 0.0
         for link in dict.fromkeys(capsule.link for capsule in robot.capsules):
             mesh = robot.collision_meshes[link]
             triangles = closed_triangles(mesh)
-            balls = _link_balls(robot, link)
+            start = time.perf_counter()
+            balls = np.array([[*ball.p0, ball.radius] for ball in inner_balls(mesh, link)]).reshape(-1, 4)
+            seconds += time.perf_counter() - start
             points = rng.uniform(*mesh.bounds, size=(args.samples, 3))
             if triangles is not None:
                 points = points[points_inside(points, triangles)]
@@ -63,17 +61,7 @@ def main(argv=None) -> None:
             deepest_ball = balls[:, 3].max() * 1000 if len(balls) else 0.0
             print(f"{name:6s} {link:28s} {len(balls):5d} {deepest_ball:10.1f} {len(points):6d} {share}")
         print(f"{name:6s} {'all links':28s} {'':5s} {'':10s} {points_all:6d} {filled_all / max(points_all, 1):7.1%}   "
-              f"(the balls took {seconds:.1f} s, once per model)")
-
-
-def _link_balls(robot: RobotModel, link: str) -> np.ndarray:
-    """(k, 4): the link's inner balls in its own frame (centre, radius), metres."""
-    from depthguard.robots._inner import inner_balls
-
-    cover = 0.5 * math.sqrt(3.0) * config.INNER_BALL_COVER_VOXEL
-    balls = inner_balls(robot.collision_meshes[link], link, config.INNER_BALL_SPACING, config.INNER_BALLS, cover,
-                        config.INNER_SURFACE_SAMPLE)
-    return np.array([[*ball.p0, ball.radius] for ball in balls]).reshape(-1, 4)
+              f"(the balls took {seconds:.1f} s, found once per model)")
 
 
 if __name__ == "__main__":

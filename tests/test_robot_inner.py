@@ -27,7 +27,7 @@ COVER = 0.5 * np.sqrt(3.0) * 0.01  # the half-diagonal of a 1 cm voxel
 
 
 def _balls(mesh, link="link"):
-    return inner_balls(mesh, link, 0.01, 64, COVER, 0.0015)
+    return inner_balls(mesh, link)  # the defaults: a 1 cm grid, 64 balls, 1 cm voxels, samples every 1.5 mm
 
 
 def test_an_open_tube_holds_its_inner_balls():
@@ -82,10 +82,21 @@ def test_a_thin_flange_gets_its_balls_from_a_finer_grid():
         assert np.all(np.abs(ball.p0) + ball.radius <= np.array([0.04, 0.04, 0.015]) + 1e-9), ball
 
 
+def test_a_link_fifty_metres_across_gets_its_balls_with_bounded_work():
+    """A URDF may bring a mesh up to config.COORDINATE_LIMIT across (a wrong scale): a closed box 50 m a side would
+    need 10^11 grid points and 10^9 surface samples at the default spacings. The grid and the samples are coarsened
+    to config.INNER_BALL_LIMITS instead, and the balls found still lie inside the box."""
+    box = trimesh.creation.box((50.0, 50.0, 50.0))
+    balls = _balls(box)
+    assert balls
+    for ball in balls:
+        assert np.all(np.abs(ball.p0) + ball.radius <= 25.0 + 1e-9), ball
+
+
 def test_the_iiwa_inner_balls_lie_inside_its_meshes():
     """coal: no inner ball meets its link's collision mesh; pybullet: rays from each ball's centre in six directions
     all hit that mesh (it lies round the ball, which therefore lies inside it). And they fill the links: every link
-    but the flange holds a 1 cm voxel round at least 40 % of the grid points 1.5 cm or deeper inside it."""
+    but the flange holds a 1 cm voxel round at least 40 % of the points (uniform samples) 1.5 cm or deeper inside it."""
     coal = pytest.importorskip("coal")
     pybullet = pytest.importorskip("pybullet")
     robot = RobotModel.default()

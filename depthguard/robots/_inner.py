@@ -23,15 +23,21 @@ for one, these balls 44-73 % (the flange aside; ``benchmarks/probe_robot_inside.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import trimesh
 
+from depthguard import config
 from depthguard.robots._capsules import LinkCapsule
 
 #: Metres by which every inner ball stays off the mesh.
 _CLEARANCE = 1e-3
 
-#: Metres: the deepest a ball of :func:`inner_balls` is searched for (a lower bound beyond).
+#: Metres: the half-diagonal of the voxel a ball of :func:`inner_balls` is chosen to hold wholly.
+_COVER = 0.5 * math.sqrt(3.0) * config.INNER_BALL_COVER_VOXEL
+#: Metres: the deepest a ball of :func:`inner_balls` is searched for (a lower bound beyond; more for a link whose grid
+#: or samples had to be coarsened).
 _DEEPEST = 0.1
 #: Metres: the balls of :func:`inner_balls` shallower than this get the fine samples' bound.
 _REFINED = 0.03
@@ -41,8 +47,9 @@ _RAYS = np.array([[0.5773, 0.5774, 0.5775], [-0.8017, 0.2673, 0.5345], [0.1231, 
 _RAYS = _RAYS / np.linalg.norm(_RAYS, axis=1)[:, None]
 
 
-def inner_balls(mesh: trimesh.Trimesh, link: str, spacing: float, count: int, cover: float,
-                sample: float) -> list[LinkCapsule]:
+def inner_balls(mesh: trimesh.Trimesh, link: str, spacing: float = config.INNER_BALL_SPACING,
+                count: int = config.INNER_BALLS, cover: float = _COVER,
+                sample: float = config.INNER_SURFACE_SAMPLE) -> list[LinkCapsule]:
     """Balls inside ``mesh`` (link frame, metres; open ends closed as :func:`closed_triangles` closes them), chosen to
     fill it: each a sample of a grid ``spacing`` metres a side with the ball of its distance to the mesh (a lower
     bound: less ``sample`` and 1 mm), at most ``count`` of them, picked greedily so that as many grid points as
@@ -58,7 +65,12 @@ def inner_balls(mesh: trimesh.Trimesh, link: str, spacing: float, count: int, co
        between two such points cannot meet the surface: each of its points is within spacing / 2 of one end). A
        group that reaches the grid's rim (which lies outside the mesh's bounds) is outside; every other group is
        inside or outside as a whole, decided by the three-ray parity test of one of its points (all three agree).
-    3. The ball round an inside point with radius its lower bound less 1 mm lies inside the mesh."""
+    3. The ball round an inside point with radius its lower bound less 1 mm lies inside the mesh.
+
+    Bounded work for any mesh a URDF may bring (up to ``config.COORDINATE_LIMIT`` across): the grid, the surface
+    samples and the pairs the greedy choice weighs are each held under ``config.INNER_BALL_LIMITS``' counts by a
+    coarser grid, coarser samples (whose spacing the bound then subtracts) or every k-th grid point counted, which
+    change how well the balls fill the link, never whether they lie inside it."""
     from scipy import sparse
     from scipy.spatial import cKDTree
 
@@ -72,6 +84,10 @@ def inner_balls(mesh: trimesh.Trimesh, link: str, spacing: float, count: int, co
     if not len(targets):  # a thin link (a flange) the grid's points miss the middle of: a grid half as fine
         return inner_balls(mesh, link, 0.5 * spacing, count, cover, sample) if spacing > 4.0 * sample else []
     useful = np.flatnonzero(radii > cover)
+    pairs = int(cKDTree(targets).query_ball_point(centres[useful], radii[useful] - cover, return_length=True).sum())
+    most = config.INNER_BALL_LIMITS["pairs"]
+    if pairs > most:  # the greedy choice weighs every k-th target only
+        targets = targets[::-(-pairs // most)]
     reached = cKDTree(targets).query_ball_point(centres[useful], radii[useful] - cover)
     rows = np.repeat(useful, [len(r) for r in reached])
     cols = np.concatenate([np.asarray(r, dtype=np.int64) for r in reached]) if len(useful) else rows
@@ -96,6 +112,9 @@ def _inside_samples(triangles: np.ndarray, spacing: float, sample: float) -> tup
     from scipy import ndimage
     from scipy.spatial import cKDTree
 
+    extent = np.ptp(triangles.reshape(-1, 3), axis=0)
+    while np.prod(np.floor(extent / spacing) + 4.0) > config.INNER_BALL_LIMITS["grid"]:
+        spacing *= 2.0
     lo = triangles.reshape(-1, 3).min(axis=0) - spacing
     hi = triangles.reshape(-1, 3).max(axis=0) + spacing
     axes = [np.arange(lo[a], hi[a] + spacing, spacing) for a in range(3)]
@@ -105,7 +124,8 @@ def _inside_samples(triangles: np.ndarray, spacing: float, sample: float) -> tup
     # than spacing / 2, so its queries stop at spacing plus the samples' slack; the depths' queries stop at 10 cm
     # (no link is thicker than 20 cm). A query that stops at a bound returns inf: the bound is then a lower bound of
     # the distance.
-    coarse = 2.0 * sample
+    sample = _sample_spacing(triangles, sample)
+    coarse = _sample_spacing(triangles, 2.0 * sample)
     tree = cKDTree(_surface_samples(triangles, coarse))
     enough = spacing + coarse
     reach = tree.query(grid.reshape(-1, 3), distance_upper_bound=enough, workers=-1)[0]
@@ -120,24 +140,40 @@ def _inside_samples(triangles: np.ndarray, spacing: float, sample: float) -> tup
         inside[labels[enclosed]] = points_inside(grid.reshape(-1, 3)[first[enclosed]], triangles)
     mask = inside[groups]
     centres = grid[mask]
-    reach = tree.query(centres, distance_upper_bound=_DEEPEST, workers=-1)[0]
-    radii = np.minimum(reach, _DEEPEST) - coarse - _CLEARANCE
+    deepest = max(_DEEPEST, 2.0 * spacing, 4.0 * coarse)  # a link so large its grid or samples were coarsened
+    reach = tree.query(centres, distance_upper_bound=deepest, workers=-1)[0]
+    radii = np.minimum(reach, deepest) - coarse - _CLEARANCE
     shallow = radii < _REFINED  # the fine samples where the bound's slack weighs most (and the query is quick)
-    reach = cKDTree(_surface_samples(triangles, sample)).query(centres[shallow], distance_upper_bound=_DEEPEST,
+    reach = cKDTree(_surface_samples(triangles, sample)).query(centres[shallow], distance_upper_bound=deepest,
                                                                workers=-1)[0]
-    radii[shallow] = np.minimum(reach, _DEEPEST) - sample - _CLEARANCE
+    radii[shallow] = np.minimum(reach, deepest) - sample - _CLEARANCE
     keep = radii > 0.0
     return centres[keep], radii[keep]
+
+
+def _sample_spacing(triangles: np.ndarray, sample: float) -> float:
+    """``sample`` metres, doubled until :func:`_surface_samples` gives at most ``config.INNER_BALL_LIMITS['samples']``
+    corners."""
+    edges = _longest_edges(triangles)
+    while True:
+        n = np.maximum(np.ceil(edges / sample), 1.0)
+        if np.sum((n + 1.0) * (n + 2.0) / 2.0) <= config.INNER_BALL_LIMITS["samples"]:
+            return sample
+        sample *= 2.0
+
+
+def _longest_edges(triangles: np.ndarray) -> np.ndarray:
+    """(m,) metres: each of the (m, 3, 3) triangles' longest edge."""
+    return np.stack([np.linalg.norm(triangles[:, 1] - triangles[:, 0], axis=1),
+                     np.linalg.norm(triangles[:, 2] - triangles[:, 1], axis=1),
+                     np.linalg.norm(triangles[:, 0] - triangles[:, 2], axis=1)], axis=1).max(axis=1)
 
 
 def _surface_samples(triangles: np.ndarray, sample: float) -> np.ndarray:
     """(k, 3): the corners of every triangle of (m, 3, 3) cut into n^2 equal pieces, n the smallest with every
     piece's edges at most ``sample`` metres: every point of a piece lies within its longest edge of each corner."""
     out = []
-    edges = np.stack([np.linalg.norm(triangles[:, 1] - triangles[:, 0], axis=1),
-                      np.linalg.norm(triangles[:, 2] - triangles[:, 1], axis=1),
-                      np.linalg.norm(triangles[:, 0] - triangles[:, 2], axis=1)], axis=1).max(axis=1)
-    pieces = np.maximum(np.ceil(edges / sample), 1).astype(np.int64)
+    pieces = np.maximum(np.ceil(_longest_edges(triangles) / sample), 1).astype(np.int64)
     for n in np.unique(pieces):
         group = triangles[pieces == n]
         i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")

@@ -611,11 +611,8 @@ class RobotModel:
         key = (str(self.urdf_path), tuple((c.link, tuple(c.p0), tuple(c.p1), c.radius) for c in self.capsules))
         with _GAP_LOCK:
             if key not in _INNER_CAPSULES:
-                cover = 0.5 * math.sqrt(3.0) * config.INNER_BALL_COVER_VOXEL
                 pieces = [piece for capsule in self.capsules
-                          for piece in inner_balls(self.collision_meshes[capsule.link], capsule.link,
-                                                   config.INNER_BALL_SPACING, config.INNER_BALLS, cover,
-                                                   config.INNER_SURFACE_SAMPLE)]
+                          for piece in inner_balls(self.collision_meshes[capsule.link], capsule.link)]
                 anchors = self._kinematics.anchors([c.link for c in pieces for _ in (0, 1)],
                                                    [end for c in pieces for end in (c.p0, c.p1)])
                 _INNER_CAPSULES[key] = (np.array([c.radius for c in pieces], dtype=np.float64), anchors)
