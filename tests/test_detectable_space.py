@@ -195,8 +195,9 @@ def _workcell_frames(times):
 @pytest.mark.slow
 def test_the_monitors_detectable_distances_never_exceed_the_truth_to_a_person():
     """Scenario B's person (every part at least 10 cm thick, so a ball of d fits everywhere in them) walking in and
-    reaching for the arm, four cameras: at points round the arm (not on it: with no robot zone the robot's own body
-    is possibly occupied, so the detectable space counts it as an obstacle), the detectable distance is at most the
+    reaching for the arm, four cameras: at points round the arm (not on it: with no robot zone the layer round the
+    robot that no camera sees free is possibly occupied, so the detectable space counts it as an obstacle; its inside
+    is free), the detectable distance is at most the
     exact distance to the person plus 2.5 footprints of the farthest camera + 1 mm (the fused answers' tolerance,
     tests/test_fusion_workcell.py). Known static solids (floor, walls, pedestal) are given too: their inside is free,
     what they hide still counts."""

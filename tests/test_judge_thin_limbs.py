@@ -286,8 +286,9 @@ def detectable(case, robot, zone=0.0, known_solids=False, path="fused"):
 def test_detectable_distances(cases, robot, label):
     """d = 40 mm, no robot zone (hidden band 0: the effective capability is d): every part at least 40 mm thick (the
     forearm; the finger and the hand are thinner, which ISO 13855's C covers) counts, to the balls of d inside it;
-    every distance above 0 is flagged detection_opening. With zone 0 the robot's own body counts as occupied, so the
-    points on and near the robot read 0."""
+    every distance above 0 is flagged detection_opening. With zone 0 the robot's inside counts free (design §8a's
+    Robot_k, balls inside its meshes) but the layer round it that no camera sees free does not, so the points on and
+    near the robot read little."""
     case = cases[label]
     for known in ((False, True) if case.solids else (False,)):
         result, core, tolerance = detectable(case, robot, known_solids=known)
