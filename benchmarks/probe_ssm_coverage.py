@@ -8,9 +8,14 @@ answers may hide next to a surface (``DistanceMonitor.query_hidden_band``: SSM o
 70 mm); whether the detectable space with the loop's settings is allowed; and the distances SSM may use with the
 settings that are sound, ``DistanceMonitor(detection_capability=d)`` with no robot zone (possibly occupied regions
 thinner than the detection capability left out: ``depthguard.freespace.DetectableSpace``; the robot's inside counts
-free), for d = 40 mm, and in the SSM layout also 55 and 70 mm (ISO 13855's largest; C = 8 (d - 14) mm grows with it):
+free), for d = 40 mm, and in the SSM layout also 55 and 70 mm (ISO 13855's largest; its C: 8 (d - 14) mm up to
+40 mm, 850 mm above):
 
     .venv/bin/python benchmarks/probe_ssm_coverage.py [--time 5.2] [--rho 1.5] [--loop]
+    .venv/bin/python benchmarks/probe_ssm_coverage.py --bound [--start 3.5] [--settle 0.5]
+
+``--bound`` prints only the factor SSM allows along the task from an ideal sound memory opened by d beside the
+project's (issue 35 item 6; :func:`bound`; figures in ``docs/figures/probe_ssm_coverage_bound.md``).
 
 Layouts (the variants are written from the packaged scene files into a temporary directory):
 - ``two``: the scene's two front cameras, workspace top z = 1.5 m (the principal sees up to about z = 1.5 there);
@@ -34,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 import depthguard as dg
+from depthguard.avoidance import intrusion_distance
 from depthguard import config
 from depthguard_lab.simulation import load_workcell
 from depthguard_lab.simulation._episode import sense_at
@@ -116,7 +122,21 @@ def main(argv=None) -> None:
     parser.add_argument("--rho", type=float, default=1.5, help="the monitor's rho, metres (default 1.5)")
     parser.add_argument("--loop", action="store_true",
                         help="also run the demo's mode ssm in its cell with the sound settings (about a minute per d)")
+    parser.add_argument("--bound", action="store_true",
+                        help="only the factor an ideal sound memory opened by d allows in the SSM cell, beside the "
+                             "project's, along the task (about 15 minutes)")
+    parser.add_argument("--start", type=float, default=3.5, help="--bound: seconds, where the memories start")
+    parser.add_argument("--settle", type=float, default=0.5, help="--bound: seconds of start-up not counted")
+    parser.add_argument("--margins", action="store_true",
+                        help="only what holds the project's detectable distances at 0 in the SSM cell: its voxels, "
+                             "the robot's inside and each margin, one at a time (about 3 minutes)")
     args = parser.parse_args(argv)
+    if args.bound:
+        bound(args.start, args.settle, verbose=True)
+        return
+    if args.margins:
+        margins(args.time)
+        return
     ssm_layout = Path(str(PACKAGE / "scenario_b_ssm.yaml"))
     rows = [("two", False, False, False, None), ("four", False, False, False, None),
             ("four+ceiling", True, False, False, None), ("four+ceiling known", True, False, True, None),
@@ -163,10 +183,197 @@ def closed_loop(capabilities=(0.04, 0.07)) -> None:
         run = dataclasses.replace(settings, monitor=dict(aggregate="min", invalid="occupied", robot_zone=0.0),
                                   ssm=SSMParams(detection_capability=d))
         scale = run_closed_loop(cell, "ssm", settings=run).scale
-        print(f"  {d * 1000:5.0f} {8 * (d * 1000 - 14):5.0f} {len(scale):6d} {np.mean(scale > 0):10.1%} "
+        print(f"  {d * 1000:5.0f} {intrusion_distance(d) * 1000:5.0f} {len(scale):6d} {np.mean(scale > 0):10.1%} "
               f"{scale.mean():6.2f} {np.quantile(scale, 0.9):6.2f} {scale.max():6.2f}")
 
 
+def _beyond_rho(distance: np.ndarray, rho: float) -> np.ndarray:
+    """``distance`` with inf where it is at least rho (the monitor's "nothing within rho")."""
+    return np.where(distance >= rho, np.inf, distance)
+
+
+#: --bound: the ideal's grid, a box round the task's control points (they span x 0-0.55, y -0.17-0.08,
+#: z 0.19-0.89 m) 0.65 m wider on every side but the floor (z = -0.5); SSM at d = 40 mm needs at most 0.46 m from
+#: any point's sphere for the whole speed, so an answer "at least to the box's side" costs no factor.
+BOUND_BOX = ((-0.65, -0.82, -0.5), (1.2, 0.73, 1.54))
+
+
+def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, verbose: bool = False) -> None:
+    """Issue 35 item 6 for SSM: along the task in the SSM cell (``avoidance_demo.ssm_scene``, the robot where its
+    script puts it, not slowed), the factor SSM allows each frame from the distances of an ideal sound memory opened
+    by d (:class:`depthguard_lab.experiments.ideal_memory.IdealMemory` with ``opening=d``: exact ray casts, the
+    robot's exact volume, erosion at v_max; on the exact renders, and on the frames as the cameras measured them
+    with their noise margins, a pixel without a measurement seeing nothing free) and from the project's
+    detectable distances (the loop's sound settings: no robot zone, holes occupied, the solids known), on the same
+    frames, with the same SSM (C for d, the joints' braking, T_r = one frame's latency + one control step, the
+    task's command) and the loop's look-ahead. Both memories start at ``start`` seconds with everything possibly
+    occupied; the first ``settle`` seconds are not counted."""
+    from depthguard.avoidance import JointLimits, SpeedSeparationMonitor, SSMParams
+    from depthguard_lab.experiments.avoidance_demo import ssm_scene
+    from depthguard_lab.experiments.ideal_memory import IdealMemory, measured_depths
+    from depthguard_lab.simulation._closed_loop import _detectable, _ssm_factor
+    from depthguard_lab.simulation._episode import SceneRenderer, sense
+    from depthguard_lab.simulation._truth import TruthComputer
+
+    cell, settings = ssm_scene()
+    robot = cell.robot
+    points_robot = robot.with_surface_points(settings.surface_tolerance)
+    radii = points_robot.control_point_radii
+    limits = JointLimits.from_robot(robot, acceleration=settings.acceleration)
+    ssm = SpeedSeparationMonitor(SSMParams(detection_capability=d), rho=settings.ssm_rho, braking=limits.acceleration,
+                                 reaches=robot.joint_reaches())
+    dt = 1.0 / settings.control_rate
+    reaction = settings.latency + dt
+    monitor = dg.DistanceMonitor(cell.rig, rho=settings.ssm_rho, robot=robot, aggregate="min", invalid="occupied",
+                                 robot_zone=0.0, static=cell.background_parts(), detection_capability=d)
+    ideals = {"ideal, exact": IdealMemory(cell, spacing=spacing, bounds=BOUND_BOX, opening=d),
+              "ideal, measured": IdealMemory(cell, spacing=spacing, noise_margin=True, measured=True,
+                                             bounds=BOUND_BOX, opening=d)}
+    rows = {name: [] for name in ["project", *ideals]}
+    least = {name: [] for name in rows}
+    truth = TruthComputer(robot)
+    parts = {name: cell.part_names(name) for name in cell.obstacle_names}
+    scene = SceneRenderer(cell, None)
+    static = {o.name for o in cell.static_objects}
+    person = []
+    print(f"\nthe bound for SSM (issue 35 item 6): {cell.duration:g} s of scenario_b_reach.yaml in "
+          f"scenario_b_ssm.yaml, the robot on its script, d = {d * 1000:.0f} mm "
+          f"(C = {intrusion_distance(d) * 1000:.0f} mm), "
+          f"T_r = {reaction * 1000:.0f} ms; the memories start at {start:g} s, counted from {start + settle:g} s; "
+          f"the ideal's grid {spacing * 100:g} cm over {BOUND_BOX}")
+    try:
+        for index in range(int(round(start * cell.rate)), int(round(cell.duration * cell.rate)) + 1):
+            t = index / cell.rate
+            q = cell.joints_at(t).copy()
+            frame = sense(cell, scene, truth, parts, q, t, index, 0)
+            prepared = monitor.prepare_set(frame.depth, joints=q, now=t)
+            for ideal in ideals.values():
+                ideal.update(t, q, measured_depths(frame.depth) if ideal.measured else frame.depth_exact, frame.label)
+            if t < start + settle - 1e-9:
+                continue
+            points, jacobians = points_robot.control_point_kinematics(q)
+            later = min(t + dt, cell.duration)  # the task's command (at the end: the step before)
+            dq = (cell.joints_at(later) - cell.joints_at(later - dt)) / dt
+            moving = [i for i, name in enumerate(frame.truth.obstacles) if name not in static]
+            person.append(float(np.min(frame.truth.distances[:, moving], initial=np.inf)))
+            asks = {"project": (prepared, lambda p, x: _detectable(p, x, settings.ssm_rho))}
+            for name, ideal in ideals.items():
+                asks[name] = (ideal, lambda p, x: _beyond_rho(p.nearest(x), settings.ssm_rho))
+            for name, (source, ask) in asks.items():
+                distance = ask(source, points)
+                least[name].append(float(np.min(np.maximum(np.where(np.isfinite(distance), distance,
+                                                                    settings.ssm_rho) - radii, 0.0))))
+                rows[name].append(_ssm_factor(ssm, source, distance, points, jacobians, dq, reaction, radii,
+                                              settings.ssm_lookahead, ask))
+            if verbose and (index % 3 == 0):
+                print(f"  {t:5.2f} s person {person[-1]:5.2f} m " + "  ".join(
+                    f"{name} {rows[name][-1]:4.2f} ({least[name][-1]:5.3f} m)" for name in rows))
+    finally:
+        scene.release()
+    person = np.asarray(person)
+    far = person > 1.5
+    print(f"  {len(person)} frames, the person more than 1.5 m from every control point in {int(far.sum())}")
+    print(f"  {'memory':16s} {'factor > 0':>10s} {'mean':>6s} {'p50':>6s} {'mean, person > 1.5 m':>20s} "
+          f"{'least detectable distance, p50':>30s}")
+    for name, factor in rows.items():
+        factor = np.asarray(factor)
+        mean_far = f"{factor[far].mean():.2f}" if far.any() else "-"
+        print(f"  {name:16s} {np.mean(factor > 0):10.1%} {factor.mean():6.2f} {np.median(factor):6.2f} "
+              f"{mean_far:>20s} {np.median(least[name]):30.3f}")
+
+
+def margins(t: float) -> None:
+    """What holds SSM's detectable distances at 0 in the SSM cell (``avoidance_demo.ssm_scene``, the person gone at
+    ``t``): the project's detectable distances at the demo's 21 control points and the factor SSM allows there (as
+    :func:`bound` computes it), with its sound settings (no robot zone, holes occupied, the solids known), and with
+    one thing changed at a time:
+
+    - ``6 mm``: the detectable space's voxels 6 mm instead of 1 cm, over :data:`BOUND_BOX` (the whole cell at 6 mm
+      is over ``config.FREESPACE_MAX_VOXELS``; beyond the box counts possibly occupied, so no distance reaches
+      beyond its side, about 0.5 m: enough for d = 40 mm's whole speed, 0.46 m, never for the 850 mm of C above
+      40 mm);
+    - ``inside 6 mm``: the robot's inside from balls found on a 6 mm grid, up to 1500 a link (about 5,000 for the
+      iiwa, 23 s to find, nearly its exact inside), instead of ``config.INNER_BALLS`` on 1 cm;
+    - ``exact``: the noise-free renders instead of the sensor's frames (no noise, no dropouts);
+    - the margins: the noise margin (k = 3 sigma, ``k 0``: none), the calibration margin (``fusion_margin``, 10 mm)
+      and the pixel of pad (``fusion_pixels``).
+
+    Dropping a margin is not sound: these rows only say what each costs."""
+    import dataclasses
+
+    import depthguard.robots._inner as inner
+    import depthguard.robots._model as robot_model
+    from depthguard.avoidance import JointLimits, SpeedSeparationMonitor, SSMParams
+    from depthguard_lab.experiments.avoidance_demo import ssm_scene
+    from depthguard_lab.simulation._closed_loop import _detectable, _ssm_factor
+
+    cell, settings = ssm_scene()
+    robot = cell.robot
+    points_robot = robot.with_surface_points(settings.surface_tolerance)
+    radii = points_robot.control_point_radii
+    limits = JointLimits.from_robot(robot, acceleration=settings.acceleration)
+    dt = 1.0 / settings.control_rate
+    times = [t - i / cell.rate for i in (3, 2, 1, 0)]
+    frames = sense_at(cell, times)
+    q = frames[-1].joints
+    points, jacobians = points_robot.control_point_kinematics(q)
+    dq = (cell.joints_at(t) - cell.joints_at(t - dt)) / dt
+    exact = [{name: dataclasses.replace(image, data=np.round(np.asarray(f.depth_exact[name]) / image.depth_scale)
+                                        .astype(np.uint16)) for name, image in f.depth.items()} for f in frames]
+    rig = cell.rig
+    noiseless = dataclasses.replace(rig, cameras={name: dataclasses.replace(c, noise=dataclasses.replace(c.noise,
+                                                                                                         k=0.0))
+                                                  for name, c in rig.cameras.items()})
+    fine = dict(detectable_voxel=0.006)
+    free = dict(fusion_margin=0.0, fusion_pixels=0)
+    rows = [  # (label, dense inside, rig, box, options, exact)
+        ("sound settings (1 cm voxels over the cell)", False, rig, False, {}, False),
+        ("6 mm", False, rig, True, fine, False),
+        ("6 mm, exact, no margin", False, noiseless, True, {**fine, **free}, True),
+        ("6 mm, inside 6 mm", True, rig, True, fine, False),
+        ("6 mm, inside 6 mm, exact, no margin", True, noiseless, True, {**fine, **free}, True),
+        ("... and the noise margin (3 sigma)", True, rig, True, {**fine, **free}, True),
+        ("... or the calibration margin (10 mm)", True, noiseless, True, {**fine, "fusion_pixels": 0}, True),
+        ("... or the pixel of pad", True, noiseless, True, {**fine, "fusion_margin": 0.0}, True),
+        ("6 mm, inside 6 mm, sensor frames, no margin", True, noiseless, True, {**fine, **free}, False),
+        ("6 mm, inside 6 mm, d 55 mm", True, rig, True, {**fine, "detection_capability": 0.055}, False),
+        ("6 mm, inside 6 mm, d 70 mm", True, rig, True, {**fine, "detection_capability": 0.07}, False),
+    ]
+    print(f"what holds SSM's detectable distances at 0: the SSM cell at {t:g} s (the person gone), the demo's "
+          f"{len(points)} control points, distances from their spheres, metres; the factor SSM allows for the task's "
+          "command there (T_r one frame + one control step)")
+    print(f"  {'':46s} {'d mm':>4s} {'C mm':>4s} {'points > 0':>10s} {'least':>6s} {'median':>6s} {'factor':>6s}")
+    original = inner.inner_balls
+    try:
+        for label, dense, row_rig, box, options, use_exact in rows:
+            if dense and inner.inner_balls is original:  # the model's balls are cached per process: found again
+                inner.inner_balls = lambda mesh, link: original(mesh, link, spacing=0.006, count=1500)
+                robot_model._INNER_CAPSULES.clear()
+            options = {"rho": settings.ssm_rho, "robot": robot, "aggregate": "min", "invalid": "occupied",
+                       "robot_zone": 0.0, "static": cell.background_parts(), "detection_capability": 0.04, **options}
+            row_rig = dataclasses.replace(row_rig, workspace=np.asarray(BOUND_BOX)) if box else row_rig
+            monitor = dg.DistanceMonitor(row_rig, **options)
+            for f, depth in zip(frames, exact if use_exact else [f.depth for f in frames]):
+                prepared = monitor.prepare_set(depth, joints=f.joints, now=f.time)
+            d = options["detection_capability"]
+            ssm = SpeedSeparationMonitor(SSMParams(detection_capability=d), rho=settings.ssm_rho,
+                                         braking=limits.acceleration, reaches=robot.joint_reaches())
+            distance = _detectable(prepared, points, settings.ssm_rho)
+            surface = np.maximum(np.where(np.isfinite(distance), distance, settings.ssm_rho) - radii, 0.0)
+            factor = _ssm_factor(ssm, prepared, distance, points, jacobians, dq, settings.latency + dt, radii,
+                                 settings.ssm_lookahead, lambda p, x: _detectable(p, x, settings.ssm_rho))
+            print(f"  {label:46s} {d * 1000:4.0f} {intrusion_distance(d) * 1000:4.0f} "
+                  f"{f'{int(np.sum(surface > 0))} / {len(surface)}':>10s} {surface.min():6.3f} "
+                  f"{np.median(surface):6.3f} {factor:6.2f}", flush=True)
+    finally:
+        inner.inner_balls = original
+        robot_model._INNER_CAPSULES.clear()
+
+
 if __name__ == "__main__":
-    with report(__file__):
+    import sys
+
+    name = "probe_ssm_coverage_bound" if "--bound" in sys.argv else \
+        "probe_ssm_coverage_margins" if "--margins" in sys.argv else None
+    with report(__file__, name=name):
         main()

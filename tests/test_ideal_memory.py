@@ -65,3 +65,48 @@ def test_the_ideal_memory_at_start_up_and_blind(start, noise_margin, measured):
     for point in grid[far][::7]:
         reached = np.min(np.linalg.norm(sources - point, axis=1)) <= 2.0
         assert not reached or ideal.possibly[tuple(np.round((point - ideal.lo) / ideal.spacing - 0.5).astype(int))]
+
+
+def test_opened_is_the_union_of_the_balls_that_fit():
+    """``opened`` against its definition, ball by ball: a True point is kept exactly when some grid ball of the
+    radius (centre on a grid point, the grid points within the radius) holds it and lies in the mask (the grid's
+    outside counts as in it: a ball may reach beyond the grid)."""
+    from depthguard_lab.experiments.ideal_memory import opened
+
+    rng = np.random.default_rng(3)
+    mask = np.zeros((14, 12, 10), dtype=bool)
+    mask[1:9, 2:10, 1:8] = True  # a block a ball of radius 2 fits in, its corners not
+    mask[10:12, :, :] = True  # a slab 2 thick: no ball of radius 2
+    mask |= rng.random(mask.shape) < 0.1
+    radius = 2.0
+    offsets = np.argwhere(np.ones((5, 5, 5), bool)) - 2
+    offsets = offsets[(offsets ** 2).sum(1) <= radius ** 2]
+    twin = np.zeros_like(mask)
+    for centre in np.argwhere(mask):
+        ball = centre + offsets
+        inside = np.all((ball >= 0) & (ball < mask.shape), axis=1)
+        ball = ball[inside]
+        if mask[tuple(ball.T)].all():
+            twin[tuple(ball.T)] = True
+    assert twin[1:9, 2:10, 1:8].sum() > 100 and not twin[10:12, 2:-2, 2:-2].any()  # the test says something
+    np.testing.assert_array_equal(opened(mask, radius), twin)
+
+
+def test_an_opened_memory_keeps_only_balls_of_d_and_answers_within_its_box(start):
+    """With ``opening`` the possibly-occupied points are the opening of those without it, and ``nearest`` is the
+    distance to the nearest of them, at most to the box's side."""
+    from depthguard_lab.experiments.ideal_memory import opened
+
+    workcell, frame = start
+    box = ((-0.6, -0.6, -0.5), (0.9, 0.6, 1.2))
+    plain = IdealMemory(workcell, spacing=0.04, bounds=box)
+    open_ = IdealMemory(workcell, spacing=0.04, bounds=box, opening=0.08)
+    for ideal in (plain, open_):
+        ideal.update(frame.time, frame.joints, frame.depth_exact, frame.label)
+    np.testing.assert_array_equal(open_.possibly, opened(plain.possibly, 0.04 / 0.04))
+    assert 0 < open_.possibly.sum() < plain.possibly.sum()  # the opening removed some, not all
+    points = np.array([[0.3, 0.0, 0.5], [0.0, 0.3, 0.9], [0.85, 0.0, 0.0]])
+    where = open_.points[open_.possibly.reshape(-1)]
+    side = np.minimum(points - open_.lo, open_.hi - points).min(axis=1)
+    brute = np.minimum(np.linalg.norm(where[None] - points[:, None], axis=2).min(axis=1), side)
+    np.testing.assert_allclose(open_.nearest(points), brute, atol=1e-12)

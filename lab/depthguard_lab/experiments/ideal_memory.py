@@ -55,15 +55,18 @@ class IdealMemory:
         v_max: metres/second (``config.FREESPACE_V_MAX``).
         measured: the depths given to :meth:`update` are the simulated sensor's frames (noise and dropouts), not the
             exact renders: a pixel without a measurement (0) sees nothing free, rather than everything.
+        bounds: ((3,), (3,)) metres, world frame: the grid's box (default the workspace), for a finer grid near
+            the robot.
+        opening: metres, SSM's detection capability d (0: no opening, the memory of every consumer).
     """
 
     def __init__(self, workcell, spacing: float = SPACING, noise_margin: bool = False,
-                 v_max: float = config.FREESPACE_V_MAX, measured: bool = False):
-        lo, hi = (np.asarray(c, dtype=np.float64) for c in workcell.rig.workspace)
+                 v_max: float = config.FREESPACE_V_MAX, measured: bool = False, bounds=None, opening: float = 0.0):
+        lo, hi = (np.asarray(c, dtype=np.float64) for c in (workcell.rig.workspace if bounds is None else bounds))
         self.spacing, self.v_max, self.noise_margin = float(spacing), float(v_max), bool(noise_margin)
-        self.measured = bool(measured)
+        self.measured, self.opening = bool(measured), float(opening)
         self.shape = tuple(int(n) for n in np.maximum(np.floor((hi - lo) / spacing), 1))
-        self.lo = lo
+        self.lo, self.hi = lo, lo + np.asarray(self.shape) * spacing
         axes = [lo[i] + (np.arange(self.shape[i]) + 0.5) * spacing for i in range(3)]
         self.points = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
         self.robot = workcell.robot
@@ -84,6 +87,7 @@ class IdealMemory:
         self.arrival = np.full(self.shape, -np.inf)
         self.ever_seen = np.zeros(self.shape, dtype=bool)
         self.possibly = np.ones(self.shape, dtype=bool)
+        self._tree = None
 
     def inside_robot(self, joints) -> np.ndarray:
         """(nx, ny, nz) bool: the grid points inside the robot's links at ``joints``."""
@@ -134,6 +138,8 @@ class IdealMemory:
         self.arrival.reshape(-1)[surfaces] = -np.inf
         free = seen | self.inside_robot(joints) | self.solid
         possibly = (self.arrival <= time) & ~free
+        if self.opening > 0.0:
+            possibly = opened(possibly, self.opening / 2.0 / self.spacing)
         # distance to the nearest possibly-occupied point, or to outside the workspace but for its floor
         padded = np.ones(tuple(n + 2 for n in self.shape), dtype=bool)
         padded[1:-1, 1:-1, 1:-1] = ~possibly
@@ -141,7 +147,23 @@ class IdealMemory:
         distance = ndimage.distance_transform_edt(padded)[1:-1, 1:-1, 1:-1] * self.spacing
         np.maximum(self.arrival, time + distance / self.v_max, out=self.arrival)
         self.possibly, self.surfaces = possibly, surfaces.reshape(self.shape)
+        self._tree = None  # nearest()'s, of these possibly-occupied points
         self.ever_seen |= seen
+
+    def nearest(self, points: np.ndarray) -> np.ndarray:
+        """(m,) metres: each of the (m, 3) query points' distance to the nearest possibly-occupied grid point, at
+        most its distance to the grid box's side (beyond it nothing is known: the distance is "at least" that)."""
+        from scipy.spatial import cKDTree
+
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        side = np.minimum(points - self.lo, self.hi - points).min(axis=1)
+        if self._tree is None:
+            where = self.points[self.possibly.reshape(-1)]
+            self._tree = cKDTree(where) if len(where) else False
+        if not len(points) or self._tree is False:
+            return np.maximum(side, 0.0)
+        distance, _ = self._tree.query(points, distance_upper_bound=max(float(side.max()), 0.0) + 1e-9)
+        return np.maximum(np.minimum(distance, side), 0.0)
 
     def distances(self, points: np.ndarray, capsules, rho: float) -> tuple[np.ndarray, list[str]]:
         """For each of the (m, 3) query points: the distance (metres, inf beyond ``rho``) to the nearest point
@@ -166,3 +188,12 @@ class IdealMemory:
                 out[i] = d[j]
                 kinds[i] = "seen before" if ever[candidates[j]] else "never seen"
         return out, kinds
+
+
+def opened(mask: np.ndarray, radius: float) -> np.ndarray:
+    """The opening of a boolean grid by a ball of ``radius`` (in grid steps): the True points that lie in some ball
+    centred on a grid point whose grid points within ``radius`` are all True."""
+    centres = ndimage.distance_transform_edt(mask) > radius
+    if not centres.any():
+        return np.zeros_like(mask)
+    return mask & (ndimage.distance_transform_edt(~centres) <= radius)
