@@ -13,6 +13,7 @@ free), for d = 40 mm, and in the SSM layout also 55 and 70 mm (ISO 13855's large
 
     .venv/bin/python benchmarks/probe_ssm_coverage.py [--time 5.2] [--rho 1.5] [--loop]
     .venv/bin/python benchmarks/probe_ssm_coverage.py --bound [--start 3.5] [--settle 0.5]
+    .venv/bin/python benchmarks/probe_ssm_coverage.py --margins [--time 5.2] [--nearer 0.45]
 
 ``--bound`` prints only the factor SSM allows along the task from an ideal sound memory opened by d beside the
 project's (issue 35 item 6; :func:`bound`; figures in ``docs/figures/probe_ssm_coverage_bound.md``).
@@ -130,12 +131,14 @@ def main(argv=None) -> None:
     parser.add_argument("--margins", action="store_true",
                         help="only what holds the project's detectable distances at 0 in the SSM cell: its voxels, "
                              "the robot's inside and each margin, one at a time (about 3 minutes)")
+    parser.add_argument("--nearer", type=float, default=None,
+                        help="--margins: every camera this fraction of its distance from where it looks (0-1]")
     args = parser.parse_args(argv)
     if args.bound:
         bound(args.start, args.settle, verbose=True)
         return
     if args.margins:
-        margins(args.time)
+        margins(args.time, args.nearer)
         return
     ssm_layout = Path(str(PACKAGE / "scenario_b_ssm.yaml"))
     rows = [("two", False, False, False, None), ("four", False, False, False, None),
@@ -282,7 +285,23 @@ def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, v
               f"{mean_far:>20s} {np.median(least[name]):30.3f}")
 
 
-def margins(t: float) -> None:
+def _nearer_layout(directory: Path, fraction: float) -> Path:
+    """scenario_b_ssm.yaml with every camera moved towards the point it looks at, to ``fraction`` of its distance."""
+    import re
+
+    def move(match):
+        eye, target = (np.array([float(x) for x in match.group(i).split(",")]) for i in (1, 2))
+        eye = target + fraction * (eye - target)
+        return f"look_at: {{eye: [{', '.join(f'{x:.3f}' for x in eye)}], target: [{match.group(2)}],"
+
+    text = re.sub(r"look_at: \{eye: \[([^\]]*)\], target: \[([^\]]*)\],", move,
+                  (PACKAGE / "scenario_b_ssm.yaml").read_text())
+    path = directory / f"scenario_b_ssm_nearer_{fraction:g}.yaml"
+    path.write_text(text)
+    return path
+
+
+def margins(t: float, nearer: float | None = None) -> None:
     """What holds SSM's detectable distances at 0 in the SSM cell (``avoidance_demo.ssm_scene``, the person gone at
     ``t``): the project's detectable distances at the demo's 21 control points and the factor SSM allows there (as
     :func:`bound` computes it), with its sound settings (no robot zone, holes occupied, the solids known), and with
@@ -298,7 +317,8 @@ def margins(t: float) -> None:
     - the margins: the noise margin (k = 3 sigma, ``k 0``: none), the calibration margin (``fusion_margin``, 10 mm)
       and the pixel of pad (``fusion_pixels``).
 
-    Dropping a margin is not sound: these rows only say what each costs."""
+    Dropping a margin is not sound: these rows only say what each costs. ``nearer``: every camera moved towards the
+    point it looks at, to that fraction of its distance (its noise margin and its pixels' footprint shrink)."""
     import dataclasses
 
     import depthguard.robots._inner as inner
@@ -308,6 +328,12 @@ def margins(t: float) -> None:
     from depthguard_lab.simulation._closed_loop import _detectable, _ssm_factor
 
     cell, settings = ssm_scene()
+    if nearer is not None:
+        with tempfile.TemporaryDirectory() as tmp:
+            cell = load_workcell(Path(str(PACKAGE / "scenario_b_reach.yaml")), layout=_nearer_layout(Path(tmp), nearer))
+        print(f"every camera at {nearer:g} of its distance from where it looks: " + "; ".join(
+            f"{name} {np.linalg.norm(camera.T_world_camera[:3, 3] - [0.3, 0.0, 0.6]):.2f} m from the arm's middle"
+            for name, camera in cell.rig.cameras.items()))
     robot = cell.robot
     points_robot = robot.with_surface_points(settings.surface_tolerance)
     radii = points_robot.control_point_radii
@@ -374,6 +400,7 @@ if __name__ == "__main__":
     import sys
 
     name = "probe_ssm_coverage_bound" if "--bound" in sys.argv else \
-        "probe_ssm_coverage_margins" if "--margins" in sys.argv else None
+        ("probe_ssm_coverage_margins" + ("_nearer" if "--nearer" in sys.argv else "")) if "--margins" in sys.argv \
+        else None
     with report(__file__, name=name):
         main()
