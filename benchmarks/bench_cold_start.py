@@ -12,10 +12,11 @@ runs it from there with this virtual environment, each step a new process:
 4. ``depthguard distance`` on its first frame, one camera and then both fused, with the robot filtered out: seconds
    from the process's start to its answer.
 
-    .venv/bin/python benchmarks/bench_cold_start.py [--without-warmup]
+    .venv/bin/python benchmarks/bench_cold_start.py [--without-warmup] [--llvm-opt N]
 
 ``--without-warmup`` also times the first answers from an empty cache (what the first query costs when nothing was
-compiled ahead: minutes).
+compiled ahead: minutes). ``--llvm-opt N`` also times the baseline with LLVM's optimisation level N (numba's
+``NUMBA_OPT``, 3 by default; 0-3), after it in the same run: how much of the compile time is LLVM's.
 """
 
 from __future__ import annotations
@@ -34,10 +35,10 @@ from _common import report
 REPO = Path(__file__).resolve().parents[1]
 
 
-def run(argv, cwd, label, module="depthguard.cli"):
+def run(argv, cwd, label, module="depthguard.cli", env=None):
     """Run ``python -m MODULE ARGV`` (the library's command line, or the lab's, ``depthguard_lab.cli``) from the
-    copy; (wall seconds, CPU seconds, stdout)."""
-    env = dict(os.environ, PYTHONPATH=str(cwd))
+    copy, with ``env`` (dict) added to the environment; (wall seconds, CPU seconds, stdout)."""
+    env = dict(os.environ, PYTHONPATH=str(cwd), **(env or {}))
     env.pop("NUMBA_CACHE_DIR", None)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
@@ -74,6 +75,7 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--without-warmup", action="store_true", help="also time the first answers from an empty "
                                                                       "cache")
+    parser.add_argument("--llvm-opt", type=int, choices=range(4), help="also the baseline at this NUMBA_OPT")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="depthguard-cold-") as tmp:
         tmp = Path(tmp)
@@ -90,6 +92,10 @@ def main(argv=None) -> None:
         baseline = fresh_copy(tmp / "baseline")
         wall, cpu, _ = run(["warmup", "--processes", "1"], baseline, "warmup in one process")
         rows.append(("baseline: warmup --processes 1, empty cache", wall, cpu))
+        if args.llvm_opt is not None:
+            wall, cpu, _ = run(["warmup", "--processes", "1"], fresh_copy(tmp / "opt"), "warmup at another NUMBA_OPT",
+                               env={"NUMBA_OPT": str(args.llvm_opt)})
+            rows.append((f"the same at NUMBA_OPT={args.llvm_opt} (LLVM's optimisation; 3 above)", wall, cpu))
         copy = fresh_copy(tmp / "clone")
         wall, cpu, out = run(["warmup"], copy, "warmup")
         rows.append((f"depthguard warmup, empty cache ({os.cpu_count()} cores; x{rows[-1][1] / wall:.2f} faster)",
