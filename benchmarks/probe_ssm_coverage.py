@@ -12,7 +12,7 @@ free), for d = 40 mm, and in the SSM layout also 55 and 70 mm (ISO 13855's large
 40 mm, 850 mm above):
 
     .venv/bin/python benchmarks/probe_ssm_coverage.py [--time 5.2] [--rho 1.5] [--loop]
-    .venv/bin/python benchmarks/probe_ssm_coverage.py --bound [--start 3.5] [--settle 0.5]
+    .venv/bin/python benchmarks/probe_ssm_coverage.py --bound [--start 3.5] [--settle 0.5] [--two]
     .venv/bin/python benchmarks/probe_ssm_coverage.py --margins [--time 5.2] [--nearer 0.45]
 
 ``--bound`` prints only the factor SSM allows along the task from an ideal sound memory opened by d beside the
@@ -128,6 +128,7 @@ def main(argv=None) -> None:
                              "project's, along the task (about 15 minutes)")
     parser.add_argument("--start", type=float, default=3.5, help="--bound: seconds, where the memories start")
     parser.add_argument("--settle", type=float, default=0.5, help="--bound: seconds of start-up not counted")
+    parser.add_argument("--two", action="store_true", help="--bound: in the scene's two-camera layout")
     parser.add_argument("--margins", action="store_true",
                         help="only what holds the project's detectable distances at 0 in the SSM cell: its voxels, "
                              "the robot's inside and each margin, one at a time (about 3 minutes)")
@@ -135,7 +136,7 @@ def main(argv=None) -> None:
                         help="--margins: every camera this fraction of its distance from where it looks (0-1]")
     args = parser.parse_args(argv)
     if args.bound:
-        bound(args.start, args.settle, verbose=True)
+        bound(args.start, args.settle, verbose=True, two=args.two)
         return
     if args.margins:
         margins(args.time, args.nearer)
@@ -201,7 +202,8 @@ def _beyond_rho(distance: np.ndarray, rho: float) -> np.ndarray:
 BOUND_BOX = ((-0.65, -0.82, -0.5), (1.2, 0.73, 1.54))
 
 
-def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, verbose: bool = False) -> None:
+def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, verbose: bool = False,
+          two: bool = False) -> None:
     """Issue 35 item 6 for SSM: along the task in the SSM cell (``avoidance_demo.ssm_scene``, the robot where its
     script puts it, not slowed), the factor SSM allows each frame from the distances of an ideal sound memory opened
     by d (:class:`depthguard_lab.experiments.ideal_memory.IdealMemory` with ``opening=d``: exact ray casts, the
@@ -210,7 +212,8 @@ def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, v
     detectable distances (the loop's sound settings: no robot zone, holes occupied, the solids known), on the same
     frames, with the same SSM (C for d, the joints' braking, T_r = one frame's latency + one control step, the
     task's command) and the loop's look-ahead. Both memories start at ``start`` seconds with everything possibly
-    occupied; the first ``settle`` seconds are not counted."""
+    occupied; the first ``settle`` seconds are not counted. ``two``: in the scene's own layout (its two front
+    Kinect-class cameras) instead of the SSM cell's five."""
     from depthguard.avoidance import JointLimits, SpeedSeparationMonitor, SSMParams
     from depthguard_lab.experiments.avoidance_demo import ssm_scene
     from depthguard_lab.experiments.ideal_memory import IdealMemory, measured_depths
@@ -219,6 +222,9 @@ def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, v
     from depthguard_lab.simulation._truth import TruthComputer
 
     cell, settings = ssm_scene()
+    layout = "scenario_b_ssm.yaml"
+    if two:
+        cell, layout = load_workcell(Path(str(PACKAGE / "scenario_b_reach.yaml"))), "its own two cameras"
     robot = cell.robot
     points_robot = robot.with_surface_points(settings.surface_tolerance)
     radii = points_robot.control_point_radii
@@ -240,7 +246,7 @@ def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, v
     static = {o.name for o in cell.static_objects}
     person = []
     print(f"\nthe bound for SSM (issue 35 item 6): {cell.duration:g} s of scenario_b_reach.yaml in "
-          f"scenario_b_ssm.yaml, the robot on its script, d = {d * 1000:.0f} mm "
+          f"{layout}, the robot on its script, d = {d * 1000:.0f} mm "
           f"(C = {intrusion_distance(d) * 1000:.0f} mm), "
           f"T_r = {reaction * 1000:.0f} ms; the memories start at {start:g} s, counted from {start + settle:g} s; "
           f"the ideal's grid {spacing * 100:g} cm over {BOUND_BOX}")
@@ -399,7 +405,7 @@ def margins(t: float, nearer: float | None = None) -> None:
 if __name__ == "__main__":
     import sys
 
-    name = "probe_ssm_coverage_bound" if "--bound" in sys.argv else \
+    name = ("probe_ssm_coverage_bound" + ("_two" if "--two" in sys.argv else "")) if "--bound" in sys.argv else \
         ("probe_ssm_coverage_margins" + ("_nearer" if "--nearer" in sys.argv else "")) if "--margins" in sys.argv \
         else None
     with report(__file__, name=name):
