@@ -110,3 +110,13 @@ def test_an_opened_memory_keeps_only_balls_of_d_and_answers_within_its_box(start
     side = np.minimum(points - open_.lo, open_.hi - points).min(axis=1)
     brute = np.minimum(np.linalg.norm(where[None] - points[:, None], axis=2).min(axis=1), side)
     np.testing.assert_allclose(open_.nearest(points), brute, atol=1e-12)
+
+
+def test_with_nothing_possibly_occupied_nothing_arrives(start):
+    """A grid wholly inside a known solid (the pedestal) holds no possibly-occupied point, and nothing can arrive
+    there: every arrival time stays infinite (a distance transform with no source would give finite ones)."""
+    workcell, frame = start
+    ideal = IdealMemory(workcell, spacing=0.02, bounds=((-0.12, -0.12, -0.45), (0.12, 0.12, -0.05)))
+    ideal.update(frame.time, frame.joints, frame.depth_exact, frame.label)
+    assert ideal.solid.all() and not ideal.possibly.any()
+    assert np.all(np.isinf(ideal.arrival))

@@ -140,11 +140,8 @@ class IdealMemory:
         possibly = (self.arrival <= time) & ~free
         if self.opening > 0.0:
             possibly = opened(possibly, self.opening / 2.0 / self.spacing)
-        # distance to the nearest possibly-occupied point, or to outside the workspace but for its floor
-        padded = np.ones(tuple(n + 2 for n in self.shape), dtype=bool)
-        padded[1:-1, 1:-1, 1:-1] = ~possibly
-        padded[:, :, 0] = True
-        distance = ndimage.distance_transform_edt(padded)[1:-1, 1:-1, 1:-1] * self.spacing
+        # distance to the nearest possibly-occupied point (the grid's outside is no source); none: nothing arrives
+        distance = ndimage.distance_transform_edt(~possibly) * self.spacing if possibly.any() else np.inf
         np.maximum(self.arrival, time + distance / self.v_max, out=self.arrival)
         self.possibly, self.surfaces = possibly, surfaces.reshape(self.shape)
         self._tree = None  # nearest()'s, of these possibly-occupied points
