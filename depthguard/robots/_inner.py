@@ -84,11 +84,13 @@ def inner_balls(mesh: trimesh.Trimesh, link: str, spacing: float = config.INNER_
     if not len(targets):  # a thin link (a flange) the grid's points miss the middle of: a grid half as fine
         return inner_balls(mesh, link, 0.5 * spacing, count, cover, sample) if spacing > 4.0 * sample else []
     useful = np.flatnonzero(radii > cover)
-    pairs = int(cKDTree(targets).query_ball_point(centres[useful], radii[useful] - cover, return_length=True).sum())
+    tree = cKDTree(targets)
+    pairs = int(tree.query_ball_point(centres[useful], radii[useful] - cover, return_length=True).sum())
     most = config.INNER_BALL_LIMITS["pairs"]
     if pairs > most:  # the greedy choice weighs every k-th target only
         targets = targets[::-(-pairs // most)]
-    reached = cKDTree(targets).query_ball_point(centres[useful], radii[useful] - cover)
+        tree = cKDTree(targets)
+    reached = tree.query_ball_point(centres[useful], radii[useful] - cover)
     rows = np.repeat(useful, [len(r) for r in reached])
     cols = np.concatenate([np.asarray(r, dtype=np.int64) for r in reached]) if len(useful) else rows
     covers = sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(centres), len(targets)))
