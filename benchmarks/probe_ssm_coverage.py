@@ -191,9 +191,25 @@ def closed_loop(capabilities=(0.04, 0.07)) -> None:
               f"{scale.mean():6.2f} {np.quantile(scale, 0.9):6.2f} {scale.max():6.2f}")
 
 
-def _beyond_rho(distance: np.ndarray, rho: float) -> np.ndarray:
-    """``distance`` with inf where it is at least rho (the monitor's "nothing within rho")."""
-    return np.where(distance >= rho, np.inf, distance)
+def _loop_ssm(robot, settings, d: float):
+    """The demo's SSM (its rho, the joints' braking, the robot's reaches) with C for detection capability d."""
+    from depthguard.avoidance import JointLimits, SpeedSeparationMonitor, SSMParams
+
+    limits = JointLimits.from_robot(robot, acceleration=settings.acceleration)
+    return SpeedSeparationMonitor(SSMParams(detection_capability=d), rho=settings.ssm_rho, braking=limits.acceleration,
+                                  reaches=robot.joint_reaches())
+
+
+def _sound_options(cell, settings, d: float) -> dict:
+    """``DistanceMonitor`` options of SSM's sound settings in ``cell``: no robot zone, holes occupied, the solids
+    known, detection capability d."""
+    return dict(rho=settings.ssm_rho, robot=cell.robot, aggregate="min", invalid="occupied", robot_zone=0.0,
+                static=cell.background_parts(), detection_capability=d)
+
+
+def _from_spheres(distance: np.ndarray, radii: np.ndarray, rho: float) -> np.ndarray:
+    """(m,) metres from the control points' spheres: ``distance`` less ``radii``, inf counted as rho, at least 0."""
+    return np.maximum(np.where(np.isfinite(distance), distance, rho) - radii, 0.0)
 
 
 #: --bound: the ideal's grid, a box round the task's control points (they span x 0-0.55, y -0.17-0.08,
@@ -214,10 +230,9 @@ def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, v
     task's command) and the loop's look-ahead. Both memories start at ``start`` seconds with everything possibly
     occupied; the first ``settle`` seconds are not counted. ``two``: in the scene's own layout (its two front
     Kinect-class cameras) instead of the SSM cell's five."""
-    from depthguard.avoidance import JointLimits, SpeedSeparationMonitor, SSMParams
     from depthguard_lab.experiments.avoidance_demo import ssm_scene
     from depthguard_lab.experiments.ideal_memory import IdealMemory, measured_depths
-    from depthguard_lab.simulation._closed_loop import _detectable, _ssm_factor
+    from depthguard_lab.simulation._closed_loop import _detectable, _ssm_factor, beyond_rho
     from depthguard_lab.simulation._episode import SceneRenderer, sense
     from depthguard_lab.simulation._truth import TruthComputer
 
@@ -228,13 +243,10 @@ def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, v
     robot = cell.robot
     points_robot = robot.with_surface_points(settings.surface_tolerance)
     radii = points_robot.control_point_radii
-    limits = JointLimits.from_robot(robot, acceleration=settings.acceleration)
-    ssm = SpeedSeparationMonitor(SSMParams(detection_capability=d), rho=settings.ssm_rho, braking=limits.acceleration,
-                                 reaches=robot.joint_reaches())
+    ssm = _loop_ssm(robot, settings, d)
     dt = 1.0 / settings.control_rate
     reaction = settings.latency + dt
-    monitor = dg.DistanceMonitor(cell.rig, rho=settings.ssm_rho, robot=robot, aggregate="min", invalid="occupied",
-                                 robot_zone=0.0, static=cell.background_parts(), detection_capability=d)
+    monitor = dg.DistanceMonitor(cell.rig, **_sound_options(cell, settings, d))
     ideals = {"ideal, exact": IdealMemory(cell, spacing=spacing, bounds=BOUND_BOX, opening=d),
               "ideal, measured": IdealMemory(cell, spacing=spacing, noise_margin=True, measured=True,
                                              bounds=BOUND_BOX, opening=d)}
@@ -267,11 +279,10 @@ def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, v
             person.append(float(np.min(frame.truth.distances[:, moving], initial=np.inf)))
             asks = {"project": (prepared, lambda p, x: _detectable(p, x, settings.ssm_rho))}
             for name, ideal in ideals.items():
-                asks[name] = (ideal, lambda p, x: _beyond_rho(p.nearest(x), settings.ssm_rho))
+                asks[name] = (ideal, lambda p, x: beyond_rho(p.nearest(x), settings.ssm_rho))
             for name, (source, ask) in asks.items():
                 distance = ask(source, points)
-                least[name].append(float(np.min(np.maximum(np.where(np.isfinite(distance), distance,
-                                                                    settings.ssm_rho) - radii, 0.0))))
+                least[name].append(float(np.min(_from_spheres(distance, radii, settings.ssm_rho))))
                 rows[name].append(_ssm_factor(ssm, source, distance, points, jacobians, dq, reaction, radii,
                                               settings.ssm_lookahead, ask))
             if verbose and (index % 3 == 0):
@@ -329,7 +340,6 @@ def margins(t: float, nearer: float | None = None) -> None:
 
     import depthguard.robots._inner as inner
     import depthguard.robots._model as robot_model
-    from depthguard.avoidance import JointLimits, SpeedSeparationMonitor, SSMParams
     from depthguard_lab.experiments.avoidance_demo import ssm_scene
     from depthguard_lab.simulation._closed_loop import _detectable, _ssm_factor
 
@@ -343,7 +353,6 @@ def margins(t: float, nearer: float | None = None) -> None:
     robot = cell.robot
     points_robot = robot.with_surface_points(settings.surface_tolerance)
     radii = points_robot.control_point_radii
-    limits = JointLimits.from_robot(robot, acceleration=settings.acceleration)
     dt = 1.0 / settings.control_rate
     times = [t - i / cell.rate for i in (3, 2, 1, 0)]
     frames = sense_at(cell, times)
@@ -381,17 +390,15 @@ def margins(t: float, nearer: float | None = None) -> None:
             if dense and inner.inner_balls is original:  # the model's balls are cached per process: found again
                 inner.inner_balls = lambda mesh, link: original(mesh, link, spacing=0.006, count=1500)
                 robot_model._INNER_CAPSULES.clear()
-            options = {"rho": settings.ssm_rho, "robot": robot, "aggregate": "min", "invalid": "occupied",
-                       "robot_zone": 0.0, "static": cell.background_parts(), "detection_capability": 0.04, **options}
+            options = {**_sound_options(cell, settings, 0.04), **options}
             row_rig = dataclasses.replace(row_rig, workspace=np.asarray(BOUND_BOX)) if box else row_rig
             monitor = dg.DistanceMonitor(row_rig, **options)
             for f, depth in zip(frames, exact if use_exact else [f.depth for f in frames]):
                 prepared = monitor.prepare_set(depth, joints=f.joints, now=f.time)
             d = options["detection_capability"]
-            ssm = SpeedSeparationMonitor(SSMParams(detection_capability=d), rho=settings.ssm_rho,
-                                         braking=limits.acceleration, reaches=robot.joint_reaches())
+            ssm = _loop_ssm(robot, settings, d)
             distance = _detectable(prepared, points, settings.ssm_rho)
-            surface = np.maximum(np.where(np.isfinite(distance), distance, settings.ssm_rho) - radii, 0.0)
+            surface = _from_spheres(distance, radii, settings.ssm_rho)
             factor = _ssm_factor(ssm, prepared, distance, points, jacobians, dq, settings.latency + dt, radii,
                                  settings.ssm_lookahead, lambda p, x: _detectable(p, x, settings.ssm_rho))
             print(f"  {label:46s} {d * 1000:4.0f} {intrusion_distance(d) * 1000:4.0f} "

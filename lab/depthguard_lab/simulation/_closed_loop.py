@@ -421,7 +421,11 @@ class _MovedSince:
 def _detectable(prepared, points, rho) -> np.ndarray:
     """(m,) the detectable distances (``PreparedSet.detectable_distances``) of points (m, 3), inf where at least
     rho (as the monitor's "nothing within rho")."""
-    distance = prepared.detectable_distances(points, limit=rho, check=False).distance
+    return beyond_rho(prepared.detectable_distances(points, limit=rho, check=False).distance, rho)
+
+
+def beyond_rho(distance: np.ndarray, rho: float) -> np.ndarray:
+    """(m,) ``distance`` (metres) with inf where it is at least rho (the monitor's "nothing within rho")."""
     return np.where(distance >= rho, np.inf, distance)
 
 
