@@ -270,6 +270,32 @@ def test_cells_kept_for_the_frame_change_no_answer(aggregate):
     assert (kept._cells > 0).sum() > 100  # the cache was used
 
 
+def test_cells_of_earlier_frames_are_cleared_when_their_array_is_reused():
+    """The cell classes' array (a byte a cell, mostly untouched) passes from one set's FusedFrames to the next once
+    the first is collected: the next starts with every cell unknown, and answers as on an array of its own."""
+    from depthguard import buffers
+
+    r, grid, principal, frees, robot_far, robot_near = robot_scene_frames()
+    points = np.array([[0.0, 0.0, 0.35], [0.15, 0.15, 0.8], [0.6, 0.2, 0.9], [1.0, 0.0, 0.7]])
+    first = FusedFrames(grid, r, principal, frees, robot_far=robot_far, robot_near=robot_near)
+    first.distances(points, 0.4, "hybrid")
+    assert (first._cells > 0).sum() > 100 and first._touched.sum() > 10
+    used = first._cells.base
+    del first
+    _, _, principal2, frees2, _, _ = robot_scene_frames(torso=True)
+    again = FusedFrames(grid, r, principal2, frees2, robot_far=robot_far, robot_near=robot_near)
+    assert again._cells.base is used  # reused, not new
+    assert not again._cells.any() and not again._touched.any()
+    reused = again.distances(points, 0.4, "hybrid")
+    del again
+    with buffers._lock:
+        buffers._spares.clear()
+    own = FusedFrames(grid, r, principal2, frees2, robot_far=robot_far, robot_near=robot_near)
+    assert own._cells.base is not used
+    expected = own.distances(points, 0.4, "hybrid")
+    assert np.array_equal(reused.distance, expected.distance) and reused.flags == expected.flags
+
+
 BESIDE, BEHIND = (0.0, 2.5, 1.4), (-2.5, 0.6, 1.6)  # second cameras: beside the principal, behind the arm
 
 
@@ -329,6 +355,7 @@ def test_nearest_by_run_equals_the_walk_on_random_pixels():
         run_hi = min(n - 1, run_lo + int(rng.integers(0, 40)))
         cells[run_lo:run_hi + 1] = 1
         frames._cells[v, u] = cells
+        frames._touched[v, u] = 1  # for whoever reuses the array
         runs = np.full(camera.shape, K.NO_FREE_RUN, dtype=np.int64)
         runs[v, u] = (run_lo << 32) | run_hi
         state = frames.kernel_state(runs, runs.copy())
@@ -458,7 +485,7 @@ def test_space_between_two_links_is_checked():
         for k in range(k_lo, k_hi + 1, 32):
             K.classify_run(u, v, k, min(k + 31, k_hi), frames.kernel_state())
         depths = grid.d_min + (np.arange(k_lo, k_hi + 1) + 0.5) * grid.delta_d
-        classes[name] = frames._cells[v, u, k_lo:k_hi + 1]
+        classes[name] = frames._cells[v, u, k_lo:k_hi + 1].copy()  # the next frames reuse the array
     ray = p.T_world_camera[:3, :3] @ np.array([(u - p.cx) / p.fx, (v - p.cy) / p.fy, 1.0])
     points = p.T_world_camera[:3, 3] + depths[:, None] * ray  # the cells' centres, world frame
     to_b = np.hypot(points[:, 0] + 0.3, points[:, 1]) - 0.08  # from B's padded surface (its axis is vertical)

@@ -45,7 +45,7 @@ def zone_grid(d_min, delta_d, n_cells, zone, params):
     empty3 = np.zeros((0, 1, 1, 3))
     return K.GridState(d_min, delta_d, n_cells, empty3, np.zeros((0, 3)), np.zeros((0, 1, 1), np.float32),
                        np.zeros((0, 2), np.int64), np.zeros(0), 0.0, np.zeros((1, 1, 1), np.uint8),
-                       np.zeros((0, 0, 0), np.uint8), np.zeros(0), np.zeros((1, 1), np.int64),
+                       np.zeros((1, 1), np.uint8), np.zeros((0, 0, 0), np.uint8), np.zeros(0), np.zeros((1, 1), np.int64),
                        np.zeros((1, 1), np.int64), zone, params, np.zeros((0, 7)), np.zeros(K.CAPSULE_PARAMS),
                        np.zeros((1, 1), np.float32), np.zeros((1, 1), np.float32))
 

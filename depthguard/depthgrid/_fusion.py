@@ -9,6 +9,7 @@ import numpy as np
 from numba import parallel_chunksize
 
 from depthguard import config
+from depthguard.buffers import reusable
 from depthguard.cameras import PinholeCamera, Rig
 from depthguard.depth import DepthImage, OccupancyImage
 from depthguard.kernels import depthgrid as grid_kernels
@@ -181,9 +182,11 @@ class FusedFrames:
                                   np.float32(camera.depth_range[0]), principal.blind, near, far, exit_,
                                   float(robot_tolerance), *camera.noise.coefficients(), self._certain, self._z_end,
                                   self._blind_from, self._shell_lo, self._shell_hi)
-        # The cells' classes so far, a byte each: 0 unknown, 1 free, 2 occupied. The zeroed pages come from the
-        # operating system as they are first touched, so memory grows with the cells looked at, not with the grid.
-        self._cells = np.zeros(camera.shape + (grid.n_cells,), dtype=np.uint8)
+        # The cells' classes so far, a byte each: 0 unknown, 1 free, 2 occupied, 3 free by the memory
+        # (classify_run), and per pixel whether they were written. One array reused from set to set (a new one's
+        # pages, zeroed by the operating system as they are first touched, cost 4-5 ms a set; memory grows with the
+        # cells looked at, not with the grid): what its last owner wrote is cleared.
+        self._cells, self._touched = _cell_cache(camera.shape, grid.n_cells, self)
         # Per pixel, one run of cells known free in its gray area and one behind the robot, to skip without reading
         # them: (first << 32) | last.
         self._free_run = np.full(camera.shape, grid_kernels.NO_FREE_RUN, dtype=np.int64)
@@ -248,9 +251,23 @@ class FusedFrames:
         grid = self.grid
         return grid_kernels.GridState(grid.d_min, grid.delta_d, grid.n_cells, self._corners, self._offsets,
                                       self._eroded, self._sizes, self._z_near, self._margin, self._cells,
+                                      self._touched,
                                       *self._memory, self._free_run if free_run is None else free_run,
                                       self._behind_run if behind_run is None else behind_run, *self._zone,
                                       *self._shell, self._shell_lo, self._shell_hi)
+
+
+def _cell_cache(shape: tuple, n_cells: int, owner) -> tuple[np.ndarray, np.ndarray]:
+    """(cells, touched): a principal of ``shape`` (h, w) pixels' cell classes ((h, w, n_cells) uint8) and marks of
+    the pixels whose cells were written ((h, w) uint8), all 0, in one array reused from the sets of frames before
+    (:func:`depthguard.buffers.reusable`, given back when ``owner`` is collected): only the pixels its last owner
+    marked are cleared."""
+    h, w = shape
+    flat = reusable((h, w, n_cells + 1), np.uint8, owner, new=np.zeros).reshape(-1)
+    cells = flat[:h * w * n_cells].reshape(h, w, n_cells)
+    touched = flat[h * w * n_cells:].reshape(h, w)
+    grid_kernels.clear_touched(cells, touched)
+    return cells, touched
 
 
 _NO_MEMORY = (np.zeros((0, 0, 0), dtype=np.uint8), np.zeros(grid_kernels.MEM_GEOMETRY_SIZE))

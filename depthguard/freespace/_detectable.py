@@ -47,7 +47,7 @@ from depthguard.kernels import detectable as detectable_kernels
 from depthguard.kernels.detectable import erode_fits, mark_box_voxels, mark_capsule_voxels, nearest_fit
 from depthguard.errors import InputError
 from depthguard.validation import NOT_A_NUMBER, check_limit, check_real
-from depthguard.freespace._buffers import reusable
+from depthguard.buffers import reusable
 from depthguard.freespace._memory import CameraViews, VoxelBox, _check_box
 
 #: Voxels a side of the blocks whose counts let a distance query skip the empty parts of the box.

@@ -20,7 +20,7 @@ from depthguard.cameras import PinholeCamera
 from depthguard.errors import InputError
 from depthguard.validation import NOT_A_NUMBER, check_real, short_repr
 from depthguard.kernels import freespace as freespace_kernels
-from depthguard.freespace._buffers import reusable
+from depthguard.buffers import reusable
 
 
 

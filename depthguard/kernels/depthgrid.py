@@ -84,7 +84,8 @@ from depthguard.kernels.jit import kernel
 #: along each principal pixel; corners (n_sec, H+1, W+1, 3), offsets (n_sec, 3): the map (DepthGridMap); eroded
 #: (n_sec, h, w) float32: each secondary's free depths eroded by the footprint pad; sizes (n_sec, 2) int64: their
 #: (width, height); z_near (n_sec,): their nearest valid depth; margin: metres a secondary must see beyond a cell;
-#: cells (H, W, n_cells) uint8: the cells' classes so far; mem_free (free voxels, uint8) and mem_geometry (float64):
+#: cells (H, W, n_cells) uint8: the cells' classes so far; touched (H, W) uint8: 1 where a pixel's cells were written
+#: (:func:`classify_run`; what the next set's reuse of the array clears); mem_free (free voxels, uint8) and mem_geometry (float64):
 #: the free-space memory (:func:`remembered_cells`; zero-sized for none; two fields, not a nested tuple, which
 #: numba's parallel loops do not take); free_run, behind_run (H, W) int64: per pixel, one run of cells known free in
 #: its gray area (or, without a measurement, its frustum) and one in the space behind the robot (two, so that the
@@ -93,7 +94,8 @@ from depthguard.kernels.jit import kernel
 #: for none). shell (n_caps, 7) float64, shell_params (CAPSULE_PARAMS,) float64 and shell_lo, shell_hi (H, W) float32
 #: metres: the self-filter's shell round the links that a principal pixel's ray meets after it first left the robot
 #: (:func:`shell_cells`; zero rows for none).
-GridState = namedtuple("GridState", "d_min delta_d n_cells corners offsets eroded sizes z_near margin cells mem_free "
+GridState = namedtuple("GridState", "d_min delta_d n_cells corners offsets eroded sizes z_near margin cells touched "
+                                    "mem_free "
                                     "mem_geometry free_run behind_run zone zone_params shell shell_params shell_lo "
                                     "shell_hi")
 
@@ -421,10 +423,15 @@ CLASSIFY_RUN = 8  # cells classified together: neighbours share a face, projecte
 @kernel()
 def classify_run(u, v, k_a, k_b, grid):
     """Classify cells k_a..k_b (at most 64) of principal pixel (u, v) into cells[v, u, k]: 1 when the cell lies in
-    the robot zone (:func:`zoned_cells`), in the shell of a link behind the first (:func:`shell_cells`), or some
-    secondary camera saw through the whole cell, else 3 when the free-space memory (``memory``,
-    :func:`remembered_cells`) certifies every voxel the cell touches, else 2 (occupied, or hidden from every camera).
-    Each face between two cells is projected once per camera.
+    the robot zone (:func:`zoned_cells`) or in the shell of a link behind the first (:func:`shell_cells`), else 3
+    when the free-space memory certifies every voxel the cell touches (:func:`remembered_cells`: the voxels some
+    camera saw wholly free this set among them), else 1 when some secondary camera saw through the whole cell, else
+    2 (occupied, or hidden from every camera). Each face between two cells is projected once per camera.
+
+    The memory is asked before the cameras because its answer is a lookup in voxels the set has computed already
+    (issue 38's one look at what the cameras see free): a cell it certifies needs no camera's footprint read. Which
+    cells are free (1 or 3) and which occupied (2) is the same in either order; only which of 1 and 3 a free cell
+    gets can differ, and no answer reads that (the flag ``remembered`` comes from the voxels).
 
     A camera is first asked about the whole run at once: the run's footprint lies within the box of its two end
     faces' corners and its largest depth at one of them (depth is linear along each corner ray), so if the camera
@@ -435,6 +442,10 @@ def classify_run(u, v, k_a, k_b, grid):
     n = k_b - k_a + 1
     everything = _ALL if n == 64 else (np.uint64(1) << np.uint64(n)) - np.uint64(1)
     cleared = zoned_cells(u, v, k_a, k_b, grid) | shell_cells(u, v, k_a, k_b, grid)
+    remembered = np.uint64(0)
+    if cleared != everything:
+        remembered = remembered_cells(u, v, k_a, k_b, grid) & ~cleared
+    cleared |= remembered  # settled; the cameras are asked about the rest
     for j in range(corners.shape[0]):
         if cleared == everything:
             break
@@ -459,13 +470,23 @@ def classify_run(u, v, k_a, k_b, grid):
                                     max(y_hi0, y_hi1), max(far0, far1) + margin):
                     cleared |= bit
             ok0, x_lo0, x_hi0, y_lo0, y_hi0, far0 = ok1, x_lo1, x_hi1, y_lo1, y_hi1, far1
-    remembered = np.uint64(0)
-    if cleared != everything:
-        remembered = remembered_cells(u, v, k_a, k_b, grid)
+    grid.touched[v, u] = 1
     for i in range(k_b - k_a + 1):
         bit = np.uint64(1) << np.uint64(i)
-        cells[v, u, k_a + i] = 1 if (cleared & bit) != np.uint64(0) else (
-            3 if (remembered & bit) != np.uint64(0) else 2)
+        cells[v, u, k_a + i] = 3 if (remembered & bit) != np.uint64(0) else (
+            1 if (cleared & bit) != np.uint64(0) else 2)
+
+
+@kernel(parallel=True)
+def clear_touched(cells, touched):
+    """cells[v, u, :] = 0 and touched[v, u] = 0 wherever touched[v, u] is not 0: a set's cell classes cleared for
+    the next set in time proportional to the pixels it wrote. cells: (H, W, n_cells) uint8; touched: (H, W) uint8,
+    ``grid``'s."""
+    for v in prange(touched.shape[0]):
+        for u in range(touched.shape[1]):
+            if touched[v, u] != 0:
+                cells[v, u, :] = 0
+                touched[v, u] = 0
 
 
 #: Layout of the free-space memory's geometry, ``memory[1]`` (float64): the voxel box's low corner (world, metres),
@@ -547,7 +568,7 @@ def remembered_cells(u, v, k_a, k_b, grid):
 def _next_not_free(cells, v, u, k, k_end, step):
     """The first cell from k towards k_end (inclusive, by step +-1) not known to be free, or k_end + step. cells:
     (H, W, n_cells) uint8, ``grid``'s cell classes, read at pixel (u, v); k, k_end, step: int."""
-    while k != k_end + step and (cells[v, u, k] & 1) != 0:  # 1: seen free now, 3: remembered free
+    while k != k_end + step and (cells[v, u, k] & 1) != 0:  # 1: seen free now or the robot's, 3: the memory's
         k += step
     return k
 
@@ -557,8 +578,9 @@ def occupied_in(u, v, k_lo, k_hi, highest, grid):
     """The highest (with ``highest``, a numpy bool) or lowest occupied cell in k_lo..k_hi (int) of principal pixel
     (u, v), -1 for none.
 
-    cells[v, u, k] caches each cell's class for the frame: 0 unknown, 1 free (seen), 2 occupied, 3 free (remembered:
-    no camera sees through it now, but the free-space memory says no person can be there yet). A cell met unknown is
+    cells[v, u, k] caches each cell's class for the frame: 0 unknown, 1 free (the robot's, or seen through by a
+    camera), 2 occupied, 3 free (the free-space memory certifies it: seen free this set, or no person can be there
+    yet). A cell met unknown is
     classified with the next few in the walk's direction (:func:`classify_run`). Threads that query different
     control points may classify the same cell at once; each writes the same byte, a function of this frame's images
     alone, so whichever write lands, the cache holds the right class.

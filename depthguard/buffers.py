@@ -1,7 +1,8 @@
 """Large per-set arrays reused from one set of frames to the next.
 
-A set's row-minimum tables (12 MB a 640x480 camera) and a watched detectable space's block arrays (2 bytes a voxel)
-are made anew for every set. Above glibc's largest mmap threshold (32 MB) each such array is mapped afresh and every
+A set's row-minimum tables (12 MB a 640x480 camera), a watched detectable space's block arrays (2 bytes a voxel) and
+the depth grid's cell classes (a byte a cell, 130 MB for a 640x480 principal, of which a set touches a few) are made
+anew for every set. Above glibc's largest mmap threshold (32 MB) each such array is mapped afresh and every
 page it touches faults in again, which on this project's machines cost 10-100 ms a set. :func:`reusable` hands out
 an array that an earlier owner no longer holds (its contents are whatever that owner left: the caller writes before
 it reads), and takes it back when its new owner is garbage collected.
@@ -21,15 +22,17 @@ _spares: dict[tuple, list[np.ndarray]] = {}
 _lock = threading.Lock()
 
 
-def reusable(shape: tuple, dtype, owner) -> np.ndarray:
+def reusable(shape: tuple, dtype, owner, new=np.empty) -> np.ndarray:
     """An uninitialised C-contiguous array of ``shape`` and ``dtype``, given back to the spares when ``owner`` (any
-    object that supports weak references) is collected: the array must not outlive it."""
+    object that supports weak references) is collected: the array must not outlive it. ``new(shape, dtype)`` makes
+    one when no spare is left (``np.zeros`` for one that starts zeroed: its pages come from the operating system as
+    they are first touched); a spare holds what its last owner left in it."""
     key = (tuple(int(n) for n in shape), np.dtype(dtype).str)
     with _lock:
         spares = _spares.setdefault(key, [])
         array = spares.pop() if spares else None
     if array is None:
-        array = np.empty(key[0], dtype=key[1])
+        array = new(key[0], dtype=key[1])
     weakref.finalize(owner, _give_back, key, array)
     return array
 
