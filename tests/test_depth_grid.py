@@ -274,18 +274,21 @@ def test_cells_of_earlier_frames_are_cleared_when_their_array_is_reused():
     """The cell classes' array (a byte a cell, mostly untouched) passes from one set's FusedFrames to the next once
     the first is collected: the next starts with every cell unknown, and answers as on an array of its own."""
     from depthguard import buffers
+    from depthguard.kernels import depthgrid as K
 
     r, grid, principal, frees, robot_far, robot_near = robot_scene_frames()
     points = np.array([[0.0, 0.0, 0.35], [0.15, 0.15, 0.8], [0.6, 0.2, 0.9], [1.0, 0.0, 0.7]])
     first = FusedFrames(grid, r, principal, frees, robot_far=robot_far, robot_near=robot_near)
     first.distances(points, 0.4, "hybrid")
     assert (first._cells > 0).sum() > 100 and first._touched.sum() > 10
+    assert np.any(first._free_run != K.NO_FREE_RUN)
     used = first._cells.base
     del first
     _, _, principal2, frees2, _, _ = robot_scene_frames(torso=True)
     again = FusedFrames(grid, r, principal2, frees2, robot_far=robot_far, robot_near=robot_near)
     assert again._cells.base is used  # reused, not new
     assert not again._cells.any() and not again._touched.any()
+    assert np.all(again._free_run == K.NO_FREE_RUN) and np.all(again._behind_run == K.NO_FREE_RUN)
     reused = again.distances(points, 0.4, "hybrid")
     del again
     with buffers._lock:

@@ -186,11 +186,10 @@ class FusedFrames:
         # (classify_run), and per pixel whether they were written. One array reused from set to set (a new one's
         # pages, zeroed by the operating system as they are first touched, cost 4-5 ms a set; memory grows with the
         # cells looked at, not with the grid): what its last owner wrote is cleared.
-        self._cells, self._touched = _cell_cache(camera.shape, grid.n_cells, self)
+        self._cells, runs, self._touched = _cell_cache(camera.shape, grid.n_cells, self)
         # Per pixel, one run of cells known free in its gray area and one behind the robot, to skip without reading
         # them: (first << 32) | last.
-        self._free_run = np.full(camera.shape, grid_kernels.NO_FREE_RUN, dtype=np.int64)
-        self._behind_run = np.full(camera.shape, grid_kernels.NO_FREE_RUN, dtype=np.int64)
+        self._free_run, self._behind_run = runs
         self._memory = _NO_MEMORY if remembered is None else _memory_tuple(remembered, camera)
         self._zone = _zone_arrays(robot_zone, camera)
         self._shell = NO_ZONE if robot_shell is None else \
@@ -257,17 +256,28 @@ class FusedFrames:
                                       *self._shell, self._shell_lo, self._shell_hi)
 
 
-def _cell_cache(shape: tuple, n_cells: int, owner) -> tuple[np.ndarray, np.ndarray]:
-    """(cells, touched): a principal of ``shape`` (h, w) pixels' cell classes ((h, w, n_cells) uint8) and marks of
-    the pixels whose cells were written ((h, w) uint8), all 0, in one array reused from the sets of frames before
+def _cell_cache(shape: tuple, n_cells: int, owner) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(cells, runs, touched) for a principal of ``shape`` (h, w) pixels: the cell classes ((h, w, n_cells) uint8,
+    all 0), the free runs ((2, h, w) int64, free_run and behind_run, all NO_FREE_RUN) and marks of the pixels whose
+    cells or runs were written ((h, w) uint8, all 0), in one array reused from the sets of frames before
     (:func:`depthguard.buffers.reusable`, given back when ``owner`` is collected): only the pixels its last owner
     marked are cleared."""
     h, w = shape
-    flat = reusable((h, w, n_cells + 1), np.uint8, owner, new=np.zeros).reshape(-1)
-    cells = flat[:h * w * n_cells].reshape(h, w, n_cells)
-    touched = flat[h * w * n_cells:].reshape(h, w)
-    grid_kernels.clear_touched(cells, touched)
-    return cells, touched
+    pixels = h * w
+    flat = reusable((h, w, n_cells + 17), np.uint8, owner, new=_new_cell_cache).reshape(-1)
+    runs = flat[:16 * pixels].view(np.int64).reshape(2, h, w)  # first: numpy aligns an array's start
+    cells = flat[16 * pixels:16 * pixels + pixels * n_cells].reshape(h, w, n_cells)
+    touched = flat[16 * pixels + pixels * n_cells:].reshape(h, w)
+    grid_kernels.clear_touched(cells, runs, touched)
+    return cells, runs, touched
+
+
+def _new_cell_cache(shape: tuple, dtype) -> np.ndarray:
+    """A new array for :func:`_cell_cache`: zeros (their pages come from the operating system as they are first
+    touched), the runs NO_FREE_RUN."""
+    out = np.zeros(shape, dtype=dtype)
+    out.reshape(-1)[:16 * shape[0] * shape[1]].view(np.int64)[:] = grid_kernels.NO_FREE_RUN
+    return out
 
 
 _NO_MEMORY = (np.zeros((0, 0, 0), dtype=np.uint8), np.zeros(grid_kernels.MEM_GEOMETRY_SIZE))

@@ -84,8 +84,8 @@ from depthguard.kernels.jit import kernel
 #: along each principal pixel; corners (n_sec, H+1, W+1, 3), offsets (n_sec, 3): the map (DepthGridMap); eroded
 #: (n_sec, h, w) float32: each secondary's free depths eroded by the footprint pad; sizes (n_sec, 2) int64: their
 #: (width, height); z_near (n_sec,): their nearest valid depth; margin: metres a secondary must see beyond a cell;
-#: cells (H, W, n_cells) uint8: the cells' classes so far; touched (H, W) uint8: 1 where a pixel's cells were written
-#: (:func:`classify_run`; what the next set's reuse of the array clears); mem_free (free voxels, uint8) and
+#: cells (H, W, n_cells) uint8: the cells' classes so far; touched (H, W) uint8: 1 where a pixel's cells or runs were
+#: written (:func:`classify_run`, :func:`_walk_out`; what the next set's reuse of the arrays clears); mem_free (free voxels, uint8) and
 #: mem_geometry (float64): the free-space memory (:func:`remembered_cells`; zero-sized for none; two fields, not a
 #: nested tuple, which numba's parallel loops do not take); free_run, behind_run (H, W) int64: per pixel, one run
 #: of cells known free in its gray area (or, without a measurement, its frustum) and one in the space behind the
@@ -478,14 +478,16 @@ def classify_run(u, v, k_a, k_b, grid):
 
 
 @kernel(parallel=True)
-def clear_touched(cells, touched):
-    """cells[v, u, :] = 0 and touched[v, u] = 0 wherever touched[v, u] is not 0: a set's cell classes cleared for
-    the next set in time proportional to the pixels it wrote. cells: (H, W, n_cells) uint8; touched: (H, W) uint8,
-    ``grid``'s."""
+def clear_touched(cells, runs, touched):
+    """cells[v, u, :] = 0, runs[:, v, u] = NO_FREE_RUN and touched[v, u] = 0 wherever touched[v, u] is not 0: a
+    set's cell classes and free runs cleared for the next set in time proportional to the pixels it wrote. cells:
+    (H, W, n_cells) uint8; runs: (2, H, W) int64, free_run and behind_run; touched: (H, W) uint8, ``grid``'s."""
     for v in prange(touched.shape[0]):
         for u in range(touched.shape[1]):
             if touched[v, u] != 0:
                 cells[v, u, :] = 0
+                runs[0, v, u] = NO_FREE_RUN
+                runs[1, v, u] = NO_FREE_RUN
                 touched[v, u] = 0
 
 
@@ -667,6 +669,7 @@ def _walk_out(u, v, k_lo, k_hi, k_star, in_run, run_lo, run_hi, grid, runs):
     # Everything between the two is free now.
     free_lo = k_left + 1 if k_left >= 0 else (min(k_lo, run_lo) if in_run else k_lo)
     free_hi = k_right - 1 if k_right >= 0 else (max(k_hi, run_hi) if in_run else k_hi)
+    grid.touched[v, u] = 1
     remember_free_run(runs, v, u, free_lo, free_hi)
     return k_left, k_right
 
