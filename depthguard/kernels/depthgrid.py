@@ -85,11 +85,12 @@ from depthguard.kernels.jit import kernel
 #: (n_sec, h, w) float32: each secondary's free depths eroded by the footprint pad; sizes (n_sec, 2) int64: their
 #: (width, height); z_near (n_sec,): their nearest valid depth; margin: metres a secondary must see beyond a cell;
 #: cells (H, W, n_cells) uint8: the cells' classes so far; touched (H, W) uint8: 1 where a pixel's cells or runs were
-#: written (:func:`classify_run`, :func:`_walk_out`; what the next set's reuse of the arrays clears); mem_free (free voxels, uint8) and
-#: mem_geometry (float64): the free-space memory (:func:`remembered_cells`; zero-sized for none; two fields, not a
-#: nested tuple, which numba's parallel loops do not take); free_run, behind_run (H, W) int64: per pixel, one run
-#: of cells known free in its gray area (or, without a measurement, its frustum) and one in the space behind the
-#: robot (two, so that the two runs of a pixel that shows the robot behind a surface do not replace each other).
+#: written (:func:`classify_run`, :func:`_walk_out`; what the next set's reuse of the arrays clears); mem_free (free
+#: voxels, uint8) and mem_geometry (float64): the free-space memory (:func:`remembered_cells`; zero-sized for none;
+#: two fields, not a nested tuple, which numba's parallel loops do not take); free_run, behind_run (H, W) int64:
+#: per pixel, one run of cells known free in its gray area (or, without a measurement, its frustum) and one in the
+#: space behind the robot (two, so that the two runs of a pixel that shows the robot behind a surface do not replace
+#: each other).
 #: zone (n_caps, 7) float64 and zone_params (CAPSULE_PARAMS,) float64: the robot zone (:func:`zoned_cells`; zero rows
 #: for none). shell (n_caps, 7) float64, shell_params (CAPSULE_PARAMS,) float64 and shell_lo, shell_hi (H, W) float32
 #: metres: the self-filter's shell round the links that a principal pixel's ray meets after it first left the robot
