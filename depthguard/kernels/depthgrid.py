@@ -498,10 +498,12 @@ MEM_LO, MEM_INV_VOXEL, MEM_R, MEM_T, MEM_INTRINSICS, MEM_GEOMETRY_SIZE = 0, 3, 4
 
 
 @kernel(inline=True)
-def _face_bounds(u, v, z, geo):
-    """The world-frame bounding box (x_lo, x_hi, y_lo, y_hi, z_lo, z_hi) of principal pixel (u, v)'s footprint at
-    optical depth z (float64, metres): its 4 corners on the frustum's edge rays. geo: (MEM_GEOMETRY_SIZE,) float64,
-    ``grid``'s mem_geometry (laid out as the MEM_* constants say)."""
+def _footprint_slopes(u, v, geo):
+    """(lo0, hi0, lo1, hi1, lo2, hi2): per world axis, the smallest and largest component of principal pixel (u,
+    v)'s 4 frustum edge rays in the world frame, each scaled to optical depth 1 (no unit). A footprint corner at
+    optical depth z lies at t + z r (t the principal's position), linear in z > 0, so the footprint at depth z spans
+    t_a + z lo_a to t_a + z hi_a along world axis a. geo: (MEM_GEOMETRY_SIZE,) float64, ``grid``'s mem_geometry
+    (laid out as the MEM_* constants say)."""
     lo0 = np.inf
     lo1 = np.inf
     lo2 = np.inf
@@ -510,11 +512,11 @@ def _face_bounds(u, v, z, geo):
     hi2 = -np.inf
     for dv in range(2):
         for du in range(2):
-            x = (u - 0.5 + du - geo[MEM_INTRINSICS + 2]) * geo[MEM_INTRINSICS] * z
-            y = (v - 0.5 + dv - geo[MEM_INTRINSICS + 3]) * geo[MEM_INTRINSICS + 1] * z
-            w0 = geo[MEM_R] * x + geo[MEM_R + 1] * y + geo[MEM_R + 2] * z + geo[MEM_T]
-            w1 = geo[MEM_R + 3] * x + geo[MEM_R + 4] * y + geo[MEM_R + 5] * z + geo[MEM_T + 1]
-            w2 = geo[MEM_R + 6] * x + geo[MEM_R + 7] * y + geo[MEM_R + 8] * z + geo[MEM_T + 2]
+            x = (u - 0.5 + du - geo[MEM_INTRINSICS + 2]) * geo[MEM_INTRINSICS]
+            y = (v - 0.5 + dv - geo[MEM_INTRINSICS + 3]) * geo[MEM_INTRINSICS + 1]
+            w0 = geo[MEM_R] * x + geo[MEM_R + 1] * y + geo[MEM_R + 2]
+            w1 = geo[MEM_R + 3] * x + geo[MEM_R + 4] * y + geo[MEM_R + 5]
+            w2 = geo[MEM_R + 6] * x + geo[MEM_R + 7] * y + geo[MEM_R + 8]
             lo0 = min(lo0, w0)
             lo1 = min(lo1, w1)
             lo2 = min(lo2, w2)
@@ -525,25 +527,24 @@ def _face_bounds(u, v, z, geo):
 
 
 @kernel(inline=True)
-def _voxels_free(free, geo, lo0, hi0, lo1, hi1, lo2, hi2):
-    """Whether every voxel that the world box [lo, hi] (grown by 1e-9 m against rounding) touches is certified free
-    in ``free`` ((nx, ny, nz) uint8, 1 = free; ``grid``'s mem_free); not when the box leaves the voxels' box (or holds
-    NaN). The box: lo0 <= hi0, lo1 <= hi1, lo2 <= hi2, float64, metres, along world x, y, z. geo: the memory's
-    geometry, as in :func:`_face_bounds`."""
-    inv = geo[MEM_INV_VOXEL]
-    nx, ny, nz = free.shape
-    i0 = np.floor((lo0 - 1e-9 - geo[MEM_LO]) * inv)
-    i1 = np.floor((hi0 + 1e-9 - geo[MEM_LO]) * inv)
-    j0 = np.floor((lo1 - 1e-9 - geo[MEM_LO + 1]) * inv)
-    j1 = np.floor((hi1 + 1e-9 - geo[MEM_LO + 1]) * inv)
-    k0 = np.floor((lo2 - 1e-9 - geo[MEM_LO + 2]) * inv)
-    k1 = np.floor((hi2 + 1e-9 - geo[MEM_LO + 2]) * inv)
-    if not (0.0 <= i0 and i1 < nx and 0.0 <= j0 and j1 < ny and 0.0 <= k0 and k1 < nz):
-        return False
-    for i in range(int(i0), int(i1) + 1):
-        for j in range(int(j0), int(j1) + 1):
-            for k in range(int(k0), int(k1) + 1):
-                if free[i, j, k] == 0:
+def _voxel_span(t, lo, hi, z0, z1, origin, inv):
+    """(first, last) voxel index (float64, floored) along one world axis that the part of a pixel's frustum between
+    optical depths z0 < z1 (float64, metres) can touch: its extent t + z [lo, hi] over z in [z0, z1] (t metres, lo
+    and hi the axis's slopes from :func:`_footprint_slopes`), grown by 1e-9 m against rounding, in voxels from
+    ``origin`` (metres) of 1 / ``inv`` metres."""
+    a = t + (z0 if lo >= 0.0 else z1) * lo
+    b = t + (z1 if hi >= 0.0 else z0) * hi
+    return np.floor((a - 1e-9 - origin) * inv), np.floor((b + 1e-9 - origin) * inv)
+
+
+@kernel(inline=True)
+def _all_free(free, i0, i1, j0, j1, h0, h1):
+    """Whether free[i, j, h] != 0 for every voxel of i0..i1 x j0..j1 x h0..h1 (int, inside ``free``, (nx, ny, nz)
+    uint8)."""
+    for a in range(i0, i1 + 1):
+        for b in range(j0, j1 + 1):
+            for c in range(h0, h1 + 1):
+                if free[a, b, c] == 0:
                     return False
     return True
 
@@ -553,17 +554,34 @@ def remembered_cells(u, v, k_a, k_b, grid):
     """Bit i set when cell k_a + i (k_a..k_b, at most 64) of principal pixel (u, v) lies wholly in voxels that the
     free-space memory certifies free (design §8a): the grid's mem_free, (nx, ny, nz) uint8, 1 for a voxel no person
     can have reached yet, of zero size for no memory, and its mem_geometry (MEM_GEOMETRY_SIZE,) float64 as
-    MEM_LO.. describe. A cell lies within the box of its 8 corners (it is convex), whose voxels are checked."""
+    MEM_LO.. describe. A cell lies within the box of its 8 corners (it is convex), whose voxels are checked (not when
+    the box leaves the voxels' box or holds NaN); a cell whose box touches the same voxels as the cell before it
+    takes that cell's answer without reading them again."""
     free, geo, d_min, delta_d = grid.mem_free, grid.mem_geometry, grid.d_min, grid.delta_d
     if free.size == 0:
         return np.uint64(0)
+    nx, ny, nz = free.shape
+    inv = geo[MEM_INV_VOXEL]
+    s0, e0, s1, e1, s2, e2 = _footprint_slopes(u, v, geo)
     out = np.uint64(0)
-    a0, a1, b0, b1, c0, c1 = _face_bounds(u, v, d_min + k_a * delta_d, geo)
+    last = (-1.0, -1.0, -1.0, -1.0, -1.0, -1.0)
+    last_free = False
     for i in range(k_b - k_a + 1):
-        e0, e1, f0, f1, g0, g1 = _face_bounds(u, v, d_min + (k_a + i + 1) * delta_d, geo)
-        if _voxels_free(free, geo, min(a0, e0), max(a1, e1), min(b0, f0), max(b1, f1), min(c0, g0), max(c1, g1)):
+        z0 = d_min + (k_a + i) * delta_d
+        z1 = d_min + (k_a + i + 1) * delta_d
+        i0, i1 = _voxel_span(geo[MEM_T], s0, e0, z0, z1, geo[MEM_LO], inv)
+        j0, j1 = _voxel_span(geo[MEM_T + 1], s1, e1, z0, z1, geo[MEM_LO + 1], inv)
+        h0, h1 = _voxel_span(geo[MEM_T + 2], s2, e2, z0, z1, geo[MEM_LO + 2], inv)
+        if not (0.0 <= i0 and i1 < nx and 0.0 <= j0 and j1 < ny and 0.0 <= h0 and h1 < nz):
+            last_free = False
+            last = (-1.0, -1.0, -1.0, -1.0, -1.0, -1.0)
+            continue
+        span = (i0, i1, j0, j1, h0, h1)
+        if span != last:
+            last = span
+            last_free = _all_free(free, int(i0), int(i1), int(j0), int(j1), int(h0), int(h1))
+        if last_free:
             out |= np.uint64(1) << np.uint64(i)
-        a0, a1, b0, b1, c0, c1 = e0, e1, f0, f1, g0, g1
     return out
 
 
