@@ -93,6 +93,7 @@ class RobotSilhouette:
         self.padding = robot.padding if padding is None else check_real(padding, "padding", minimum=0.0,
                                                                         unit="metres", field="padding")
         self._meshes: list[tuple[str, int]] = []  # (link, mesh id) with vertices in the link frame
+        self._last_instances: tuple | None = None  # (joints' and base's bytes, the instances placed there)
         #: Metres: how far the rendered geometry reaches beyond the robot's capsules (the hulls' corners; 0 for the
         #: capsules and the meshes, which the capsules contain).
         self.beyond_capsules = 0.0
@@ -111,9 +112,19 @@ class RobotSilhouette:
             self._meshes.append((link, mesh_id))
 
     def instances(self, q) -> list[MeshInstance]:
-        """The robot's meshes placed at configuration ``q`` (label = link index)."""
+        """The robot's meshes placed at configuration ``q`` (label = link index). The last configuration's are kept:
+        a set's passes (nearest, farthest, first exit) in each of its cameras place the robot at the same joints."""
+        try:
+            key = np.asarray(q, dtype=np.float64).tobytes() + np.asarray(self.robot.T_world_base).tobytes()
+        except (TypeError, ValueError):
+            key = None  # not joints: link_poses says why
+        last = self._last_instances
+        if key is not None and last is not None and last[0] == key:
+            return list(last[1])
         poses = self.robot.link_poses(q)
-        return [MeshInstance(mesh_id, poses[link], label=i) for i, (link, mesh_id) in enumerate(self._meshes)]
+        placed = [MeshInstance(mesh_id, poses[link], label=i) for i, (link, mesh_id) in enumerate(self._meshes)]
+        self._last_instances = (key, tuple(placed))
+        return placed
 
     def render(self, camera: PinholeCamera, q) -> np.ndarray:
         """(h, w) float32 metres: the nearest surface of the robot's padded geometry per pixel of ``camera`` at

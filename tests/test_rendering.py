@@ -321,6 +321,29 @@ def test_closed_meshes_render_the_same_with_culling(renderer):
     assert np.all(renderer.render_depth(inside, closed[4:5]) > 0)
 
 
+def test_depth_passes_drawn_in_their_rectangle_equal_the_whole_image(renderer):
+    """The depth passes clear, rasterise and read back only the pixels the instances' bounding spheres can cover;
+    the image is bit for bit the one drawn whole: a small shape in the middle, shapes cut by the image's edge, one
+    behind the camera, one reaching the near plane (drawn whole), and none at all."""
+    rng = np.random.default_rng(21)
+    camera = random_camera(rng, 160, 120, [2.2, -1.5, 1.6], [0.0, 0.0, 0.5])
+    shapes = [Sphere((0.0, 0.0, 0.5), 0.08), Capsule((-0.2, 0.1, 0.3), (0.1, -0.1, 0.7), 0.06),
+              Box((1.2, 1.4, 0.8), (0.3, 0.2, 0.4)), Box((4.0, -3.0, 2.5), (0.2, 0.2, 0.2))]
+    closed = [MeshInstance(renderer.add_mesh(*primitive_mesh(shape, 16), closed=True), np.eye(4)) for shape in shapes]
+    eye = camera.T_world_camera[:3, 3]
+    near = MeshInstance(renderer.add_mesh(*primitive_mesh(Sphere(tuple(eye), 0.3), 16), closed=True), np.eye(4))
+    cropped = 0
+    for instances in (closed[:1], closed[:2], closed[1:3], closed[3:], closed, closed[:1] + [near], []):
+        rect = renderer._drawn_rect(camera, instances)
+        cropped += rect is not None and rect[2] * rect[3] < camera.width * camera.height
+        for kind in (dict(nearest=True), dict(nearest=False), dict(nearest=True, back_faces=True)):
+            part = renderer._depth_pass(camera, instances, crop=True, **kind)
+            whole = renderer._depth_pass(camera, instances, crop=False, **kind)
+            assert np.array_equal(part, whole), (len(instances), kind)
+            assert (whole > 0).any() == bool(instances and instances != closed[3:])
+    assert cropped >= 3
+
+
 def test_closed_is_checked(renderer):
     vertices, faces = primitive_mesh(Box((0, 0, 0), (1, 1, 1)))
     with pytest.raises(InputError, match="watertight"):

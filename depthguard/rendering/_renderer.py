@@ -307,22 +307,83 @@ class Renderer:
         :meth:`render_depth_max`, the ray leaves one body and then, after a gap or not, is inside another."""
         return self._depth_pass(camera, instances, nearest=True, back_faces=True)
 
-    def _depth_pass(self, camera, instances, nearest: bool, back_faces: bool = False) -> np.ndarray:
+    def _depth_pass(self, camera, instances, nearest: bool, back_faces: bool = False,
+                    crop: bool = True) -> np.ndarray:
+        """One depth pass. With ``crop``, only the rectangle of pixels that the instances' bounding spheres can
+        cover (:meth:`_drawn_rect`) is cleared, rasterised and read back; every pixel outside it is 0, as drawing
+        the whole image would leave it (no triangle reaches it)."""
         instances = self._check_instances(camera, instances)
         ctx = self._context()
+        W, H = camera.width, camera.height
+        rect = self._drawn_rect(camera, instances) if crop else (0, 0, W, H)
+        if rect is None:
+            return np.zeros((H, W), dtype=np.float32)
         with ctx:
-            fbo = self._targets_for(camera.width, camera.height).depth_only
+            fbo = self._targets_for(W, H).depth_only
+            x, y, w, h = rect
+            whole = rect == (0, 0, W, H)
             self._draw(fbo, self._depth_program, camera, instances, nearest=nearest, full=False,
-                       back_faces=back_faces)
-            depth = np.empty((camera.height, camera.width), dtype=np.float32)
-            fbo.read_into(depth, components=1, attachment=0, dtype="f4")
+                       back_faces=back_faces, rect=None if whole else rect)
+            if whole:
+                depth = np.empty((H, W), dtype=np.float32)
+                fbo.read_into(depth, components=1, attachment=0, dtype="f4")
+            else:
+                part = np.empty((h, w), dtype=np.float32)
+                fbo.read_into(part, viewport=rect, components=1, attachment=0, dtype="f4")
+                depth = np.zeros((H, W), dtype=np.float32)
+                depth[y:y + h, x:x + w] = part  # window row j is image row j (module docstring)
         return depth
 
-    def _draw(self, fbo, program, camera, instances, nearest: bool, full: bool, back_faces: bool = False) -> None:
+    def _drawn_rect(self, camera, instances) -> tuple[int, int, int, int] | None:
+        """(x, y, w, h): the pixels (columns x..x+w-1, rows y..y+h-1) whose centres the instances can cover, from
+        their bounding spheres grown by a pixel; the whole image when a sphere reaches the near plane (it may be
+        clipped, or wrap round the camera); None when none of them can reach a pixel.
+
+        A sphere of centre (x, y, z) and radius r beyond the near plane lies in the box [x - r, x + r] x [y - r,
+        y + r] x [z - r, z + r] with z - r > 0, on which x/z and y/z are monotone in each coordinate: their bounds
+        are at the box's corners, and u = fx x/z + cx, v = fy y/z + cy."""
+        W, H = camera.width, camera.height
+        T_camera_world = camera.T_camera_world
+        u_lo = v_lo = math.inf
+        u_hi = v_hi = -math.inf
+        for instance in instances:
+            mesh = self._meshes[instance.mesh_id]
+            T = T_camera_world @ instance.T_world_mesh
+            A = T[:3, :3]
+            centre = A @ mesh.centre_mesh + T[:3, 3]
+            # An upper bound of the largest scale, as in _beyond_near_plane; grown by a part in a million against
+            # rounding.
+            r = float(np.sqrt(np.abs(A.T @ A).sum(axis=1).max())) * mesh.radius * (1.0 + 1e-6) + 1e-9
+            if not centre[2] - r > self.near:
+                return 0, 0, W, H
+            x0, x1, y0, y1 = centre[0] - r, centre[0] + r, centre[1] - r, centre[1] + r
+            z0, z1 = centre[2] - r, centre[2] + r
+            tx = (x0 / z0, x0 / z1, x1 / z0, x1 / z1)
+            ty = (y0 / z0, y0 / z1, y1 / z0, y1 / z1)
+            u_lo = min(u_lo, camera.fx * min(tx) + camera.cx)
+            u_hi = max(u_hi, camera.fx * max(tx) + camera.cx)
+            v_lo = min(v_lo, camera.fy * min(ty) + camera.cy)
+            v_hi = max(v_hi, camera.fy * max(ty) + camera.cy)
+        if not (math.isfinite(u_lo) and math.isfinite(u_hi) and math.isfinite(v_lo) and math.isfinite(v_hi)):
+            return None if not instances else (0, 0, W, H)
+        # Pixel (u, v) is sampled at its centre (u, v): a pixel more each way for the rasteriser's sub-pixel grid.
+        q0 = max(int(math.floor(u_lo)) - 1, 0)
+        q1 = min(int(math.ceil(u_hi)) + 1, W - 1)
+        r0 = max(int(math.floor(v_lo)) - 1, 0)
+        r1 = min(int(math.ceil(v_hi)) + 1, H - 1)
+        if q0 > q1 or r0 > r1:
+            return None
+        return q0, r0, q1 - q0 + 1, r1 - r0 + 1
+
+    def _draw(self, fbo, program, camera, instances, nearest: bool, full: bool, back_faces: bool = False,
+              rect: tuple | None = None) -> None:
+        """Draw ``instances`` into ``fbo``; only the pixels of ``rect`` ((x, y, w, h), window coordinates) when
+        given."""
         ctx = self._gl.ctx
         fbo.use()
+        ctx.scissor = rect  # None: the whole framebuffer
         # The depth buffer holds near / z: 1 at the near plane, 0 at infinity (see _gl.py).
-        fbo.clear(0.0, 0.0, 0.0, 0.0, depth=0.0 if nearest else 1.0)
+        fbo.clear(0.0, 0.0, 0.0, 0.0, depth=0.0 if nearest else 1.0, viewport=rect)
         ctx.enable_only(moderngl.DEPTH_TEST)
         ctx.depth_func = ">" if nearest else "<"
         # The image is OpenGL's mirror image (module docstring), so a triangle wound counter-clockwise seen from
