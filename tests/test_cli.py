@@ -491,3 +491,19 @@ def test_build_map_out_that_is_not_a_regular_file_is_refused(work, capsys, tmp_p
     for out in (fifo, tmp_path):
         status, out_text, err = run_cli(["build-map", "--rig", work["rig2"], "--out", out], capsys)
         assert status == 2 and out_text == "" and "--out" in err and err.count("\n") == 1
+
+
+def test_replay_and_live_default_to_the_aggregate_of_their_outputs():
+    """replay and live write and publish distances and flags, no direction: their --aggregate defaults to min (the
+    distances are hybrid's, design §6); distance, which prints directions, keeps hybrid. Each can be asked for."""
+    from depthguard.cli import build_parser
+    from depthguard.cli.options import monitor_options
+
+    parser = build_parser()
+    replay = parser.parse_args(["replay", "folder", "--out", "r.csv"])
+    live = parser.parse_args(["live", "--rig", "rig.yaml", "--robot", "iiwa"])
+    assert monitor_options(replay)["aggregate"] == "min" and monitor_options(live)["aggregate"] == "min"
+    asked = parser.parse_args(["replay", "folder", "--out", "r.csv", "--aggregate", "hybrid"])
+    assert monitor_options(asked)["aggregate"] == "hybrid"
+    distance = parser.parse_args(["distance", "--rig", "rig.yaml", "--depth", "a.png", "--points", "p.csv"])
+    assert distance.aggregate == "hybrid"

@@ -179,10 +179,10 @@ def test_simulate_bag_from_the_command_line(tmp_path, capsys):
 
 def expected_rows(episode, workcell, points_file=None) -> list[list[str]]:
     """RESULTS.csv rows from a hand-written loop: the episode's PNGs by file name, the simulation's joints, one
-    DistanceMonitor queried frame by frame."""
+    DistanceMonitor queried frame by frame (``min``, replay's default aggregate)."""
     rig = dg.load_rig(episode / "rig.yaml")
     robot = RobotModel.default()
-    monitor = dg.DistanceMonitor(rig, rho=0.4, aggregate="hybrid", invalid="occupied", robot=robot)
+    monitor = dg.DistanceMonitor(rig, rho=0.4, aggregate="min", invalid="occupied", robot=robot)
     fixed = None if points_file is None else np.loadtxt(points_file, delimiter=",", skiprows=1, ndmin=2)
     rows = []
     for i in range(FRAMES):
@@ -269,7 +269,7 @@ def test_replay_gives_each_camera_its_own_joints(episode, tmp_path, capsys):
     rig, robot = recording.rig, RobotModel.default()
 
     def loop(own_times: bool) -> list[list[str]]:
-        monitor = dg.DistanceMonitor(rig, robot=robot)
+        monitor = dg.DistanceMonitor(rig, robot=robot, aggregate="min")  # replay's default
         out = []
         for i in range(FRAMES):
             frames = {name: dg.load_depth(folder / "depth" / name / f"{i:06d}.png", camera,
