@@ -1,15 +1,16 @@
 """A/B of the library against an earlier commit: the same answers, and the time they take, on the same recorded frames.
 
-The lab records scenario B's reach scene (four cameras, the person reaching in) once; then the library of each side
-(``--base``, a commit, checked out into a temporary folder; and this working tree) answers the same queries on the
-same frames in a fresh process of its own, one side after the other: the control points of the robot, fused,
-self-filtered, with the memory, in three configurations (the defaults; a robot zone with hole fills; known solids).
+The lab records scenario B's reach scene (four cameras, or with ``--cameras 2`` its own two; the person reaching in)
+once; then the library of each side (``--base``, a commit, checked out into a temporary folder; and this working
+tree) answers the same queries on the same frames in a fresh process of its own, one side after the other: the
+control points of the robot, fused, self-filtered, with the memory, in four configurations (the defaults; the ``min``
+aggregate, which ``live`` and ``replay`` ask since 2026-11-29; a robot zone with hole fills; known solids).
 It prints per configuration whether the distances agree bit for bit (else how far apart and where), and the median
 time per set (preparation and the first query) of each side with their ratio, and of the later queries on each set
 (15, the robot moving 2 mrad a query, as a controller between two sets; their answers are compared too). Both sides
 compile their kernels first (a warm-up query on the first set, not timed).
 
-    .venv/bin/python benchmarks/ab_answers.py --base 73482fc [--sets 10]
+    .venv/bin/python benchmarks/ab_answers.py --base 73482fc [--sets 10] [--cameras 2]
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ REPO = Path(__file__).resolve().parents[1]
 #: background as boxes).
 CONFIGURATIONS = {
     "defaults": {},
+    "min (live's and replay's default)": {"aggregate": "min"},
     "robot zone 6 cm, hole fills": {"robot_zone": 0.06, "invalid": "neighbors"},
     "known solids": {"static": True},
 }
@@ -78,9 +80,9 @@ json.dump(out, sys.stdout)
 """
 
 
-def record(folder: Path, sets: int) -> None:
-    """Scenario B's reach scene with four cameras: ``sets`` sets of frames from 1.2 s to 3.4 s, written to
-    ``folder`` (rig.yaml, frames.npz, meta.json)."""
+def record(folder: Path, sets: int, cameras: int = 4) -> None:
+    """Scenario B's reach scene with four cameras (or its own two): ``sets`` sets of frames from 1.2 s to 3.4 s,
+    written to ``folder`` (rig.yaml, frames.npz, meta.json)."""
     from importlib import resources
 
     import depthguard as dg
@@ -89,7 +91,7 @@ def record(folder: Path, sets: int) -> None:
 
     package = resources.files("depthguard_lab.simulation")
     workcell = load_workcell(Path(str(package / "scenario_b_reach.yaml")),
-                             layout=Path(str(package / "scenario_b_four.yaml")))
+                             layout=Path(str(package / "scenario_b_four.yaml")) if cameras == 4 else None)
     dg.save_rig(workcell.rig, folder / "rig.yaml")
     arrays, times = {}, []
     for k, frame in enumerate(sense_at(workcell, list(np.linspace(1.2, 3.4, sets)))):
@@ -122,12 +124,13 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--base", required=True, help="the commit to compare with (the code before the step)")
     parser.add_argument("--sets", type=int, default=10, help="sets of frames (default 10)")
+    parser.add_argument("--cameras", type=int, choices=(2, 4), default=4, help="the scene's cameras (default 4)")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="depthguard-ab-") as tmp:
         tmp = Path(tmp)
         frames = tmp / "frames"
         frames.mkdir()
-        record(frames, args.sets)
+        record(frames, args.sets, args.cameras)
         base = tmp / "base"
         base.mkdir()
         archive = subprocess.run(["git", "-C", str(REPO), "archive", args.base, "depthguard"], capture_output=True,
@@ -136,9 +139,9 @@ def main(argv=None) -> None:
         sides = {"base": answers(base, frames), "this tree": answers(REPO, frames)}
     commit = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", args.base], capture_output=True,
                             text=True).stdout.strip()
-    print(f"A/B: the library at {commit} (base) against this tree, scenario B's reach scene, four cameras, "
-          f"{args.sets} sets, 9 control points, rho 0.4 m, robot filtered, memory on\n")
-    print(f"{'configuration':30s} {'same distances':>16s} {'largest difference':>19s} {'base ms/set':>12s} "
+    print(f"A/B: the library at {commit} (base) against this tree, scenario B's reach scene, "
+          f"{args.cameras} cameras, {args.sets} sets, 9 control points, rho 0.4 m, robot filtered, memory on\n")
+    print(f"{'configuration':36s} {'same distances':>16s} {'largest difference':>19s} {'base ms/set':>12s} "
           f"{'this ms/set':>12s} {'ratio':>6s} {'base later ms':>14s} {'this later ms':>14s} {'ratio':>6s}")
     for label in CONFIGURATIONS:
         a, b = (np.array(sides[side][label]["distances"]) for side in ("base", "this tree"))
@@ -149,10 +152,12 @@ def main(argv=None) -> None:
         t_a, t_b = (float(np.median(sides[side][label]["seconds"])) * 1e3 for side in ("base", "this tree"))
         l_a, l_b = (float(np.median(sides[side][label]["later"])) * 1e3 for side in ("base", "this tree"))
         shown = "yes" if same else f"no ({mismatched} inf/finite)" if mismatched else "no"
-        print(f"{label:30s} {shown:>16s} {diff:19.3g} {t_a:12.1f} {t_b:12.1f} {t_b / t_a:6.2f} {l_a:14.2f} "
+        print(f"{label:36s} {shown:>16s} {diff:19.3g} {t_a:12.1f} {t_b:12.1f} {t_b / t_a:6.2f} {l_a:14.2f} "
               f"{l_b:14.2f} {l_b / l_a:6.2f}")
 
 
 if __name__ == "__main__":
-    with report(__file__):
+    two = any(a == "--cameras=2" or (a == "--cameras" and sys.argv[i + 2:i + 3] == ["2"])
+              for i, a in enumerate(sys.argv[1:]))
+    with report(__file__, name="ab_answers_2_cameras" if two else None):
         main()
