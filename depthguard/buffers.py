@@ -19,6 +19,7 @@ import numpy as np
 SPARES = 3
 
 _spares: dict[tuple, list[np.ndarray]] = {}
+_generation: dict[tuple, int] = {}  # per kind, raised by drop_spares: arrays handed out before are not taken back
 _lock = threading.Lock()
 
 
@@ -31,14 +32,25 @@ def reusable(shape: tuple, dtype, owner, new=np.empty) -> np.ndarray:
     with _lock:
         spares = _spares.setdefault(key, [])
         array = spares.pop() if spares else None
+        generation = _generation.get(key, 0)
     if array is None:
         array = new(key[0], dtype=key[1])
-    weakref.finalize(owner, _give_back, key, array)
+    weakref.finalize(owner, _give_back, key, array, generation)
     return array
 
 
-def _give_back(key: tuple, array: np.ndarray) -> None:
+def _give_back(key: tuple, array: np.ndarray, generation: int) -> None:
     with _lock:
         spares = _spares.setdefault(key, [])
-        if len(spares) < SPARES:
+        if len(spares) < SPARES and generation == _generation.get(key, 0):
             spares.append(array)
+
+
+def drop_spares(shape: tuple, dtype) -> None:
+    """Forget the arrays of ``shape`` and ``dtype``: the spares now, and those in use when their owners give them
+    back; their memory goes back to the operating system once nothing holds them, and the next :func:`reusable` of
+    that kind makes a new one."""
+    key = (tuple(int(n) for n in shape), np.dtype(dtype).str)
+    with _lock:
+        _spares.pop(key, None)
+        _generation[key] = _generation.get(key, 0) + 1

@@ -173,6 +173,12 @@ SELF_FILTER_HULL_PLANES = 64
 #: the principal sees the rig's workspace, within its depth_range.
 DEPTH_GRID_DELTA_D = 0.01
 
+#: The depth grid's cell classes (a byte a cell) live in one array reused from set to set; every
+#: CELL_CACHE_RENEWAL sets its spares are dropped and a new one made, so that the pages the sets touched go back to
+#: the operating system: resident memory then holds the cells of the last few seconds' surveillance regions, not of
+#: every pixel the robot ever came near (up to the whole array, 130 MB for a 640x480 principal, per array in turn).
+CELL_CACHE_RENEWAL = 300
+
 #: The depth grid never starts nearer than this (metres): a camera whose rig entry gives no minimum range.
 DEPTH_GRID_NEAREST = 0.1
 

@@ -299,6 +299,29 @@ def test_cells_of_earlier_frames_are_cleared_when_their_array_is_reused():
     assert np.array_equal(reused.distance, expected.distance) and reused.flags == expected.flags
 
 
+def test_cell_arrays_are_renewed_every_so_many_sets(monkeypatch):
+    """Every config.CELL_CACHE_RENEWAL sets the cell array is made anew (the pages earlier sets touched go back to
+    the operating system), the one in use when it comes back included."""
+    from depthguard import config
+
+    r, grid, principal, frees, robot_far, robot_near = robot_scene_frames()
+
+    def arrays(renewal: int) -> int:
+        """How many distinct cell arrays 9 sets used, each set's frames made while the last one's still live."""
+        monkeypatch.setattr(config, "CELL_CACHE_RENEWAL", renewal)
+        seen = []  # held, so that no two arrays are the same object by a reused id
+        frames = None
+        for _ in range(9):
+            frames = FusedFrames(grid, r, principal, frees, robot_far=robot_far, robot_near=robot_near)
+            frames.distances(np.array([[0.0, 0.0, 0.35]]), 0.4, "min")
+            if not any(frames._cells.base is array for array in seen):
+                seen.append(frames._cells.base)
+        return len(seen)
+
+    assert arrays(10**9) <= 3  # two alternate (a spare of an earlier test's may come in once)
+    assert arrays(3) >= 5  # a new pair every third set
+
+
 def test_remembered_cells_are_the_cells_whose_corner_box_lies_in_free_voxels():
     """remembered_cells against a twin written from its definition: a cell counts free by the memory exactly when
     every voxel that the box of its 8 corners (each pixel corner's ray at the cell's two depths, through the camera's

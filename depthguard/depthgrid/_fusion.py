@@ -9,7 +9,7 @@ import numpy as np
 from numba import parallel_chunksize
 
 from depthguard import config
-from depthguard.buffers import reusable
+from depthguard.buffers import drop_spares, reusable
 from depthguard.cameras import PinholeCamera, Rig
 from depthguard.depth import DepthImage, OccupancyImage
 from depthguard.kernels import depthgrid as grid_kernels
@@ -256,14 +256,23 @@ class FusedFrames:
                                       *self._shell, self._shell_lo, self._shell_hi)
 
 
+_cell_cache_uses = 0  # cell arrays handed out since the spares were last dropped (config.CELL_CACHE_RENEWAL)
+
+
 def _cell_cache(shape: tuple, n_cells: int, owner) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(cells, runs, touched) for a principal of ``shape`` (h, w) pixels: the cell classes ((h, w, n_cells) uint8,
     all 0), the free runs ((2, h, w) int64, free_run and behind_run, all NO_FREE_RUN) and marks of the pixels whose
     cells or runs were written ((h, w) uint8, all 0), in one array reused from the sets of frames before
     (:func:`depthguard.buffers.reusable`, given back when ``owner`` is collected): only the pixels its last owner
-    marked are cleared."""
+    marked are cleared. Every ``config.CELL_CACHE_RENEWAL`` calls the spares are dropped, so that the pages earlier
+    sets touched do not stay resident for good."""
+    global _cell_cache_uses
     h, w = shape
     pixels = h * w
+    _cell_cache_uses += 1
+    if _cell_cache_uses >= config.CELL_CACHE_RENEWAL:  # the pages of old sets back to the operating system
+        _cell_cache_uses = 0
+        drop_spares((h, w, n_cells + 17), np.uint8)
     flat = reusable((h, w, n_cells + 17), np.uint8, owner, new=_new_cell_cache).reshape(-1)
     runs = flat[:16 * pixels].view(np.int64).reshape(2, h, w)  # first: numpy aligns an array's start
     cells = flat[16 * pixels:16 * pixels + pixels * n_cells].reshape(h, w, n_cells)
