@@ -155,7 +155,7 @@ def add_monitor_options(parser, memory: bool = False) -> None:
 
     ``replay`` and ``live`` write and publish distances and flags, no direction: their ``--aggregate`` defaults to
     ``min``, whose distances are hybrid's (design §6) and whose first query on a new set of fused frames classifies
-    about half the cells (it stops at the nearest obstacle found so far); ``hybrid`` stays one option away."""
+    fewer cells (it stops at the nearest obstacle found so far); ``hybrid`` stays one option away."""
     parser.add_argument("--rho", type=METRES, default=config.DEFAULT_RHO,
                         help=f"surveillance radius, metres, in [{config.RHO_MIN:g}, {config.RHO_MAX:g}]")
     if memory:
