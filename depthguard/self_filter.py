@@ -93,7 +93,7 @@ class RobotSilhouette:
         self.padding = robot.padding if padding is None else check_real(padding, "padding", minimum=0.0,
                                                                         unit="metres", field="padding")
         self._meshes: list[tuple[str, int]] = []  # (link, mesh id) with vertices in the link frame
-        self._last_instances: tuple | None = None  # (joints' and base's bytes, the instances placed there)
+        self._last_instances: tuple | None = None  # ((joints' shape and bytes, base's bytes), the instances)
         #: Metres: how far the rendered geometry reaches beyond the robot's capsules (the hulls' corners; 0 for the
         #: capsules and the meshes, which the capsules contain).
         self.beyond_capsules = 0.0
@@ -115,7 +115,8 @@ class RobotSilhouette:
         """The robot's meshes placed at configuration ``q`` (label = link index). The last configuration's are kept:
         a set's passes (nearest, farthest, first exit) in each of its cameras place the robot at the same joints."""
         try:
-            key = np.asarray(q, dtype=np.float64).tobytes() + np.asarray(self.robot.T_world_base).tobytes()
+            joints = np.asarray(q, dtype=np.float64)
+            key = (joints.shape, joints.tobytes(), np.asarray(self.robot.T_world_base).tobytes())
         except (TypeError, ValueError):
             key = None  # not joints: link_poses says why
         last = self._last_instances

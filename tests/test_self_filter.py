@@ -207,3 +207,24 @@ def test_a_hole_filled_inside_the_robots_outline_is_self_filtered_like_a_measure
     else:
         assert np.all(occupancy.z_start[hole] == np.float32(beside)) and np.all(np.isinf(occupancy.blind[hole]))
     assert np.all(occupancy.invalid[hole] == 1)  # still counted as pixels without a measurement
+
+
+def test_instances_of_the_same_joints_are_placed_once_and_bad_joints_still_refused():
+    """A set's passes ask the silhouette for the robot at the same joints: placed once, the same instances after.
+    Joints of another shape with the same numbers are refused as before, not answered from the last placement."""
+    from depthguard.errors import InputError
+    from depthguard.rendering import Renderer
+    from depthguard.robots import RobotModel
+    from depthguard.self_filter import RobotSilhouette
+
+    robot = RobotModel.default()
+    q = np.zeros(len(robot.joint_names))
+    with Renderer() as renderer:
+        silhouette = RobotSilhouette(robot, renderer)
+        first = silhouette.instances(q)
+        again = silhouette.instances(q.copy())
+        assert all(a is b for a, b in zip(first, again)) and len(first) == len(again)
+        moved = silhouette.instances(q + 0.1)
+        assert not np.allclose(moved[-1].T_world_mesh, first[-1].T_world_mesh)
+        with pytest.raises(InputError):
+            silhouette.instances(q.reshape(-1, 1))
