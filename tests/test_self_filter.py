@@ -226,5 +226,6 @@ def test_instances_of_the_same_joints_are_placed_once_and_bad_joints_still_refus
         assert all(a is b for a, b in zip(first, again)) and len(first) == len(again)
         moved = silhouette.instances(q + 0.1)
         assert not np.allclose(moved[-1].T_world_mesh, first[-1].T_world_mesh)
+        silhouette.instances(q)  # q's placement is the one kept
         with pytest.raises(InputError):
             silhouette.instances(q.reshape(-1, 1))
