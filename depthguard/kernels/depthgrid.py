@@ -96,9 +96,8 @@ from depthguard.kernels.jit import kernel
 #: metres: the self-filter's shell round the links that a principal pixel's ray meets after it first left the robot
 #: (:func:`shell_cells`; zero rows for none).
 GridState = namedtuple("GridState", "d_min delta_d n_cells corners offsets eroded sizes z_near margin cells touched "
-                                    "mem_free "
-                                    "mem_geometry free_run behind_run zone zone_params shell shell_params shell_lo "
-                                    "shell_hi")
+                                    "mem_free mem_geometry free_run behind_run zone zone_params shell shell_params "
+                                    "shell_lo shell_hi")
 
 #: What the fused kernels need of the principal camera's frame, one record: its per-pixel arrays ((h, w) each, from
 #: :func:`principal_arrays`: z_start float32, z_end float32, certain uint8, blind_from float32), its intrinsics fx,
