@@ -23,12 +23,17 @@ _generation: dict[tuple, int] = {}  # per kind, raised by drop_spares: arrays ha
 _lock = threading.Lock()
 
 
+def _key(shape: tuple, dtype) -> tuple:
+    """The kind of an array: (shape as ints, dtype string)."""
+    return tuple(int(n) for n in shape), np.dtype(dtype).str
+
+
 def reusable(shape: tuple, dtype, owner, new=np.empty) -> np.ndarray:
     """An uninitialised C-contiguous array of ``shape`` and ``dtype``, given back to the spares when ``owner`` (any
     object that supports weak references) is collected: the array must not outlive it. ``new(shape, dtype)`` makes
     one when no spare is left (``np.zeros`` for one that starts zeroed: its pages come from the operating system as
     they are first touched); a spare holds what its last owner left in it."""
-    key = (tuple(int(n) for n in shape), np.dtype(dtype).str)
+    key = _key(shape, dtype)
     with _lock:
         spares = _spares.setdefault(key, [])
         array = spares.pop() if spares else None
@@ -50,7 +55,7 @@ def drop_spares(shape: tuple, dtype) -> None:
     """Forget the arrays of ``shape`` and ``dtype``: the spares now, and those in use when their owners give them
     back; their memory goes back to the operating system once nothing holds them, and the next :func:`reusable` of
     that kind makes a new one."""
-    key = (tuple(int(n) for n in shape), np.dtype(dtype).str)
+    key = _key(shape, dtype)
     with _lock:
         _spares.pop(key, None)
         _generation[key] = _generation.get(key, 0) + 1

@@ -267,17 +267,26 @@ def _cell_cache(shape: tuple, n_cells: int, owner) -> tuple[np.ndarray, np.ndarr
     marked are cleared. Every ``config.CELL_CACHE_RENEWAL`` calls the spares are dropped, so that the pages earlier
     sets touched do not stay resident for good."""
     global _cell_cache_uses
-    h, w = shape
-    pixels = h * w
+    kind = shape + (n_cells + 17,)  # per pixel: its cells, 16 bytes of runs, a mark
     _cell_cache_uses += 1
     if _cell_cache_uses >= config.CELL_CACHE_RENEWAL:  # the pages of old sets back to the operating system
         _cell_cache_uses = 0
-        drop_spares((h, w, n_cells + 17), np.uint8)
-    flat = reusable((h, w, n_cells + 17), np.uint8, owner, new=_new_cell_cache).reshape(-1)
-    runs = flat[:16 * pixels].view(np.int64).reshape(2, h, w)  # first: numpy aligns an array's start
+        drop_spares(kind, np.uint8)
+    cells, runs, touched = _cell_cache_parts(reusable(kind, np.uint8, owner, new=_new_cell_cache))
+    grid_kernels.clear_touched(cells, runs, touched)
+    return cells, runs, touched
+
+
+def _cell_cache_parts(array: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(cells, runs, touched): views of one (h, w, n_cells + 17) uint8 array of :func:`_cell_cache`, laid out as
+    the runs ((2, h, w) int64, first: numpy aligns an array's start), the cells ((h, w, n_cells) uint8) and the marks
+    ((h, w) uint8)."""
+    h, w, n = array.shape
+    n_cells, pixels = n - 17, h * w
+    flat = array.reshape(-1)
+    runs = flat[:16 * pixels].view(np.int64).reshape(2, h, w)
     cells = flat[16 * pixels:16 * pixels + pixels * n_cells].reshape(h, w, n_cells)
     touched = flat[16 * pixels + pixels * n_cells:].reshape(h, w)
-    grid_kernels.clear_touched(cells, runs, touched)
     return cells, runs, touched
 
 
@@ -285,7 +294,7 @@ def _new_cell_cache(shape: tuple, dtype) -> np.ndarray:
     """A new array for :func:`_cell_cache`: zeros (their pages come from the operating system as they are first
     touched), the runs NO_FREE_RUN."""
     out = np.zeros(shape, dtype=dtype)
-    out.reshape(-1)[:16 * shape[0] * shape[1]].view(np.int64)[:] = grid_kernels.NO_FREE_RUN
+    _cell_cache_parts(out)[1][:] = grid_kernels.NO_FREE_RUN
     return out
 
 

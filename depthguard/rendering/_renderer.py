@@ -346,14 +346,11 @@ class Renderer:
         T_camera_world = camera.T_camera_world
         u_lo = v_lo = math.inf
         u_hi = v_hi = -math.inf
+        if not instances:
+            return None
         for instance in instances:
-            mesh = self._meshes[instance.mesh_id]
-            T = T_camera_world @ instance.T_world_mesh
-            A = T[:3, :3]
-            centre = A @ mesh.centre_mesh + T[:3, 3]
-            # An upper bound of the largest scale, as in _beyond_near_plane; grown by a part in a million against
-            # rounding.
-            r = float(np.sqrt(np.abs(A.T @ A).sum(axis=1).max())) * mesh.radius * (1.0 + 1e-6) + 1e-9
+            centre, r = _bounding_sphere(self._meshes[instance.mesh_id], T_camera_world @ instance.T_world_mesh)
+            r = r * (1.0 + 1e-6) + 1e-9  # grown by a part in a million against rounding
             if not centre[2] - r > self.near:
                 return 0, 0, W, H
             x0, x1, y0, y1 = centre[0] - r, centre[0] + r, centre[1] - r, centre[1] + r
@@ -365,7 +362,7 @@ class Renderer:
             v_lo = min(v_lo, camera.fy * min(ty) + camera.cy)
             v_hi = max(v_hi, camera.fy * max(ty) + camera.cy)
         if not (math.isfinite(u_lo) and math.isfinite(u_hi) and math.isfinite(v_lo) and math.isfinite(v_hi)):
-            return None if not instances else (0, 0, W, H)
+            return 0, 0, W, H
         # Pixel (u, v) is sampled at its centre (u, v): a pixel more each way for the rasteriser's sub-pixel grid.
         q0 = max(int(math.floor(u_lo)) - 1, 0)
         q1 = min(int(math.ceil(u_hi)) + 1, W - 1)
@@ -417,12 +414,8 @@ class Renderer:
     def _beyond_near_plane(self, mesh: _Mesh, T_camera_mesh: np.ndarray) -> bool:
         """Whether the mesh's bounding sphere lies wholly beyond the near plane (then the camera is outside the
         mesh and nothing of it is clipped, so culling faces turned away from the camera is exact)."""
-        z = T_camera_mesh[2, :3] @ mesh.centre_mesh + T_camera_mesh[2, 3]
-        # An upper bound of the largest scale (spectral norm): ||A||_2^2 <= max row sum of |A^T A|; exactly 1 for a
-        # rigid transform (the SVD that computes the norm itself costs more than drawing a link).
-        A = T_camera_mesh[:3, :3]
-        scale = float(np.sqrt(np.abs(A.T @ A).sum(axis=1).max()))
-        return bool(z - scale * mesh.radius > self.near)
+        centre, radius = _bounding_sphere(mesh, T_camera_mesh)
+        return bool(centre[2] - radius > self.near)
 
     def _context(self):
         if self._gl is None:
@@ -477,6 +470,16 @@ class Renderer:
 
     def __exit__(self, *exc) -> None:
         self.release()
+
+
+def _bounding_sphere(mesh: _Mesh, T_camera_mesh: np.ndarray) -> tuple[np.ndarray, float]:
+    """(centre (3,), radius): a sphere in the camera's optical frame (metres) that holds the mesh placed by
+    ``T_camera_mesh`` ((4, 4), mesh frame -> optical frame): its bounding sphere's centre moved, its radius times an
+    upper bound of the transform's largest scale (spectral norm: ||A||_2^2 <= max row sum of |A^T A|; exactly 1 for
+    a rigid transform; the SVD that computes the norm itself costs more than drawing a link)."""
+    A = T_camera_mesh[:3, :3]
+    scale = float(np.sqrt(np.abs(A.T @ A).sum(axis=1).max()))
+    return A @ mesh.centre_mesh + T_camera_mesh[:3, 3], scale * mesh.radius
 
 
 def _check_closed(vertices: np.ndarray, faces: np.ndarray) -> None:
