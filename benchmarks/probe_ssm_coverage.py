@@ -249,7 +249,10 @@ def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, v
     monitor = dg.DistanceMonitor(cell.rig, **_sound_options(cell, settings, d))
     ideals = {"ideal, exact": IdealMemory(cell, spacing=spacing, bounds=BOUND_BOX, opening=d),
               "ideal, measured": IdealMemory(cell, spacing=spacing, noise_margin=True, measured=True,
-                                             bounds=BOUND_BOX, opening=d)}
+                                             bounds=BOUND_BOX, opening=d),
+              "ideal, margins": IdealMemory(cell, spacing=spacing, noise_margin=True, measured=True,
+                                            bounds=BOUND_BOX, opening=d, calibration=monitor.settings.fusion_margin,
+                                            pad=monitor.settings.fusion_pixels)}
     rows = {name: [] for name in ["project", *ideals]}
     least = {name: [] for name in rows}
     truth = TruthComputer(robot)

@@ -7,7 +7,8 @@ regular grid over the workspace with what no depthguard code can know:
 - ``Seen_k``: a grid point is seen free when some camera's exact ray (the simulation's noise-free render,
   ``SimFrame.depth_exact``, on the pixel the point projects to) passes it before the first surface: its optical depth
   is below that pixel's depth, less the camera's noise margin k sigma(d) when ``noise_margin`` (what the cameras'
-  noise costs even an ideal memory), and nothing else (no calibration margin, no footprint, no voxel rounding);
+  noise costs even an ideal memory), less ``calibration`` and over ``pad`` pixels round it when asked (the
+  project's calibration margin and pixel of pad), and nothing else (no footprint, no voxel rounding);
 - ``Robot_k``: the points inside the robot's collision meshes at the frame's joints (each link's mesh with its open
   ends closed, voxelised at ``robot_pitch`` and filled: exact to that pitch), and inside the known background
   (floor, pedestal: no person is inside a solid);
@@ -58,13 +59,19 @@ class IdealMemory:
         bounds: ((3,), (3,)) metres, world frame: the grid's box (default the workspace), for a finer grid near
             the robot.
         opening: metres, SSM's detection capability d (0: no opening, the memory of every consumer).
+        calibration: metres every camera must see beyond a point, on top of the noise margin (the project's
+            ``fusion_margin``; 0: the calibration is taken as exact).
+        pad: pixels: a point is seen free by a camera only when every pixel within ``pad`` of its own (a square of
+            2 pad + 1 a side) sees past it (the project's ``fusion_pixels``; 0: the one pixel it projects to).
     """
 
     def __init__(self, workcell, spacing: float = SPACING, noise_margin: bool = False,
-                 v_max: float = config.FREESPACE_V_MAX, measured: bool = False, bounds=None, opening: float = 0.0):
+                 v_max: float = config.FREESPACE_V_MAX, measured: bool = False, bounds=None, opening: float = 0.0,
+                 calibration: float = 0.0, pad: int = 0):
         lo, hi = (np.asarray(c, dtype=np.float64) for c in (workcell.rig.workspace if bounds is None else bounds))
         self.spacing, self.v_max, self.noise_margin = float(spacing), float(v_max), bool(noise_margin)
         self.measured, self.opening = bool(measured), float(opening)
+        self.calibration, self.pad = float(calibration), int(pad)
         self.shape = tuple(int(n) for n in np.maximum(np.floor((hi - lo) / spacing), 1))
         self.lo, self.hi = lo, lo + np.asarray(self.shape) * spacing
         axes = [lo[i] + (np.arange(self.shape[i]) + 0.5) * spacing for i in range(3)]
@@ -119,10 +126,11 @@ class IdealMemory:
             u[front] = np.rint(camera.fx * local[front, 0] / z[front] + camera.cx).astype(np.int64)
             v[front] = np.rint(camera.fy * local[front, 1] / z[front] + camera.cy).astype(np.int64)
             inside = front & (u >= 0) & (u < w) & (v >= 0) & (v < h)
-            d = depth[v[inside], u[inside]]
-            reach = np.where(d > 0.0, d - (camera.noise.margin(d) if self.noise_margin else 0.0),
-                             0.0 if self.measured else np.inf)
-            seen[np.flatnonzero(inside)[z[inside] < reach]] = True
+            reach = np.where(depth > 0.0, depth - (camera.noise.margin(depth) if self.noise_margin else 0.0)
+                             - self.calibration, 0.0 if self.measured else np.inf)
+            if self.pad > 0:  # the nearest reach within pad pixels; beyond the image's edge, nothing is seen
+                reach = ndimage.minimum_filter(reach, size=2 * self.pad + 1, mode="constant", cval=0.0)
+            seen[np.flatnonzero(inside)[z[inside] < reach[v[inside], u[inside]]]] = True
             # what this camera sees that is not the robot: a surface is there now
             label = np.asarray(labels[name])
             hit = (depth > 0.0) & ~np.isin(label, list(self._robot_labels))
