@@ -18,9 +18,11 @@ def start():
     return workcell, frame
 
 
-def exact_seen(ideal, workcell, frame, noise_margin, measured=False):
+def exact_seen(ideal, workcell, frame, noise_margin, measured=False, calibration=0.0, pad=0):
     """The grid points some camera's exact ray passes before its first surface (less the noise margin); with
-    ``measured``, its measured depth (noise, dropouts), where a pixel without a measurement sees nothing."""
+    ``measured``, its measured depth (noise, dropouts), where a pixel without a measurement sees nothing; with
+    ``calibration`` (metres) and ``pad`` (pixels), by that much more, on every pixel within pad of the point's (one
+    beyond the image's edge sees nothing)."""
     seen = np.zeros(len(ideal.points), bool)
     depths = measured_depths(frame.depth) if measured else frame.depth_exact
     for name, camera in workcell.rig.cameras.items():
@@ -30,21 +32,32 @@ def exact_seen(ideal, workcell, frame, noise_margin, measured=False):
         u = np.rint(camera.fx * local[:, 0] / np.maximum(z, 1e-9) + camera.cx)
         v = np.rint(camera.fy * local[:, 1] / np.maximum(z, 1e-9) + camera.cy)
         for p in np.flatnonzero((z > 1e-3) & (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)):
-            d = float(depth[int(v[p]), int(u[p])])
-            reach = (0.0 if measured else np.inf) if d == 0.0 else \
-                d - (float(camera.noise.margin(d)) if noise_margin else 0.0)
+            reach = np.inf
+            for r in range(int(v[p]) - pad, int(v[p]) + pad + 1):
+                for c in range(int(u[p]) - pad, int(u[p]) + pad + 1):
+                    if not (0 <= r < camera.height and 0 <= c < camera.width):
+                        reach = 0.0
+                        continue
+                    d = float(depth[r, c])
+                    here = (0.0 if measured else np.inf) if d == 0.0 else \
+                        d - (float(camera.noise.margin(d)) if noise_margin else 0.0) - calibration
+                    reach = min(reach, here)
             seen[p] |= z[p] < reach
     return seen.reshape(ideal.shape)
 
 
-@pytest.mark.parametrize("noise_margin, measured", [(False, False), (True, False), (True, True)])
-def test_the_ideal_memory_at_start_up_and_blind(start, noise_margin, measured):
+@pytest.mark.parametrize("noise_margin, measured, calibration, pad",
+                         [(False, False, 0.0, 0), (True, False, 0.0, 0), (True, True, 0.0, 0), (True, True, 0.01, 1)])
+def test_the_ideal_memory_at_start_up_and_blind(start, noise_margin, measured, calibration, pad):
     workcell, frame = start
-    ideal = IdealMemory(workcell, spacing=0.1, noise_margin=noise_margin, measured=measured)
+    ideal = IdealMemory(workcell, spacing=0.1, noise_margin=noise_margin, measured=measured, calibration=calibration,
+                        pad=pad)
     depths = measured_depths(frame.depth) if measured else frame.depth_exact
     ideal.update(frame.time, frame.joints, depths, frame.label)
     robot = ideal.inside_robot(frame.joints)
-    seen = exact_seen(ideal, workcell, frame, noise_margin, measured)
+    seen = exact_seen(ideal, workcell, frame, noise_margin, measured, calibration, pad)
+    if pad:  # the margins see less
+        assert seen.sum() < exact_seen(ideal, workcell, frame, noise_margin, measured).sum()
     assert robot.sum() >= 3 and 0.3 < seen.mean() < 0.99  # the test says something
     if measured:  # the sensor's dropouts see nothing free: fewer points seen than on the exact frames
         assert seen.sum() < exact_seen(ideal, workcell, frame, noise_margin).sum()

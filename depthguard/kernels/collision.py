@@ -183,21 +183,25 @@ def tile_bands(rays, depths, R, t, fx, fy, cx, cy, col_edges, row_edges, words, 
     its 8 corners; its projection is the convex hull of theirs, and a tile of B is set when its pixel rectangle meets
     that polygon (tiles are sets of pixel footprints: pixel p covers [p - 0.5, p + 0.5]). A piece that reaches behind
     B's image plane (a corner at B's depth <= 1 mm) sets every tile: it may be seen anywhere."""
-    n = rays.shape[0]
-    for a in prange(n):
-        corners = np.empty((8, 3))
-        xs = np.empty(8)
-        ys = np.empty(8)
-        hull_x = np.empty(16)
-        hull_y = np.empty(16)
-        for w in range(words):
-            out[a, w] = np.uint64(0)
-        for corner in range(8):
-            z = depths[a, corner // 4]
-            for axis in range(3):
-                corners[corner, axis] = rays[a, corner % 4, axis] * z
-        mark_projected_points(corners, R, t, fx, fy, cx, cy, 1e-3, col_edges, row_edges, out, a, xs, ys, hull_x,
-                              hull_y)
+    for p in prange(rays.shape[0]):  # each tile by a function compiled on its own (a loop body compiles twice)
+        _tile_band(rays, depths, np.int64(p), R, t, fx, fy, cx, cy, col_edges, row_edges, words, out)
+
+
+@kernel()
+def _tile_band(rays, depths, a, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
+    """Tile a (int) of :func:`tile_bands` (its arguments): out[a] written."""
+    corners = np.empty((8, 3))
+    xs = np.empty(8)
+    ys = np.empty(8)
+    hull_x = np.empty(16)
+    hull_y = np.empty(16)
+    for w in range(words):
+        out[a, w] = np.uint64(0)
+    for corner in range(8):
+        z = depths[a, corner // 4]
+        for axis in range(3):
+            corners[corner, axis] = rays[a, corner % 4, axis] * z
+    mark_projected_points(corners, R, t, fx, fy, cx, cy, 1e-3, col_edges, row_edges, out, a, xs, ys, hull_x, hull_y)
 
 
 @kernel(inline=True)
@@ -210,7 +214,7 @@ def _ball_slopes(a, z, rho):
     return (a * z - root) / d, (a * z + root) / d
 
 
-@kernel(inline=True)
+@kernel()
 def _capsule_set_bits(ends, k, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
     """Set k of :func:`capsule_tile_bits` (the work of one configuration): clears and writes out[k], out (K, words)
     uint64; ends, radii, R, t (world -> optical), fx, fy, cx, cy, col_edges, row_edges, words as there."""
@@ -272,8 +276,8 @@ def capsule_tile_bits(ends, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, w
 def capsule_tile_bits_parallel(ends, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
     """:func:`capsule_tile_bits` with the sets spread over the threads: the same arguments (ends (K, m, 2, 3), radii
     (m,), R, t world -> optical), and out (K, words) uint64 written the same."""
-    for k in prange(ends.shape[0]):
-        _capsule_set_bits(ends, k, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out)
+    for p in prange(ends.shape[0]):
+        _capsule_set_bits(ends, np.int64(p), radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out)
 
 
 @kernel(parallel=True)
