@@ -160,10 +160,11 @@ def seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_l
                     nx, ny, nz, lattice, corners, stack, skip_covered, last, out, oi, oj, ok):
     """out[oi + a, oj + b, ok + c] = True where some camera sees voxel (i0 + a, j0 + b, k0 + c) entirely free, for
     the block of ``block`` voxels a side at (i0, j0, k0) (cut at the box's size nx, ny, nz); out: 3-D bool holding
-    them (the whole box with (oi, oj, ok) = (i0, j0, k0), or one block's array with 0, 0, 0), only set; skip_covered: bool, whether a box whose voxels are all True already (free by another source) goes
-    untested (a check that costs the whole box's kernel about 4 %, where nothing is marked before). poses, intrinsics, z_near, sizes, tables:
-    the cameras, as :func:`seen_free_voxels` takes them. Scratch: lattice (n_cameras, block + 1,
-    block + 1, block + 1, 3) float64, corners (8, 3) float64, stack (7 * (log2(block) + 1) + 1, 4) int64. The other
+    them (the whole box with (oi, oj, ok) = (i0, j0, k0), or one block's array with 0, 0, 0), only set;
+    skip_covered: bool, whether a box whose voxels are all True already (free by another source) goes untested (a check
+    that costs the whole box's kernel about 4 %, where nothing is marked before). poses, intrinsics, z_near, sizes,
+    tables: the cameras, as :func:`seen_free_voxels` takes them. Scratch: lattice (n_cameras, block + 1, block + 1,
+    block + 1, 3) float64, corners (8, 3) float64, stack (7 * (log2(block) + 1) + 1, 4) int64. The other
     arguments as :func:`seen_free_voxels`.
 
     Coarse to fine: a camera that sees a whole block free sees every voxel in it free (the voxel's corners project
