@@ -214,7 +214,7 @@ def _ball_slopes(a, z, rho):
     return (a * z - root) / d, (a * z + root) / d
 
 
-@kernel()
+@kernel(inline=True)
 def _capsule_set_bits(ends, k, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
     """Set k of :func:`capsule_tile_bits` (the work of one configuration): clears and writes out[k], out (K, words)
     uint64; ends, radii, R, t (world -> optical), fx, fy, cx, cy, col_edges, row_edges, words as there."""
@@ -276,8 +276,8 @@ def capsule_tile_bits(ends, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, w
 def capsule_tile_bits_parallel(ends, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
     """:func:`capsule_tile_bits` with the sets spread over the threads: the same arguments (ends (K, m, 2, 3), radii
     (m,), R, t world -> optical), and out (K, words) uint64 written the same."""
-    for p in prange(ends.shape[0]):
-        _capsule_set_bits(ends, np.int64(p), radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out)
+    for k in prange(ends.shape[0]):
+        _capsule_set_bits(ends, k, radii, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out)
 
 
 @kernel(parallel=True)

@@ -121,45 +121,6 @@ def scan_block(cube, i0, j0, k0, voxel, x, y, z, best):
     return best
 
 
-@kernel()
-def _nearest_fit_one(fits, counts, block, lo, voxel, beyond, x, y, z, limit):
-    """One point of :func:`nearest_fit` (its arguments), at (x, y, z) metres from the box's near corner: the distance
-    it writes."""
-    bx, by, bz = counts.shape
-    side = block * voxel
-    outside, best = box_start(x, y, z, fits.shape, voxel, beyond, limit)
-    if outside:
-        return 0.0
-    near = np.empty(bx * by * bz)
-    index = np.empty(bx * by * bz, dtype=np.int64)
-    m = 0
-    for a in range(bx):
-        dx = to_interval(x, a * side, (a + 1) * side)
-        if dx >= best:
-            continue
-        for b in range(by):
-            dy = to_interval(y, b * side, (b + 1) * side)
-            if dx * dx + dy * dy >= best * best:
-                continue
-            for c in range(bz):
-                if counts[a, b, c] == 0:
-                    continue
-                dz = to_interval(z, c * side, (c + 1) * side)
-                d = math.sqrt(dx * dx + dy * dy + dz * dz)
-                if d < best:
-                    near[m] = d
-                    index[m] = (a * by + b) * bz + c
-                    m += 1
-    order = np.argsort(near[:m])
-    for n in range(m):
-        if near[order[n]] >= best:
-            break
-        a, b, c = unflatten(index[order[n]], by, bz)
-        best = scan_block(fits[a * block:(a + 1) * block, b * block:(b + 1) * block, c * block:(c + 1) * block],
-                          a * block, b * block, c * block, voxel, x, y, z, best)
-    return best
-
-
 @kernel(parallel=True)
 def nearest_fit(fits, counts, block, lo, voxel, beyond, points, limit, out):
     """out[p] = min(distance from points[p] to the nearest True voxel's cube, to the outside of the box (beyond[f]
@@ -168,9 +129,45 @@ def nearest_fit(fits, counts, block, lo, voxel, beyond, points, limit, out):
     points: (n, 3) float64, metres, world frame; lo: (3,) float64, metres, the box's near corner (world frame); beyond:
     (6,) float64, metres, for the faces at lo x, hi x, lo y, hi y, lo z, hi z; limit: float, metres (may be inf); out:
     (n,) float64, metres, written. fits and counts as :func:`erode_fits` wrote them, with its ``block``."""
-    for p in prange(points.shape[0]):  # each point by a function compiled on its own (a loop body compiles twice)
-        out[p] = _nearest_fit_one(fits, counts, block, lo, voxel, beyond, points[p, 0] - lo[0], points[p, 1] - lo[1],
-                                  points[p, 2] - lo[2], limit)
+    nx, ny, nz = fits.shape
+    bx, by, bz = counts.shape
+    side = block * voxel
+    for p in prange(points.shape[0]):
+        x = points[p, 0] - lo[0]
+        y = points[p, 1] - lo[1]
+        z = points[p, 2] - lo[2]
+        outside, best = box_start(x, y, z, fits.shape, voxel, beyond, limit)
+        if outside:
+            out[p] = 0.0
+            continue
+        near = np.empty(bx * by * bz)
+        index = np.empty(bx * by * bz, dtype=np.int64)
+        m = 0
+        for a in range(bx):
+            dx = to_interval(x, a * side, (a + 1) * side)
+            if dx >= best:
+                continue
+            for b in range(by):
+                dy = to_interval(y, b * side, (b + 1) * side)
+                if dx * dx + dy * dy >= best * best:
+                    continue
+                for c in range(bz):
+                    if counts[a, b, c] == 0:
+                        continue
+                    dz = to_interval(z, c * side, (c + 1) * side)
+                    d = math.sqrt(dx * dx + dy * dy + dz * dz)
+                    if d < best:
+                        near[m] = d
+                        index[m] = (a * by + b) * bz + c
+                        m += 1
+        order = np.argsort(near[:m])
+        for n in range(m):
+            if near[order[n]] >= best:
+                break
+            a, b, c = unflatten(index[order[n]], by, bz)
+            best = scan_block(fits[a * block:(a + 1) * block, b * block:(b + 1) * block, c * block:(c + 1) * block],
+                              a * block, b * block, c * block, voxel, x, y, z, best)
+        out[p] = best
 
 
 @kernel(inline=True)
@@ -349,8 +346,7 @@ def fill_free_blocks(blocks, lo, voxel, poses, intrinsics, z_near, sizes, tables
         if poses.shape[0] > 0:  # last: the cheaper sources spare it the boxes they cover
             lattice, corners, stack = block_scratch(poses.shape[0], block)
             seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad, block,
-                            i0, j0, k0, nx, ny, nz, lattice, corners, stack, np.bool_(True), np.int64(0), out,
-                            np.int64(0), np.int64(0), np.int64(0))  # typed, not literal: seen_free_voxels' signature
+                            i0, j0, k0, nx, ny, nz, lattice, corners, stack, True, 0, out, 0, 0, 0)
         state[a0, b0, c0] |= FREE_DONE
 
 
@@ -449,65 +445,6 @@ def search_start(points, lo, voxel, shape, beyond, limit, best, pending):
         pending[p] = not outside
 
 
-@kernel()
-def _search_one(fits_b, counts, state, shape, lo, voxel, points, p, pending, ring, best, lookahead, need, need_count):
-    """Point p (int) of one round of :func:`search_fits` (its arguments)."""
-    bx, by, bz = state.shape
-    block = fits_b.shape[3]
-    side = block * voxel
-    need_count[p] = 0
-    if not pending[p]:
-        return
-    x = points[p, 0] - lo[0]
-    y = points[p, 1] - lo[1]
-    z = points[p, 2] - lo[2]
-    pa = min(max(np.int64(math.floor(x / side)), 0), bx - 1)
-    pb = min(max(np.int64(math.floor(y / side)), 0), by - 1)
-    pc = min(max(np.int64(math.floor(z / side)), 0), bz - 1)
-    r = ring[p]
-    stalled = -1
-    while True:
-        if r > 0 and (r - 1) * side >= best[p] + 1e-9:  # no block of ring r lies nearer (rounding to spare)
-            break
-        if pa - r < 0 and pb - r < 0 and pc - r < 0 and pa + r >= bx and pb + r >= by and pc + r >= bz:
-            break
-        if stalled >= 0 and (r > stalled + lookahead or need_count[p] >= need.shape[1]):
-            break
-        for a in range(max(pa - r, 0), min(pa + r, bx - 1) + 1):
-            dx = to_interval(x, a * side, (a + 1) * side)
-            if dx >= best[p]:
-                continue
-            edge_a = abs(a - pa) == r
-            for b in range(max(pb - r, 0), min(pb + r, by - 1) + 1):
-                dy = to_interval(y, b * side, (b + 1) * side)
-                if dx * dx + dy * dy >= best[p] * best[p]:
-                    continue
-                step = 1 if edge_a or abs(b - pb) == r else 2 * r
-                c = pc - r
-                while c <= pc + r:
-                    if 0 <= c < bz:
-                        dz = to_interval(z, c * side, (c + 1) * side)
-                        if math.sqrt(dx * dx + dy * dy + dz * dz) < best[p]:
-                            if state[a, b, c] & FITS_DONE:
-                                if stalled < 0 and counts[a, b, c] > 0:
-                                    best[p] = scan_block(fits_b[a, b, c, :min(block, shape[0] - a * block),
-                                                                :min(block, shape[1] - b * block),
-                                                                :min(block, shape[2] - c * block)],
-                                                         a * block, b * block, c * block, voxel, x, y, z,
-                                                         best[p])
-                            elif need_count[p] < need.shape[1]:
-                                if stalled < 0:
-                                    stalled = r
-                                need[p, need_count[p]] = (a * by + b) * bz + c
-                                need_count[p] += 1
-                    c += max(step, 1)
-        r += 1
-    if stalled >= 0:
-        ring[p] = stalled
-    else:
-        pending[p] = False
-
-
 @kernel(parallel=True)
 def search_fits(fits_b, counts, state, shape, lo, voxel, points, pending, ring, best, lookahead, need, need_count):
     """One round of the nearest-fit search over a watched space: for each point p with pending[p], walk the rings of
@@ -523,6 +460,58 @@ def search_fits(fits_b, counts, state, shape, lo, voxel, points, pending, ring, 
     pending: (n,) bool; ring: (n,) int64; best: (n,) float64, metres (the first round: :func:`search_start`'s,
     the box's faces and the limit, as :func:`nearest_fit` starts); need: (n, cap) int64 flat block indices;
     need_count: (n,) int64."""
-    for p in prange(points.shape[0]):  # each point by a function compiled on its own (a loop body compiles twice)
-        _search_one(fits_b, counts, state, shape, lo, voxel, points, np.int64(p), pending, ring, best, lookahead,
-                    need, need_count)
+    bx, by, bz = state.shape
+    block = fits_b.shape[3]
+    side = block * voxel
+    for p in prange(points.shape[0]):
+        need_count[p] = 0
+        if not pending[p]:
+            continue
+        x = points[p, 0] - lo[0]
+        y = points[p, 1] - lo[1]
+        z = points[p, 2] - lo[2]
+        pa = min(max(np.int64(math.floor(x / side)), 0), bx - 1)
+        pb = min(max(np.int64(math.floor(y / side)), 0), by - 1)
+        pc = min(max(np.int64(math.floor(z / side)), 0), bz - 1)
+        r = ring[p]
+        stalled = -1
+        while True:
+            if r > 0 and (r - 1) * side >= best[p] + 1e-9:  # no block of ring r lies nearer (rounding to spare)
+                break
+            if pa - r < 0 and pb - r < 0 and pc - r < 0 and pa + r >= bx and pb + r >= by and pc + r >= bz:
+                break
+            if stalled >= 0 and (r > stalled + lookahead or need_count[p] >= need.shape[1]):
+                break
+            for a in range(max(pa - r, 0), min(pa + r, bx - 1) + 1):
+                dx = to_interval(x, a * side, (a + 1) * side)
+                if dx >= best[p]:
+                    continue
+                edge_a = abs(a - pa) == r
+                for b in range(max(pb - r, 0), min(pb + r, by - 1) + 1):
+                    dy = to_interval(y, b * side, (b + 1) * side)
+                    if dx * dx + dy * dy >= best[p] * best[p]:
+                        continue
+                    step = 1 if edge_a or abs(b - pb) == r else 2 * r
+                    c = pc - r
+                    while c <= pc + r:
+                        if 0 <= c < bz:
+                            dz = to_interval(z, c * side, (c + 1) * side)
+                            if math.sqrt(dx * dx + dy * dy + dz * dz) < best[p]:
+                                if state[a, b, c] & FITS_DONE:
+                                    if stalled < 0 and counts[a, b, c] > 0:
+                                        best[p] = scan_block(fits_b[a, b, c, :min(block, shape[0] - a * block),
+                                                                    :min(block, shape[1] - b * block),
+                                                                    :min(block, shape[2] - c * block)],
+                                                             a * block, b * block, c * block, voxel, x, y, z,
+                                                             best[p])
+                                elif need_count[p] < need.shape[1]:
+                                    if stalled < 0:
+                                        stalled = r
+                                    need[p, need_count[p]] = (a * by + b) * bz + c
+                                    need_count[p] += 1
+                        c += max(step, 1)
+            r += 1
+        if stalled >= 0:
+            ring[p] = stalled
+        else:
+            pending[p] = False

@@ -155,7 +155,7 @@ def _push_halves(stack, top, a, b, c, side):
     return top
 
 
-@kernel()
+@kernel(inline=True)
 def seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad, block, i0, j0, k0,
                     nx, ny, nz, lattice, corners, stack, skip_covered, last, out, oi, oj, ok):
     """out[oi + a, oj + b, ok + c] = True where some camera sees voxel (i0 + a, j0 + b, k0 + c) entirely free, for
@@ -265,11 +265,11 @@ def seen_free_voxels(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_
         i0 = (column // nby) * block
         j0 = (column % nby) * block
         lattice, corners, stack = block_scratch(poses.shape[0], block)
-        last = np.int64(0)  # typed, not literal, as every argument here: one signature with fill_free_blocks'
+        last = 0
         for k0 in range(0, nz, block):
             last = seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad,
-                                   block, i0, j0, k0, nx, ny, nz, lattice, corners, stack, np.bool_(False), last, out,
-                                   i0, j0, k0)
+                                   block, i0, j0, k0, nx, ny, nz, lattice, corners, stack, False, last, out, i0, j0,
+                                   k0)
 
 
 @kernel(inline=True)
@@ -310,68 +310,6 @@ def _piece_inside(world, capsules, near, n_near):
     return False
 
 
-@kernel()
-def _certify_voxel(lo, voxel, i, j, k, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad, capsules,
-                   levels, n, half_diagonal):
-    """Whether every point of voxel (i, j, k) is seen free by some camera or lies inside the robot: one voxel of
-    :func:`certify_mixed_voxels` (its arguments; n = 2^levels pieces a side, half_diagonal = the voxel's half
-    diagonal, metres)."""
-    n_cameras = poses.shape[0]
-    cx = lo[0] + (i + 0.5) * voxel
-    cy = lo[1] + (j + 0.5) * voxel
-    cz = lo[2] + (k + 0.5) * voxel
-    near = np.empty(256, dtype=np.int64)
-    n_near = 0
-    for c in range(capsules.shape[0]):
-        reach = capsules[c, 6] + half_diagonal
-        if _segment_distance2(cx, cy, cz, capsules, c) < reach * reach and n_near < 256:
-            near[n_near] = c
-            n_near += 1
-    world = np.empty((8, 3))
-    corners = np.empty((8, 3))
-    stack = np.empty((7 * levels + 1, 4), dtype=np.int64)  # (a, b, c, side) in pieces
-    stack[0, 0] = 0
-    stack[0, 1] = 0
-    stack[0, 2] = 0
-    stack[0, 3] = n
-    top = 1
-    passed = True
-    while top > 0:
-        top -= 1
-        a = stack[top, 0]
-        b = stack[top, 1]
-        c = stack[top, 2]
-        side = stack[top, 3]
-        for corner in range(8):
-            world[corner, 0] = lo[0] + (i + (a + (side if corner & 1 else 0)) / n) * voxel
-            world[corner, 1] = lo[1] + (j + (b + (side if corner & 2 else 0)) / n) * voxel
-            world[corner, 2] = lo[2] + (k + (c + (side if corner & 4 else 0)) / n) * voxel
-        ok = _piece_inside(world, capsules, near, n_near)
-        m = 0
-        while not ok and m < n_cameras:
-            pose = poses[m]
-            for corner in range(8):
-                x = world[corner, 0]
-                y = world[corner, 1]
-                z = world[corner, 2]
-                pz = pose[6] * x + pose[7] * y + pose[8] * z + pose[11]
-                px = pose[0] * x + pose[1] * y + pose[2] * z + pose[9]
-                py = pose[3] * x + pose[4] * y + pose[5] * z + pose[10]
-                corners[corner, 0] = intrinsics[m, 0] * px / pz + intrinsics[m, 2]
-                corners[corner, 1] = intrinsics[m, 1] * py / pz + intrinsics[m, 3]
-                corners[corner, 2] = pz
-            ok = camera_sees_box(corners, z_near[m], sizes[m, 0], sizes[m, 1], tables[m], floor_log2, margin,
-                                 pad)
-            m += 1
-        if ok:
-            continue
-        if side == 1:
-            passed = False
-            break
-        top = _push_halves(stack, top, a, b, c, side)
-    return passed
-
-
 @kernel(parallel=True)
 def certify_mixed_voxels(lo, voxel, candidates, poses, intrinsics, z_near, sizes, tables, floor_log2, margin, pad,
                          capsules, levels, out):
@@ -389,11 +327,66 @@ def certify_mixed_voxels(lo, voxel, candidates, poses, intrinsics, z_near, sizes
     float32, metres, each free image's row-minimum table (:func:`row_min_tables`). A voxel's capsules are those whose
     segment passes within their radius plus half the voxel's diagonal of its centre (at most 256 are looked at: a
     voxel with more is judged by its first 256, which can only pass fewer pieces)."""
+    n_cameras = poses.shape[0]
     n = np.int64(1) << levels
     half_diagonal = 0.5 * np.sqrt(3.0) * voxel
-    for p in prange(candidates.shape[0]):  # each voxel by a function compiled on its own (a loop body compiles twice)
-        out[p] = _certify_voxel(lo, voxel, candidates[p, 0], candidates[p, 1], candidates[p, 2], poses, intrinsics,
-                                z_near, sizes, tables, floor_log2, margin, pad, capsules, levels, n, half_diagonal)
+    for p in prange(candidates.shape[0]):
+        i = candidates[p, 0]
+        j = candidates[p, 1]
+        k = candidates[p, 2]
+        cx = lo[0] + (i + 0.5) * voxel
+        cy = lo[1] + (j + 0.5) * voxel
+        cz = lo[2] + (k + 0.5) * voxel
+        near = np.empty(256, dtype=np.int64)
+        n_near = 0
+        for c in range(capsules.shape[0]):
+            reach = capsules[c, 6] + half_diagonal
+            if _segment_distance2(cx, cy, cz, capsules, c) < reach * reach and n_near < 256:
+                near[n_near] = c
+                n_near += 1
+        world = np.empty((8, 3))
+        corners = np.empty((8, 3))
+        stack = np.empty((7 * levels + 1, 4), dtype=np.int64)  # (a, b, c, side) in pieces
+        stack[0, 0] = 0
+        stack[0, 1] = 0
+        stack[0, 2] = 0
+        stack[0, 3] = n
+        top = 1
+        passed = True
+        while top > 0:
+            top -= 1
+            a = stack[top, 0]
+            b = stack[top, 1]
+            c = stack[top, 2]
+            side = stack[top, 3]
+            for corner in range(8):
+                world[corner, 0] = lo[0] + (i + (a + (side if corner & 1 else 0)) / n) * voxel
+                world[corner, 1] = lo[1] + (j + (b + (side if corner & 2 else 0)) / n) * voxel
+                world[corner, 2] = lo[2] + (k + (c + (side if corner & 4 else 0)) / n) * voxel
+            ok = _piece_inside(world, capsules, near, n_near)
+            m = 0
+            while not ok and m < n_cameras:
+                pose = poses[m]
+                for corner in range(8):
+                    x = world[corner, 0]
+                    y = world[corner, 1]
+                    z = world[corner, 2]
+                    pz = pose[6] * x + pose[7] * y + pose[8] * z + pose[11]
+                    px = pose[0] * x + pose[1] * y + pose[2] * z + pose[9]
+                    py = pose[3] * x + pose[4] * y + pose[5] * z + pose[10]
+                    corners[corner, 0] = intrinsics[m, 0] * px / pz + intrinsics[m, 2]
+                    corners[corner, 1] = intrinsics[m, 1] * py / pz + intrinsics[m, 3]
+                    corners[corner, 2] = pz
+                ok = camera_sees_box(corners, z_near[m], sizes[m, 0], sizes[m, 1], tables[m], floor_log2, margin,
+                                     pad)
+                m += 1
+            if ok:
+                continue
+            if side == 1:
+                passed = False
+                break
+            top = _push_halves(stack, top, a, b, c, side)
+        out[p] = passed
 
 
 # ----------------------------------------------------------------------------------------- the distance transform
@@ -505,7 +498,7 @@ def _lower_envelope(f, n, v, fv, zn, zd, out):
         out[q] = d * d + fv[top]
 
 
-@kernel()
+@kernel(inline=True)
 def _envelope_slab(slab, lines, f, v, fv, zn, zd, out):
     """Transform every line along the first axis of ``slab`` ((m, nz) int32 view) in place, through ``lines`` ((nz,
     m) int64 work space: the slab transposed so each line is contiguous). f, v, fv, zn, zd, out: int64 work space
