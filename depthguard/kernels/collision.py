@@ -189,7 +189,8 @@ def tile_bands(rays, depths, R, t, fx, fy, cx, cy, col_edges, row_edges, words, 
 
 @kernel()
 def _tile_band(rays, depths, a, R, t, fx, fy, cx, cy, col_edges, row_edges, words, out):
-    """Tile a (int) of :func:`tile_bands` (its arguments): out[a] written."""
+    """Tile a (int) of :func:`tile_bands`: out[a] written. rays (n_tiles_A, 4, 3), depths (n_tiles_A, 2), R, t, fx,
+    fy, cx, cy, col_edges, row_edges, words and out as :func:`tile_bands` takes them."""
     corners = np.empty((8, 3))
     xs = np.empty(8)
     ys = np.empty(8)
