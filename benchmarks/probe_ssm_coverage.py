@@ -223,8 +223,9 @@ def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, v
     """Issue 35 item 6 for SSM: along the task in the SSM cell (``avoidance_demo.ssm_scene``, the robot where its
     script puts it, not slowed), the factor SSM allows each frame from the distances of an ideal sound memory opened
     by d (:class:`depthguard_lab.experiments.ideal_memory.IdealMemory` with ``opening=d``: exact ray casts, the
-    robot's exact volume, erosion at v_max; on the exact renders, and on the frames as the cameras measured them
-    with their noise margins, a pixel without a measurement seeing nothing free) and from the project's
+    robot's exact volume, erosion at v_max; on the exact renders, on the frames as the cameras measured them with
+    their noise margins, a pixel without a measurement seeing nothing free, and on those with the project's
+    calibration margin and pixel of pad too: ``fusion_margin``, ``fusion_pixels``) and from the project's
     detectable distances (the loop's sound settings: no robot zone, holes occupied, the solids known), on the same
     frames, with the same SSM (C for d, the joints' braking, T_r = one frame's latency + one control step, the
     task's command) and the loop's look-ahead. Both memories start at ``start`` seconds with everything possibly
