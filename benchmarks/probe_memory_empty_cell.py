@@ -79,7 +79,7 @@ def main() -> None:
     parser.add_argument("--step", type=int, default=3, help="query every step-th frame after the start-up")
     args = parser.parse_args()
     print(f"an empty cell (scenario B, no people), the robot on its hexagon; {args.duration:g} s, start-up "
-          f"{args.start:g} s not counted, every {args.step}th frame after it; rho {RHO} m, min, the library's "
+          f"{args.start:g} s not counted, one frame in {args.step} after it; rho {RHO} m, min, the library's "
           f"defaults; answers from the surface spheres' surfaces (1 cm), clipped to [0, rho], metres")
     for title, layout in SCENES.items():
         workcell = empty_cell(args.duration, layout)
