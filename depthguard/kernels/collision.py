@@ -112,6 +112,20 @@ def _tiles_spanned(edges, lo, hi):
 
 
 @kernel(inline=True)
+def hull_work():
+    """The work arrays of :func:`mark_projected_points` / :func:`mark_hull_tiles` for up to 8 points: (xs, ys, hull_x,
+    hull_y), float64, (8,), (8,), (16,), (16,)."""
+    return np.empty(8), np.empty(8), np.empty(16), np.empty(16)
+
+
+@kernel(inline=True)
+def clear_bits(out, k, words):
+    """out[k, :words] = 0: bitset k of out ((K, words) uint64) emptied."""
+    for w in range(words):
+        out[k, w] = np.uint64(0)
+
+
+@kernel(inline=True)
 def mark_hull_tiles(xs, ys, hull_x, hull_y, col_edges, row_edges, out, k):
     """Set in out[k] (out: (K, words) uint64 bitsets, tile index r * cols + c) every tile whose footprint
     (col_edges[c] .. col_edges[c + 1] x row_edges[r] .. row_edges[r + 1], pixels) meets the convex hull of the points
@@ -192,12 +206,8 @@ def _tile_band(rays, depths, a, R, t, fx, fy, cx, cy, col_edges, row_edges, word
     """Tile a (int) of :func:`tile_bands`: out[a] written. rays (n_tiles_A, 4, 3), depths (n_tiles_A, 2), R, t, fx,
     fy, cx, cy, col_edges, row_edges, words and out as :func:`tile_bands` takes them."""
     corners = np.empty((8, 3))
-    xs = np.empty(8)
-    ys = np.empty(8)
-    hull_x = np.empty(16)
-    hull_y = np.empty(16)
-    for w in range(words):
-        out[a, w] = np.uint64(0)
+    xs, ys, hull_x, hull_y = hull_work()
+    clear_bits(out, a, words)
     for corner in range(8):
         z = depths[a, corner // 4]
         for axis in range(3):
@@ -222,12 +232,8 @@ def _capsule_set_bits(ends, k, radii, R, t, fx, fy, cx, cy, col_edges, row_edges
     m = ends.shape[1]
     cols = col_edges.shape[0] - 1
     rows = row_edges.shape[0] - 1
-    xs = np.empty(8)
-    ys = np.empty(8)
-    hull_x = np.empty(16)
-    hull_y = np.empty(16)
-    for w in range(words):
-        out[k, w] = np.uint64(0)
+    xs, ys, hull_x, hull_y = hull_work()
+    clear_bits(out, k, words)
     for j in range(m):
         rho = radii[j]
         behind = False

@@ -5,7 +5,7 @@ them."""
 import numpy as np
 
 from depthguard.kernels.jit import kernel
-from depthguard.kernels.collision import mark_projected_points
+from depthguard.kernels.collision import clear_bits, hull_work, mark_projected_points
 
 
 @kernel()
@@ -22,12 +22,8 @@ def box_tile_bits(corners, R, t, fx, fy, cx, cy, near, col_edges, row_edges, wor
     projection is the convex hull of theirs (exact, not a bound, while the box lies in front of the camera). A box
     with a corner at optical depth <= ``near`` (float, metres; the caller passes 1 mm: within 1 mm of the camera's
     plane, or behind it) sets every tile: it may be seen anywhere."""
-    xs = np.empty(8)
-    ys = np.empty(8)
-    hull_x = np.empty(16)
-    hull_y = np.empty(16)
+    xs, ys, hull_x, hull_y = hull_work()
     for k in range(corners.shape[0]):
-        for w in range(words):
-            out[k, w] = np.uint64(0)
+        clear_bits(out, k, words)
         mark_projected_points(corners[k], R, t, fx, fy, cx, cy, near, col_edges, row_edges, out, k, xs, ys, hull_x,
                               hull_y)
