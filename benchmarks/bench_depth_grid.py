@@ -29,7 +29,7 @@ from depthguard.scenes import Box, render_depth
 from depthguard_lab.simulation import standing_person
 from depthguard.self_filter import RobotSilhouette
 from depthguard.transforms import look_at
-from _common import report
+from _common import nearer, report
 
 EYES = {"principal": [1.5, -2.0, 1.8], "second": [1.5, 2.0, 1.8], "third": [-1.8, -1.6, 2.0],
         "fourth": [-1.8, 1.6, 2.0]}
@@ -51,7 +51,7 @@ def workcell_frames(rig_cameras, robot, q, renderer):
     for name, camera in rig_cameras.items():
         room = render_depth(camera, scene + person)
         arm = silhouette.render(camera, q)
-        depth = np.where(arm > 0, np.minimum(arm, np.where(room > 0, room, np.inf)), room)
+        depth = nearer(arm, room)
         frames[name] = dg.depth_image(np.round(depth * 1000).astype(np.uint16), camera)
     return frames
 

@@ -61,7 +61,7 @@ from depthguard.scenes import Box, render_depth
 from depthguard_lab.simulation import standing_person  # noqa: E402
 from depthguard.self_filter import RobotSilhouette  # noqa: E402
 from bench_depth_grid import EYES, cameras  # noqa: E402
-from _common import report
+from _common import nearer, report
 
 WORKSPACE = [[-1.2, -1.5, 0.0], [1.8, 1.5, 2.0]]  # the robot (base at the origin) and the person's reach
 RHO = 0.4
@@ -110,7 +110,7 @@ class Scene:
         for name in names:
             room = self.background[name]
             arm = self.silhouette.render(self.cameras[name], q)
-            depth = np.where(arm > 0, np.minimum(arm, np.where(room > 0, room, np.inf)), room)
+            depth = nearer(arm, room)
             out[name] = np.round(depth * 1000).astype(np.uint16)
         return out
 
@@ -614,7 +614,7 @@ def still_pool(all_cameras, robot, renderer, names):
     for name in names:
         room = render_depth(all_cameras[name], ROOM)
         arm = silhouette.render(all_cameras[name], Q0)
-        still[name] = np.where(arm > 0, np.minimum(arm, np.where(room > 0, room, np.inf)), room)
+        still[name] = nearer(arm, room)
     points = robot.control_point_positions(Q0)
     pool = []
     for k in range(WALK):
@@ -622,7 +622,7 @@ def still_pool(all_cameras, robot, renderer, names):
         raw = {}
         for name in names:
             body = render_depth(all_cameras[name], person)
-            depth = np.where(body > 0, np.minimum(body, np.where(still[name] > 0, still[name], np.inf)), still[name])
+            depth = nearer(body, still[name])
             raw[name] = np.round(depth * 1000).astype(np.uint16)
         pool.append((Q0.copy(), points, raw))
     return pool

@@ -22,7 +22,7 @@ from depthguard.robots import RobotModel  # noqa: E402
 from depthguard.scenes import Box, render_depth  # noqa: E402
 from depthguard.self_filter import RobotSilhouette  # noqa: E402
 from depthguard.transforms import look_at  # noqa: E402
-from _common import report, timings  # noqa: E402
+from _common import nearer, report, timings  # noqa: E402
 
 
 def main(argv=None) -> None:
@@ -52,7 +52,7 @@ def main(argv=None) -> None:
     for camera in cameras:
         exact = silhouettes["meshes"].render(camera, poses[0])
         scene = render_depth(camera, room)
-        depth = np.where(exact > 0, np.minimum(exact, np.where(scene > 0, scene, np.inf)), scene)
+        depth = nearer(exact, scene)
         frames[camera.name] = dg.depth_image(np.round(depth * 1000).astype(np.uint16), camera)
 
     def filter_pair():
