@@ -12,7 +12,7 @@ free), for d = 40 mm, and in the SSM layout also 55 and 70 mm (ISO 13855's large
 40 mm, 850 mm above):
 
     .venv/bin/python benchmarks/probe_ssm_coverage.py [--time 5.2] [--rho 1.5] [--loop]
-    .venv/bin/python benchmarks/probe_ssm_coverage.py --bound [--start 3.5] [--settle 0.5] [--two]
+    .venv/bin/python benchmarks/probe_ssm_coverage.py --bound [--start 3.5] [--settle 0.5] [--two] [--fine 0.007]
     .venv/bin/python benchmarks/probe_ssm_coverage.py --margins [--time 5.2] [--nearer 0.45]
 
 ``--bound`` prints only the factor SSM allows along the task from an ideal sound memory opened by d beside the
@@ -33,6 +33,7 @@ Layouts (the variants are written from the packaged scene files into a temporary
 from __future__ import annotations
 
 import argparse
+import math
 import tempfile
 from importlib import resources
 from pathlib import Path
@@ -129,6 +130,9 @@ def main(argv=None) -> None:
     parser.add_argument("--start", type=float, default=3.5, help="--bound: seconds, where the memories start")
     parser.add_argument("--settle", type=float, default=0.5, help="--bound: seconds of start-up not counted")
     parser.add_argument("--two", action="store_true", help="--bound: in the scene's two-camera layout")
+    parser.add_argument("--fine", type=float, default=None,
+                        help="--bound: only the ideal with every margin, on its 1 cm grid and on one this fine "
+                             "(metres), beside the project (the bound's dependence on its sampling)")
     parser.add_argument("--margins", action="store_true",
                         help="only what holds the project's detectable distances at 0 in the SSM cell: its voxels, "
                              "the robot's inside and each margin, one at a time (about 3 minutes)")
@@ -136,7 +140,7 @@ def main(argv=None) -> None:
                         help="--margins: every camera this fraction of its distance from where it looks (0-1]")
     args = parser.parse_args(argv)
     if args.bound:
-        bound(args.start, args.settle, verbose=True, two=args.two)
+        bound(args.start, args.settle, verbose=True, two=args.two, fine=args.fine)
         return
     if args.margins:
         margins(args.time, args.nearer)
@@ -219,7 +223,7 @@ BOUND_BOX = ((-0.65, -0.82, -0.5), (1.2, 0.73, 1.54))
 
 
 def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, verbose: bool = False,
-          two: bool = False) -> None:
+          two: bool = False, fine: float | None = None) -> None:
     """Issue 35 item 6 for SSM: along the task in the SSM cell (``avoidance_demo.ssm_scene``, the robot where its
     script puts it, not slowed), the factor SSM allows each frame from the distances of an ideal sound memory opened
     by d (:class:`depthguard_lab.experiments.ideal_memory.IdealMemory` with ``opening=d``: exact ray casts, the
@@ -230,7 +234,14 @@ def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, v
     frames, with the same SSM (C for d, the joints' braking, T_r = one frame's latency + one control step, the
     task's command) and the loop's look-ahead. Both memories start at ``start`` seconds with everything possibly
     occupied; the first ``settle`` seconds are not counted. ``two``: in the scene's own layout (its two front
-    Kinect-class cameras) instead of the SSM cell's five."""
+    Kinect-class cameras) instead of the SSM cell's five. ``fine`` (metres): only the ideal with every margin, on
+    its ``spacing`` grid (the bound), and what a sound rule with the ideal's exact tests would give on a grid of
+    ``fine`` (s): the ideal's points stand for themselves (a ball centred on a grid point, free points only at grid
+    points), which is generous; a sound rule keeps a grid point as a ball's centre unless a free point lies within
+    r - s sqrt(3) / 2 of it (then every point of its cube has one within r) and counts its distance from the cube
+    less r. So that row is the ideal on the fine grid with the radius less half a cube's diagonal and its distances
+    less a whole diagonal (the cube's own and the radius'). The project's rule differs: 1 cm voxels each wholly free,
+    the robot's inside from inner balls, a cell's footprint of pixels."""
     from depthguard_lab.experiments.avoidance_demo import ssm_scene
     from depthguard_lab.experiments.ideal_memory import IdealMemory, measured_depths
     from depthguard_lab.simulation._closed_loop import _detectable, _ssm_factor, beyond_rho
@@ -248,12 +259,19 @@ def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, v
     dt = 1.0 / settings.control_rate
     reaction = settings.latency + dt
     monitor = dg.DistanceMonitor(cell.rig, **_sound_options(cell, settings, d))
-    ideals = {"ideal, exact": IdealMemory(cell, spacing=spacing, bounds=BOUND_BOX, opening=d),
-              "ideal, measured": IdealMemory(cell, spacing=spacing, noise_margin=True, measured=True,
-                                             bounds=BOUND_BOX, opening=d),
-              "ideal, margins": IdealMemory(cell, spacing=spacing, noise_margin=True, measured=True,
-                                            bounds=BOUND_BOX, opening=d, calibration=monitor.settings.fusion_margin,
-                                            pad=monitor.settings.fusion_pixels)}
+    margins = dict(noise_margin=True, measured=True, bounds=BOUND_BOX, opening=d,
+                   calibration=monitor.settings.fusion_margin, pad=monitor.settings.fusion_pixels)
+    if fine is None:
+        ideals = {"ideal, exact": IdealMemory(cell, spacing=spacing, bounds=BOUND_BOX, opening=d),
+                  "ideal, measured": IdealMemory(cell, spacing=spacing, noise_margin=True, measured=True,
+                                                 bounds=BOUND_BOX, opening=d),
+                  "ideal, margins": IdealMemory(cell, spacing=spacing, **margins)}
+    else:  # a sound rule's rounding on the fine grid: the centre's radius less half a cube's diagonal
+        half = fine * math.sqrt(3.0) / 2.0
+        ideals = {f"ideal, margins, {spacing * 1000:g} mm": IdealMemory(cell, spacing=spacing, **margins),
+                  f"sound rule, {fine * 1000:g} mm": IdealMemory(cell, spacing=fine,
+                                                                 **{**margins, "opening": d - 2.0 * half})}
+    less = {name: (2.0 * half if name.startswith("sound") else 0.0) for name in ideals}
     rows = {name: [] for name in ["project", *ideals]}
     least = {name: [] for name in rows}
     truth = TruthComputer(robot)
@@ -265,7 +283,7 @@ def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, v
           f"{layout}, the robot on its script, d = {d * 1000:.0f} mm "
           f"(C = {intrusion_distance(d) * 1000:.0f} mm), "
           f"T_r = {reaction * 1000:.0f} ms; the memories start at {start:g} s, counted from {start + settle:g} s; "
-          f"the ideal's grid {spacing * 100:g} cm over {BOUND_BOX}")
+          f"the ideal's grid {spacing * 100:g} cm{f' and {fine * 1000:g} mm' if fine else ''} over {BOUND_BOX}")
     try:
         for index in range(int(round(start * cell.rate)), int(round(cell.duration * cell.rate)) + 1):
             t = index / cell.rate
@@ -283,7 +301,8 @@ def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, v
             person.append(float(np.min(frame.truth.distances[:, moving], initial=np.inf)))
             asks = {"project": (prepared, lambda p, x: _detectable(p, x, settings.ssm_rho))}
             for name, ideal in ideals.items():
-                asks[name] = (ideal, lambda p, x: beyond_rho(p.nearest(x), settings.ssm_rho))
+                asks[name] = (ideal, lambda p, x, less=less[name]: beyond_rho(np.maximum(p.nearest(x) - less, 0.0),
+                                                                            settings.ssm_rho))
             for name, (source, ask) in asks.items():
                 distance = ask(source, points)
                 least[name].append(float(np.min(_from_spheres(distance, radii, settings.ssm_rho))))
@@ -416,7 +435,8 @@ def margins(t: float, nearer: float | None = None) -> None:
 if __name__ == "__main__":
     import sys
 
-    name = ("probe_ssm_coverage_bound" + ("_two" if "--two" in sys.argv else "")) if "--bound" in sys.argv else \
+    name = ("probe_ssm_coverage_bound" + ("_two" if "--two" in sys.argv else "")
+            + ("_fine" if "--fine" in sys.argv else "")) if "--bound" in sys.argv else \
         ("probe_ssm_coverage_margins" + ("_nearer" if "--nearer" in sys.argv else "")) if "--margins" in sys.argv \
         else None
     with report(__file__, name=name):
