@@ -16,7 +16,8 @@ free), for d = 40 mm, and in the SSM layout also 55 and 70 mm (ISO 13855's large
     .venv/bin/python benchmarks/probe_ssm_coverage.py --margins [--time 5.2] [--nearer 0.45]
 
 ``--bound`` prints only the factor SSM allows along the task from an ideal sound memory opened by d beside the
-project's (issue 35 item 6; :func:`bound`; figures in ``docs/figures/probe_ssm_coverage_bound.md``).
+project's (issue 35 item 6; :func:`bound`; figures in ``docs/figures/probe_ssm_coverage_bound.md``); with ``--fine S``,
+beside a sound rule's rounding of that ideal on a grid of S (``docs/figures/probe_ssm_coverage_bound_fine.md``).
 
 Layouts (the variants are written from the packaged scene files into a temporary directory):
 - ``two``: the scene's two front cameras, workspace top z = 1.5 m (the principal sees up to about z = 1.5 there);
