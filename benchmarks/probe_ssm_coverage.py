@@ -240,9 +240,10 @@ def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, v
     ``fine`` (s): the ideal's points stand for themselves (a ball centred on a grid point, free points only at grid
     points), which is generous; a sound rule keeps a grid point as a ball's centre unless a free point lies within
     r - s sqrt(3) / 2 of it (then every point of its cube has one within r) and counts its distance from the cube
-    less r. So that row is the ideal on the fine grid with the radius less half a cube's diagonal and its distances
-    less a whole diagonal (the cube's own and the radius'). The project's rule differs: 1 cm voxels each wholly free,
-    the robot's inside from inner balls, a cell's footprint of pixels."""
+    less r. That row is the ideal on the fine grid with the radius r' = r - s sqrt(3) / 2 and its distances less a
+    whole diagonal, s sqrt(3). Since each opened grid point lies within r' of a centre, such a rule's distance is at
+    most the opened points' distance less s sqrt(3) / 2: at most half a diagonal above the row's. The project's rule
+    differs: 1 cm voxels each wholly free, the robot's inside from inner balls, a cell's footprint of pixels."""
     from depthguard_lab.experiments.avoidance_demo import ssm_scene
     from depthguard_lab.experiments.ideal_memory import IdealMemory, measured_depths
     from depthguard_lab.simulation._closed_loop import _detectable, _ssm_factor, beyond_rho
