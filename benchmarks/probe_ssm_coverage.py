@@ -131,7 +131,7 @@ def main(argv=None) -> None:
     parser.add_argument("--start", type=float, default=3.5, help="--bound: seconds, where the memories start")
     parser.add_argument("--settle", type=float, default=0.5, help="--bound: seconds of start-up not counted")
     parser.add_argument("--two", action="store_true", help="--bound: in the scene's two-camera layout")
-    parser.add_argument("--fine", type=float, default=None,
+    parser.add_argument("--fine", type=_grid_spacing, default=None,
                         help="--bound: only the ideal with every margin, on its 1 cm grid and on one this fine "
                              "(metres), beside the project (the bound's dependence on its sampling)")
     parser.add_argument("--margins", action="store_true",
@@ -173,6 +173,14 @@ def main(argv=None) -> None:
     print("\ncolumns: " + " ".join(names))
     if args.loop:
         closed_loop()
+
+
+def _grid_spacing(text: str) -> float:
+    """--fine's value: metres, finite, in (0, 0.02] (a grid step no longer than the ball's radius, d / 2 = 20 mm)."""
+    value = float(text)
+    if not 0.0 < value <= 0.02:  # also refuses nan and inf
+        raise argparse.ArgumentTypeError(f"a grid spacing in metres in (0, 0.02], got {text!r}")
+    return value
 
 
 def closed_loop(capabilities=(0.04, 0.07)) -> None:
