@@ -132,8 +132,8 @@ def main(argv=None) -> None:
     parser.add_argument("--settle", type=float, default=0.5, help="--bound: seconds of start-up not counted")
     parser.add_argument("--two", action="store_true", help="--bound: in the scene's two-camera layout")
     parser.add_argument("--fine", type=_grid_spacing, default=None,
-                        help="--bound: only the ideal with every margin, on its 1 cm grid and on one this fine "
-                             "(metres), beside the project (the bound's dependence on its sampling)")
+                        help="--bound: only the ideal with every margin on its 1 cm grid, beside a sound rule's "
+                             "rounding of it on a grid this fine (metres, at most 0.02), and the project")
     parser.add_argument("--margins", action="store_true",
                         help="only what holds the project's detectable distances at 0 in the SSM cell: its voxels, "
                              "the robot's inside and each margin, one at a time (about 3 minutes)")
