@@ -3,7 +3,7 @@
 #
 #   ./dev.sh demo    set up, then run the main job: the lab's built-in workcell in closed loop (plots + tables in
 #                    out/demo)
-#   ./dev.sh test    set up, then run the test suite (what CI runs)
+#   ./dev.sh test    set up, then run the test suite (what CI runs), in two worker processes
 #   ./dev.sh bench   set up, then run the benchmarks
 #   ./dev.sh setup   only set up
 #
@@ -69,7 +69,9 @@ setup
 case "$job" in
   setup) ;;
   demo) exec .venv/bin/depthguard-lab demo "$@" ;;
-  test) exec .venv/bin/python -m pytest -q "$@" ;;
+  # Two worker processes, each module's tests in one of them (its module-scoped set-ups made once); each worker
+  # runs numba on one thread (tests/conftest.py).
+  test) exec .venv/bin/python -m pytest -q -n 2 --dist loadscope "$@" ;;
   bench)
     for bench in benchmarks/bench_*.py; do
       echo "== $bench"

@@ -10,6 +10,17 @@ SHARED = os.path.join(os.path.dirname(REPO), "shared")
 REAL_DATA = os.path.join(SHARED, "data", "real")
 
 
+def pytest_configure(config):
+    """Under pytest-xdist (``./dev.sh test`` runs one worker per core), each worker runs numba's parallel kernels on
+    one thread: two workers of two threads each on two cores wait for each other's threads far longer than they
+    work. The answers do not depend on the thread count; ``test_depth_grid`` and the kernels' thread tests set it
+    themselves where it is what they check."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        import numba
+
+        numba.set_num_threads(1)
+
+
 @pytest.fixture
 def real_data():
     if not os.path.isdir(REAL_DATA):

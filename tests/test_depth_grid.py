@@ -473,13 +473,14 @@ def test_threads_and_row_chunks_change_no_answer(monkeypatch):
     r, grid, principal, frees, robot_far, robot_near = robot_scene_frames()
     points = np.random.default_rng(8).uniform([-0.5, -0.6, 0.1], [1.3, 0.6, 1.3], (10, 3))
     answers = []
+    previous = numba.get_num_threads()
     for threads, chunks in ((1, 1), (2, 1), (2, 4), (1, 3)):
         numba.set_num_threads(threads)
         monkeypatch.setattr(config, "FUSION_ROW_CHUNKS", chunks)
         for aggregate in ("min", "hybrid"):
             result = fused_distances(grid, r, principal, frees, points, 0.4, aggregate, robot_far=robot_far)
             answers.append((aggregate, result.distance, result.count))
-    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    numba.set_num_threads(previous)
     for aggregate, distance, count in answers:
         first = next(a for a in answers if a[0] == aggregate)
         assert np.allclose(distance, first[1], rtol=1e-12, atol=0) and np.array_equal(count, first[2])
