@@ -17,7 +17,8 @@ free), for d = 40 mm, and in the SSM layout also 55 and 70 mm (ISO 13855's large
 
 ``--bound`` prints only the factor SSM allows along the task from an ideal sound memory opened by d beside the
 project's (issue 35 item 6; :func:`bound`; figures in ``docs/figures/probe_ssm_coverage_bound.md``); with ``--fine S``,
-beside a sound rule's rounding of that ideal on a grid of S (``docs/figures/probe_ssm_coverage_bound_fine.md``).
+beside a sound rule's rounding of that ideal on a grid of S (``docs/figures/probe_ssm_coverage_bound_fine.md`` for 1 cm,
+``..._fine_7mm.md`` for 0.007).
 
 Layouts (the variants are written from the packaged scene files into a temporary directory):
 - ``two``: the scene's two front cameras, workspace top z = 1.5 m (the principal sees up to about z = 1.5 there);
@@ -442,11 +443,28 @@ def margins(t: float, nearer: float | None = None) -> None:
         robot_model._INNER_CAPSULES.clear()
 
 
+def _fine_suffix(argv: list[str]) -> str:
+    """The figure's name for --fine's value: ``_fine`` for 1 cm (the first figure), ``_fine_7mm`` for 0.007."""
+    for i, arg in enumerate(argv):
+        if arg == "--fine" and i + 1 < len(argv):
+            value = argv[i + 1]
+        elif arg.startswith("--fine="):
+            value = arg.split("=", 1)[1]
+        else:
+            continue
+        try:
+            mm = float(value) * 1000.0
+        except ValueError:  # refused by argparse, before any figure is written
+            return "_fine"
+        return "_fine" if math.isclose(mm, 10.0) else f"_fine_{mm:g}mm"
+    return ""
+
+
 if __name__ == "__main__":
     import sys
 
     name = ("probe_ssm_coverage_bound" + ("_two" if "--two" in sys.argv else "")
-            + ("_fine" if "--fine" in sys.argv else "")) if "--bound" in sys.argv else \
+            + _fine_suffix(sys.argv)) if "--bound" in sys.argv else \
         ("probe_ssm_coverage_margins" + ("_nearer" if "--nearer" in sys.argv else "")) if "--margins" in sys.argv \
         else None
     with report(__file__, name=name):
