@@ -470,7 +470,7 @@ class DistanceMonitor:
 
         box = self.memory.box
         t = min(state.occupancy.timestamp for state in new)
-        robot = near = inner = None
+        robot = near = inner = region = None
         if self.robot is not None:  # Robot_k: inside the links at the joints of the frames captured at t
             joints = [state.joints for state in new if state.occupancy.timestamp == t and state.joints is not None]
             if joints:
@@ -480,16 +480,21 @@ class DistanceMonitor:
                 # frames of t agree on the joints (else the cameras alone)
                 near = np.zeros(box.shape, dtype=bool)
                 padded = np.empty((len(self.robot.capsules), 7))
+                spans = []  # each moment's sub-box of the marks
                 for q in joints:
                     padded[:, :6] = self.robot.capsule_segments(q, check=False).reshape(-1, 6)
                     padded[:, 6] = [capsule.radius for capsule in self.robot.capsules]
-                    robot_voxels(box, padded, box.voxel * math.sqrt(3.0), near)
+                    spans.append(robot_voxels(box, padded, box.voxel * math.sqrt(3.0), near))
+                spans = [s for s in spans if all(part.stop > part.start for part in s)]
+                region = tuple(slice(min(s[a].start for s in spans), max(s[a].stop for s in spans))
+                               for a in range(3)) if spans else (slice(0, 0),) * 3
                 same = all(np.array_equal(m, moments[0]) for m in moments)
                 inner = moments[0] if same else None
         remember_frames(
             self.memory, t, [state.camera for state in new], [state.free for state in new],
             [functools.partial(surface_voxels, box, state.camera, state.image, state.occupancy) for state in new],
-            margin=self.fusion_margin, pad=self.fusion_pixels, robot=robot, near_robot=near, inner=inner)
+            margin=self.fusion_margin, pad=self.fusion_pixels, robot=robot, near_robot=near, inner=inner,
+            near_region=region)
         self._remembered = {id(state) for state in usable.values()}
 
     def plan(self, usable, stale) -> "QueryPlan":

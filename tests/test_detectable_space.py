@@ -106,6 +106,27 @@ def test_the_opening_matches_scipys():
     np.testing.assert_allclose(limited, np.minimum(space.distances(points), 0.01), atol=1e-9)
 
 
+def test_robot_voxels_mark_nothing_outside_the_sub_box_they_return():
+    """``robot_voxels`` returns slices outside which it marked nothing: for capsules across the box's faces, thin
+    ones that reach no voxel's centre, and (the whole box) one that is not finite."""
+    box = VoxelBox([-0.3, -0.3, -0.3], [0.3, 0.3, 0.3], S)
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        n = int(rng.integers(1, 4))
+        capsules = np.concatenate([rng.uniform(-0.45, 0.45, (n, 6)), rng.uniform(0.0, 0.08, (n, 1))], axis=1)
+        zone = float(rng.choice([0.0, 0.03]))
+        marked = np.zeros(box.shape, dtype=bool)
+        region = robot_voxels(box, capsules, zone, marked)
+        inside = np.zeros(box.shape, dtype=bool)
+        inside[region] = True
+        assert not np.any(marked & ~inside)
+    thin = np.zeros(box.shape, dtype=bool)
+    assert robot_voxels(box, np.array([[0.0, 0.0, 0.0, 0.1, 0.0, 0.0, 0.001]]), 0.0, thin) == (slice(0, 0),) * 3
+    assert not thin.any()
+    whole = robot_voxels(box, np.array([[0.0, 0.0, np.nan, 0.1, 0.0, 0.0, 0.05]]), 0.0, np.zeros(box.shape, bool))
+    assert whole == tuple(slice(0, n) for n in box.shape)
+
+
 def test_robot_and_solid_voxels_lie_inside_what_they_stand_for():
     box = VoxelBox([-0.3, -0.3, -0.3], [0.3, 0.3, 0.3], S)
     corners = _corners(box)

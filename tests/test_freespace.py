@@ -564,3 +564,39 @@ def test_mixed_voxels_combine_cameras_and_the_robot_within_a_voxel():
     assert mixed_voxels(one, blind, np.zeros((1, 3), int), halves, 1)[0]
     assert not mixed_voxels(one, blind, np.zeros((1, 3), int), halves[:1], 2)[0]
     assert not mixed_voxels(one, blind, np.zeros((1, 3), int), halves, 0)[0]
+
+
+def test_the_voxels_next_to_the_robot_are_looked_for_in_its_sub_box_only_with_the_same_answer():
+    """``remember_frames`` with ``near_region`` (the sub-box ``robot_voxels`` returns) takes the same voxels next to
+    the robot as with the whole box searched: the same voxels seen free and the same arrival times, over a box much
+    larger than the robot's sub-box (as a cell's is)."""
+    from depthguard.freespace import remember_frames, robot_inside_voxels, robot_voxels
+    from depthguard.scenes import Capsule
+
+    p0, p1, radius = np.array([-0.25, 0.0, 0.5]), np.array([0.25, 0.05, 0.6]), 0.07
+    scene = [Box.from_bounds([-3, -3, -0.05], [3, 3, 0.0]), Capsule(tuple(p0), tuple(p1), radius)]
+    cameras, images = [], []
+    for n, eye in enumerate(([1.6, -1.4, 1.8], [1.5, 1.6, 1.6])):
+        camera = dg.PinholeCamera(f"c{n}", 320, 240, 260.0, 260.0, 159.5, 119.5, look_at(eye, [0.0, 0.0, 0.5]),
+                                  depth_range=(0.4, 6.0))
+        cameras.append(camera)
+        images.append(free_image(dg.depth_image(render_depth(camera, scene), camera), camera))
+    box = VoxelBox([-1.2, -1.0, 0.0], [1.2, 1.0, 1.4], 0.04)
+    inner = np.array([[*p0, *p1, radius - 0.002]])
+    robot = robot_inside_voxels(box, [inner])
+    near = np.zeros(box.shape, dtype=bool)
+    region = robot_voxels(box, np.array([[*p0, *p1, radius]]), box.voxel * math.sqrt(3.0), near)
+    sub = np.zeros(box.shape, dtype=bool)
+    sub[region] = True
+    assert near.any() and not np.any(near & ~sub)
+    assert sub.sum() * 20 < sub.size  # the robot's sub-box is a small part of the box
+    answers = []
+    for searched in (None, region):
+        memory = FreeSpaceMemory(box)
+        seen = remember_frames(memory, 1.0, cameras, images, [], margin=0.005, pad=0, robot=robot, near_robot=near,
+                               inner=inner, near_region=searched)
+        answers.append((seen, memory.arrival.copy()))
+    np.testing.assert_array_equal(answers[0][0], answers[1][0])
+    np.testing.assert_array_equal(answers[0][1], answers[1][1])
+    by_pieces = answers[0][0] & near & ~seen_free_voxels(box, cameras, images, margin=0.005, pad=0) & ~robot
+    assert by_pieces.any()  # some voxels next to the robot were certified piece by piece, so the search mattered

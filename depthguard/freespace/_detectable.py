@@ -270,13 +270,37 @@ _NO_MASK = np.zeros((0, 0, 0), dtype=np.bool_)
 _NO_CAPSULES = np.zeros((0, 0, 7))
 
 
-def robot_voxels(box: VoxelBox, capsules: np.ndarray, zone: float, out: np.ndarray) -> None:
+def robot_voxels(box: VoxelBox, capsules: np.ndarray, zone: float, out: np.ndarray) -> tuple[slice, slice, slice]:
     """Mark in ``out`` (box.shape bool) the voxels that lie entirely within ``zone`` metres of the capsules
     ((n, 7): p0 (3), p1 (3), radius, metres, world frame): the robot and its zone, no person (as the monitor's
     ``robot_zone`` takes it). A voxel is marked when its centre is within radius + zone - s sqrt(3) / 2 of the
-    segment."""
+    segment. Returns (i, j, k) slices of the box outside which nothing was marked: the capsules' bounding boxes
+    grown by their reach and a voxel (the whole box where a capsule is not finite; empty slices when none reaches a
+    voxel's centre), so that a caller may look for the marks there only."""
     capsules = np.ascontiguousarray(capsules, dtype=np.float64).reshape(-1, 7)
     mark_capsule_voxels(np.asarray(box.lo, dtype=np.float64), float(box.voxel), capsules, float(zone), out)
+    return _capsule_region(box, capsules, float(zone))
+
+
+def _capsule_region(box: VoxelBox, capsules: np.ndarray, zone: float) -> tuple[slice, slice, slice]:
+    """The slices :func:`robot_voxels` returns: for the capsules whose reach (radius + zone - s sqrt(3) / 2, the
+    kernel's) is positive, the voxels from floor((min corner - reach - lo) / s) - 1 to ceil((max corner + reach -
+    lo) / s) + 1 (one voxel wider than the kernel's loops each way, against rounding), cut at the box."""
+    shape = np.asarray(box.shape)
+    whole = tuple(slice(0, n) for n in box.shape)
+    reach = capsules[:, 6] + zone - 0.5 * math.sqrt(3.0) * box.voxel
+    if not (np.all(np.isfinite(capsules)) and math.isfinite(zone)):
+        return whole
+    reaching = capsules[reach > 0.0]
+    if not len(reaching):
+        return (slice(0, 0),) * 3
+    r = reach[reach > 0.0][:, None]
+    lo = np.asarray(box.lo, dtype=np.float64)
+    low = (np.minimum(reaching[:, 0:3], reaching[:, 3:6]) - r - lo) / box.voxel
+    high = (np.maximum(reaching[:, 0:3], reaching[:, 3:6]) + r - lo) / box.voxel
+    start = np.clip(np.floor(low.min(axis=0)) - 1, 0, shape).astype(np.int64)
+    stop = np.clip(np.ceil(high.max(axis=0)) + 2, 0, shape).astype(np.int64)
+    return tuple(slice(int(a), int(max(a, b))) for a, b in zip(start, stop))
 
 
 def robot_voxels_at_every(box: VoxelBox, poses, zone: float) -> np.ndarray:
