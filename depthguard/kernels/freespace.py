@@ -142,17 +142,32 @@ def _all_true(out, i0, i1, j0, j1, k0, k1):
 
 
 @kernel(inline=True)
+def _push_cube(stack, top, a, b, c, side):
+    """Push the box (a, b, c, side) onto ``stack`` ((depth, 4) int64 rows a, b, c, side) at ``top``; returns the new
+    top."""
+    stack[top, 0] = a
+    stack[top, 1] = b
+    stack[top, 2] = c
+    stack[top, 3] = side
+    return top + 1
+
+
+@kernel(inline=True)
 def _push_halves(stack, top, a, b, c, side):
-    """Push the 8 halves of the box (a, b, c, side) onto ``stack`` ((depth, 4) int64 rows a, b, c, side) at ``top``;
-    returns the new top."""
+    """Push the 8 halves of the box (a, b, c, side) onto ``stack`` at ``top`` (:func:`_push_cube`); returns the new
+    top."""
     half = side // 2
     for child in range(8):
-        stack[top, 0] = a + (half if child & 1 else 0)
-        stack[top, 1] = b + (half if child & 2 else 0)
-        stack[top, 2] = c + (half if child & 4 else 0)
-        stack[top, 3] = half
-        top += 1
+        top = _push_cube(stack, top, a + (half if child & 1 else 0), b + (half if child & 2 else 0),
+                         c + (half if child & 4 else 0), half)
     return top
+
+
+@kernel(inline=True)
+def _pop_cube(stack, top):
+    """The box on top of ``stack`` (as :func:`_push_halves` writes it): (the new top, a, b, c, side)."""
+    top -= 1
+    return top, stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3]
 
 
 @kernel(inline=True)
@@ -177,17 +192,9 @@ def seen_free_block(lo, voxel, poses, intrinsics, z_near, sizes, tables, floor_l
     ey = min(block, ny - j0)
     ez = min(block, nz - k0)
     projected = False
-    stack[0, 0] = 0
-    stack[0, 1] = 0
-    stack[0, 2] = 0
-    stack[0, 3] = block
-    top = 1
+    top = _push_cube(stack, 0, 0, 0, 0, block)
     while top > 0:
-        top -= 1
-        a = stack[top, 0]
-        b = stack[top, 1]
-        c = stack[top, 2]
-        side = stack[top, 3]
+        top, a, b, c, side = _pop_cube(stack, top)
         if a >= ex or b >= ey or c >= ez:
             continue
         a1 = min(a + side, ex)
@@ -347,18 +354,10 @@ def certify_mixed_voxels(lo, voxel, candidates, poses, intrinsics, z_near, sizes
         world = np.empty((8, 3))
         corners = np.empty((8, 3))
         stack = np.empty((7 * levels + 1, 4), dtype=np.int64)  # (a, b, c, side) in pieces
-        stack[0, 0] = 0
-        stack[0, 1] = 0
-        stack[0, 2] = 0
-        stack[0, 3] = n
-        top = 1
+        top = _push_cube(stack, 0, 0, 0, 0, n)
         passed = True
         while top > 0:
-            top -= 1
-            a = stack[top, 0]
-            b = stack[top, 1]
-            c = stack[top, 2]
-            side = stack[top, 3]
+            top, a, b, c, side = _pop_cube(stack, top)
             for corner in range(8):
                 world[corner, 0] = lo[0] + (i + (a + (side if corner & 1 else 0)) / n) * voxel
                 world[corner, 1] = lo[1] + (j + (b + (side if corner & 2 else 0)) / n) * voxel
