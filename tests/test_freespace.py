@@ -490,16 +490,9 @@ def test_surface_voxels_hold_the_measured_points_and_forget_makes_them_possibly_
     assert not memory.free_at(0.01)[marked].any()
 
 
-def test_mixed_voxels_combine_cameras_and_the_robot_within_a_voxel():
-    """design §8a: a voxel counts free when every point of it is seen free by some camera or lies inside the robot.
-    Two cameras see a floor and a rendered capsule (the robot; its inner capsule 2 mm thinner); the voxels next to it
-    that neither camera sees whole and that are not wholly inside it are judged piece by piece
-    (``mixed_voxels``). Judge: every point of a 9^3 lattice in each voxel that passes is inside the inner capsule or
-    seen free by a camera on the pixel it projects to (free there at least to its depth plus the margin). Some pass
-    only by the two cameras together; none that holds the robot's surface passes (the layer the margins leave between
-    the seen-free space and the robot's inside is neither); a voxel in two inner capsules passes by the robot alone."""
-    from depthguard.freespace import CameraViews
-    from depthguard.freespace._memory import mixed_voxels
+def two_cameras_see_a_capsule():
+    """(p0, p1, radius, cameras, free images): a capsule (the robot) 0.5-0.6 m above a floor, seen by two 320x240
+    cameras."""
     from depthguard.scenes import Capsule
 
     p0, p1, radius = np.array([-0.25, 0.0, 0.5]), np.array([0.25, 0.05, 0.6]), 0.07
@@ -510,6 +503,21 @@ def test_mixed_voxels_combine_cameras_and_the_robot_within_a_voxel():
                                   depth_range=(0.4, 6.0))
         cameras.append(camera)
         images.append(free_image(dg.depth_image(render_depth(camera, scene), camera), camera))
+    return p0, p1, radius, cameras, images
+
+
+def test_mixed_voxels_combine_cameras_and_the_robot_within_a_voxel():
+    """design §8a: a voxel counts free when every point of it is seen free by some camera or lies inside the robot.
+    Two cameras see a floor and a rendered capsule (the robot; its inner capsule 2 mm thinner); the voxels next to it
+    that neither camera sees whole and that are not wholly inside it are judged piece by piece
+    (``mixed_voxels``). Judge: every point of a 9^3 lattice in each voxel that passes is inside the inner capsule or
+    seen free by a camera on the pixel it projects to (free there at least to its depth plus the margin). Some pass
+    only by the two cameras together; none that holds the robot's surface passes (the layer the margins leave between
+    the seen-free space and the robot's inside is neither); a voxel in two inner capsules passes by the robot alone."""
+    from depthguard.freespace import CameraViews
+    from depthguard.freespace._memory import mixed_voxels
+
+    p0, p1, radius, cameras, images = two_cameras_see_a_capsule()
     margin = 0.005
     box = VoxelBox([-0.4, -0.2, 0.35], [0.4, 0.24, 0.76], 0.04)
     seen = seen_free_voxels(box, cameras, images, margin=margin, pad=0)
@@ -571,16 +579,8 @@ def test_the_voxels_next_to_the_robot_are_looked_for_in_its_sub_box_only_with_th
     the robot as with the whole box searched: the same voxels seen free and the same arrival times, over a box much
     larger than the robot's sub-box (as a cell's is)."""
     from depthguard.freespace import remember_frames, robot_inside_voxels, robot_voxels
-    from depthguard.scenes import Capsule
 
-    p0, p1, radius = np.array([-0.25, 0.0, 0.5]), np.array([0.25, 0.05, 0.6]), 0.07
-    scene = [Box.from_bounds([-3, -3, -0.05], [3, 3, 0.0]), Capsule(tuple(p0), tuple(p1), radius)]
-    cameras, images = [], []
-    for n, eye in enumerate(([1.6, -1.4, 1.8], [1.5, 1.6, 1.6])):
-        camera = dg.PinholeCamera(f"c{n}", 320, 240, 260.0, 260.0, 159.5, 119.5, look_at(eye, [0.0, 0.0, 0.5]),
-                                  depth_range=(0.4, 6.0))
-        cameras.append(camera)
-        images.append(free_image(dg.depth_image(render_depth(camera, scene), camera), camera))
+    p0, p1, radius, cameras, images = two_cameras_see_a_capsule()
     box = VoxelBox([-1.2, -1.0, 0.0], [1.2, 1.0, 1.4], 0.04)
     inner = np.array([[*p0, *p1, radius - 0.002]])
     robot = robot_inside_voxels(box, [inner])
