@@ -15,6 +15,7 @@ Once the kernels are cached it takes a few seconds (mostly imports and loading t
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from dataclasses import dataclass, field
@@ -252,6 +253,17 @@ def _memory_and_detectable() -> None:
     memory.update(0.0, seen)
     memory.update(0.1, seen, robot=np.zeros(box.shape, dtype=bool))
     squared_distance_transform(seen)
+    # The voxels next to the robot that no camera sees whole, judged piece by piece, as the monitor's memory takes
+    # them with a robot: a "link" standing in the box, into which neither camera sees.
+    from depthguard.freespace import remember_frames, robot_inside_voxels, robot_voxels
+
+    link = np.array([[0.0, 0.0, 0.3, 0.0, 0.0, 0.7, 0.12]])
+    inner = link - [[0.0] * 6 + [0.02]]
+    near = np.zeros(box.shape, dtype=bool)
+    region = robot_voxels(box, link, box.voxel * math.sqrt(3.0), near)
+    remember_frames(FreeSpaceMemory(box), 0.2, cameras, [free_image(images[c.name], c) for c in cameras], [],
+                    margin=0.01, pad=1, robot=robot_inside_voxels(box, [inner]), near_robot=near, inner=inner,
+                    near_region=region)
     # The monitor with the memory (a rig with a workspace, stamped frames): its sets and their detectable space.
     remembering = _remembering_monitor(rig)
     for k, (stamped, pts) in enumerate(_stamped_sets(rig, frames, (one, several))):

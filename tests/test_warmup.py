@@ -66,6 +66,15 @@ filling = dg.DistanceMonitor(rig, invalid="neighbors")
 for pts in (points[:1], points):
     filling.query({**frames, "principal": dg.depth_image(holed, rig.cameras["principal"])}, pts)
 dg.frustum_distance([0.0, 0.0, 1.0], [[-0.1, 0.1, -0.1, 0.1]], [0.5, np.inf])
+# The monitor as replay and live run it: the free-space memory (a rig with a workspace) beside the robot (its inside,
+# and the voxels next to it that no camera sees whole, judged piece by piece), stamped frames with the joints.
+from depthguard.robots import RobotModel
+q = np.array(json.loads((folder / "q.json").read_text()))
+spaced = dg.Rig(rig.cameras, principal="principal", workspace=[[-1.0, -1.0, 0.0], [1.0, 1.0, 1.5]])
+remembering = dg.DistanceMonitor(spaced, robot=RobotModel.default(), aggregate="min")
+for k in range(2):
+    stamped = {name: dg.depth_image(frame.data, rig.cameras[name], timestamp=0.1 * k) for name, frame in frames.items()}
+    remembering.query(stamped, points, joints=q, now=0.1 * k)
 # The collision test's difference images (depthguard collide), intensity and depth.
 from depthguard.collision import TileGrid, depth_difference_image, tile_features
 grid = TileGrid(rig.cameras["principal"], 6, 8)
