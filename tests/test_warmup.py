@@ -72,9 +72,13 @@ from depthguard.robots import RobotModel
 q = np.array(json.loads((folder / "q.json").read_text()))
 spaced = dg.Rig(rig.cameras, principal="principal", workspace=[[-1.0, -1.0, 0.0], [1.0, 1.0, 1.5]])
 remembering = dg.DistanceMonitor(spaced, robot=RobotModel.default(), aggregate="min")
+# And as live --ssm runs it: SSM's detectable space beside the robot.
+detecting = dg.DistanceMonitor(spaced, robot=RobotModel.default(), aggregate="min", detection_capability=0.06,
+                               detectable_voxel=0.03)
 for k in range(2):
     stamped = {name: dg.depth_image(frame.data, rig.cameras[name], timestamp=0.1 * k) for name, frame in frames.items()}
     remembering.query(stamped, points, joints=q, now=0.1 * k)
+    detecting.prepare_set(stamped, joints=q, now=0.1 * k).detectable_distances(points)
 # The collision test's difference images (depthguard collide), intensity and depth.
 from depthguard.collision import TileGrid, depth_difference_image, tile_features
 grid = TileGrid(rig.cameras["principal"], 6, 8)
