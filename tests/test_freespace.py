@@ -600,3 +600,8 @@ def test_the_voxels_next_to_the_robot_are_looked_for_in_its_sub_box_only_with_th
     np.testing.assert_array_equal(answers[0][1], answers[1][1])
     by_pieces = answers[0][0] & near & ~seen_free_voxels(box, cameras, images, margin=0.005, pad=0) & ~robot
     assert by_pieces.any()  # some voxels next to the robot were certified piece by piece, so the search mattered
+    for bad in ((slice(0, 2),) * 2, (slice(0, 4, 2),) * 3, [slice(None)] * 3, 5):
+        with pytest.raises(dg.InputError, match="near_region") as info:
+            remember_frames(FreeSpaceMemory(box), 2.0, cameras, images, [], margin=0.005, pad=0, robot=robot,
+                            near_robot=near, inner=inner, near_region=bad)
+        assert info.value.field == "near_region"

@@ -411,6 +411,15 @@ def mixed_voxels(box: VoxelBox, views: "CameraViews", candidates: np.ndarray, in
     return out
 
 
+def _region(near_region) -> tuple[slice, slice, slice]:
+    """``remember_frames``' near_region, checked: three slices of step 1 (a slice beyond the box is cut at it)."""
+    if not (isinstance(near_region, tuple) and len(near_region) == 3 and all(
+            isinstance(part, slice) and part.step in (None, 1) for part in near_region)):
+        raise InputError(f"near_region must be a tuple of three slices of step 1 (i, j, k), got "
+                         f"{short_repr(near_region)}", field="near_region")
+    return near_region
+
+
 def remember_frames(memory: "FreeSpaceMemory", t: float, cameras: Sequence[PinholeCamera], free_images: Sequence,
                     surfaces_of: Sequence, margin: float, pad: int, robot: np.ndarray | None = None,
                     near_robot: np.ndarray | None = None, inner: np.ndarray | None = None,
@@ -432,7 +441,7 @@ def remember_frames(memory: "FreeSpaceMemory", t: float, cameras: Sequence[Pinho
     views = CameraViews.of(cameras, free_images, margin, pad)
     seen = _seen_by(memory.box, views)
     if near_robot is not None and views.count:
-        region = tuple(slice(0, n) for n in memory.box.shape) if near_region is None else near_region
+        region = tuple(slice(0, n) for n in memory.box.shape) if near_region is None else _region(near_region)
         undecided = near_robot[region] & ~seen[region]
         if robot is not None:
             undecided &= ~robot[region]
