@@ -436,7 +436,7 @@ def remember_frames(memory: "FreeSpaceMemory", t: float, cameras: Sequence[Pinho
     by piece (:func:`mixed_voxels`): free when every piece is seen free by some camera or lies inside the robot.
     ``near_region``: (i, j, k) slices of the box outside which ``near_robot`` is all False (what
     :func:`~depthguard.freespace.robot_voxels` returns), or None for the whole box: those voxels are looked for
-    there only (the same voxels, in the same order; a tenth of the box's work on a robot's cell).
+    there only (the same voxels, in the same order; 4 % of the box on bench_frame_budget's cell).
     Returns the voxels these frames saw free, alone or with the robot ((nx, ny, nz) bool)."""
     views = CameraViews.of(cameras, free_images, margin, pad)
     seen = _seen_by(memory.box, views)
