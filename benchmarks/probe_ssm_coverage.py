@@ -120,7 +120,7 @@ def probe(path: Path, t: float, rho: float, known: bool, layout: Path | None = N
     return (result.distance - radii, nearest, detectable, (band, why, refusal), list(robot.control_point_names))
 
 
-def main(argv=None) -> None:
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--time", type=float, default=5.2, help="seconds into scenario_b_reach.yaml (default 5.2)")
     parser.add_argument("--rho", type=float, default=1.5, help="the monitor's rho, metres (default 1.5)")
@@ -140,7 +140,24 @@ def main(argv=None) -> None:
                              "the robot's inside and each margin, one at a time (about 3 minutes)")
     parser.add_argument("--nearer", type=float, default=None,
                         help="--margins: every camera this fraction of its distance from where it looks (0-1]")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def figure_name(args: argparse.Namespace) -> str | None:
+    """The figure a run writes (``docs/figures/<name>.md``), or None for the default tables: ``--bound`` in
+    probe_ssm_coverage_bound[_two][_fine | _fine_7mm] (``_fine`` for 1 cm, the first such figure), ``--margins`` in
+    probe_ssm_coverage_margins[_nearer]."""
+    if args.bound:
+        fine = "" if args.fine is None else "_fine" if math.isclose(args.fine, 0.01) else \
+            f"_fine_{args.fine * 1000:g}mm"
+        return "probe_ssm_coverage_bound" + ("_two" if args.two else "") + fine
+    if args.margins:
+        return "probe_ssm_coverage_margins" + ("_nearer" if args.nearer is not None else "")
+    return None
+
+
+def main(argv=None) -> None:
+    args = _parser().parse_args(argv)
     if args.bound:
         bound(args.start, args.settle, verbose=True, two=args.two, fine=args.fine)
         return
@@ -277,12 +294,13 @@ def bound(start: float, settle: float, d: float = 0.04, spacing: float = 0.01, v
                   "ideal, measured": IdealMemory(cell, spacing=spacing, noise_margin=True, measured=True,
                                                  bounds=BOUND_BOX, opening=d),
                   "ideal, margins": IdealMemory(cell, spacing=spacing, **margins)}
+        less = dict.fromkeys(ideals, 0.0)  # metres taken from each one's distances
     else:  # a sound rule's rounding on the fine grid: the centre's radius less half a cube's diagonal
         half = fine * math.sqrt(3.0) / 2.0
+        rule = f"sound rule, {fine * 1000:g} mm"
         ideals = {f"ideal, margins, {spacing * 1000:g} mm": IdealMemory(cell, spacing=spacing, **margins),
-                  f"sound rule, {fine * 1000:g} mm": IdealMemory(cell, spacing=fine,
-                                                                 **{**margins, "opening": d - 2.0 * half})}
-    less = {name: (2.0 * half if name.startswith("sound") else 0.0) for name in ideals}
+                  rule: IdealMemory(cell, spacing=fine, **{**margins, "opening": d - 2.0 * half})}
+        less = {name: 2.0 * half if name == rule else 0.0 for name in ideals}
     rows = {name: [] for name in ["project", *ideals]}
     least = {name: [] for name in rows}
     truth = TruthComputer(robot)
@@ -443,29 +461,7 @@ def margins(t: float, nearer: float | None = None) -> None:
         robot_model._INNER_CAPSULES.clear()
 
 
-def _fine_suffix(argv: list[str]) -> str:
-    """The figure's name for --fine's value: ``_fine`` for 1 cm (the first figure), ``_fine_7mm`` for 0.007."""
-    for i, arg in enumerate(argv):
-        if arg == "--fine" and i + 1 < len(argv):
-            value = argv[i + 1]
-        elif arg.startswith("--fine="):
-            value = arg.split("=", 1)[1]
-        else:
-            continue
-        try:
-            mm = float(value) * 1000.0
-        except ValueError:  # refused by argparse, before any figure is written
-            return "_fine"
-        return "_fine" if math.isclose(mm, 10.0) else f"_fine_{mm:g}mm"
-    return ""
-
-
 if __name__ == "__main__":
-    import sys
-
-    name = ("probe_ssm_coverage_bound" + ("_two" if "--two" in sys.argv else "")
-            + _fine_suffix(sys.argv)) if "--bound" in sys.argv else \
-        ("probe_ssm_coverage_margins" + ("_nearer" if "--nearer" in sys.argv else "")) if "--margins" in sys.argv \
-        else None
-    with report(__file__, name=name):
+    # Parsed once before the figure is opened, so that a refused value writes no figure.
+    with report(__file__, name=figure_name(_parser().parse_args())):
         main()
