@@ -478,16 +478,12 @@ class DistanceMonitor:
                 robot = robot_inside_voxels(box, moments)
                 # the voxels touching the padded capsules, judged piece by piece; the robot's pieces only where the
                 # frames of t agree on the joints (else the cameras alone)
+                # (every moment's capsules in one array: the marks and their sub-box are those of all of them)
+                radii = [capsule.radius for capsule in self.robot.capsules]
+                padded = np.concatenate([np.column_stack([self.robot.capsule_segments(q, check=False).reshape(-1, 6),
+                                                          radii]) for q in joints])
                 near = np.zeros(box.shape, dtype=bool)
-                padded = np.empty((len(self.robot.capsules), 7))
-                spans = []  # each moment's sub-box of the marks
-                for q in joints:
-                    padded[:, :6] = self.robot.capsule_segments(q, check=False).reshape(-1, 6)
-                    padded[:, 6] = [capsule.radius for capsule in self.robot.capsules]
-                    spans.append(robot_voxels(box, padded, box.voxel * math.sqrt(3.0), near))
-                spans = [s for s in spans if all(part.stop > part.start for part in s)]
-                region = tuple(slice(min(s[a].start for s in spans), max(s[a].stop for s in spans))
-                               for a in range(3)) if spans else (slice(0, 0),) * 3
+                region = robot_voxels(box, padded, box.voxel * math.sqrt(3.0), near)
                 same = all(np.array_equal(m, moments[0]) for m in moments)
                 inner = moments[0] if same else None
         remember_frames(

@@ -71,10 +71,10 @@ dg.frustum_distance([0.0, 0.0, 1.0], [[-0.1, 0.1, -0.1, 0.1]], [0.5, np.inf])
 from depthguard.robots import RobotModel
 q = np.array(json.loads((folder / "q.json").read_text()))
 spaced = dg.Rig(rig.cameras, principal="principal", workspace=[[-1.0, -1.0, 0.0], [1.0, 1.0, 1.5]])
-remembering = dg.DistanceMonitor(spaced, robot=RobotModel.default(), aggregate="min")
+iiwa = RobotModel.default()
+remembering = dg.DistanceMonitor(spaced, robot=iiwa, aggregate="min")
 # And as live --ssm runs it: SSM's detectable space beside the robot.
-detecting = dg.DistanceMonitor(spaced, robot=RobotModel.default(), aggregate="min", detection_capability=0.06,
-                               detectable_voxel=0.03)
+detecting = dg.DistanceMonitor(spaced, robot=iiwa, aggregate="min", detection_capability=0.06, detectable_voxel=0.03)
 for k in range(2):
     stamped = {name: dg.depth_image(frame.data, rig.cameras[name], timestamp=0.1 * k) for name, frame in frames.items()}
     remembering.query(stamped, points, joints=q, now=0.1 * k)

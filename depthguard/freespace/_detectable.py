@@ -286,15 +286,14 @@ def _capsule_region(box: VoxelBox, capsules: np.ndarray, zone: float) -> tuple[s
     """The slices :func:`robot_voxels` returns: for the capsules whose reach (radius + zone - s sqrt(3) / 2, the
     kernel's) is positive, the voxels from floor((min corner - reach - lo) / s) - 1 to ceil((max corner + reach -
     lo) / s) + 1 (one voxel wider than the kernel's loops each way, against rounding), cut at the box."""
-    shape = np.asarray(box.shape)
-    whole = tuple(slice(0, n) for n in box.shape)
-    reach = capsules[:, 6] + zone - 0.5 * math.sqrt(3.0) * box.voxel
     if not (np.all(np.isfinite(capsules)) and math.isfinite(zone)):
-        return whole
+        return tuple(slice(0, n) for n in box.shape)
+    reach = capsules[:, 6] + zone - 0.5 * math.sqrt(3.0) * box.voxel
     reaching = capsules[reach > 0.0]
     if not len(reaching):
         return (slice(0, 0),) * 3
     r = reach[reach > 0.0][:, None]
+    shape = np.asarray(box.shape)
     lo = np.asarray(box.lo, dtype=np.float64)
     low = (np.minimum(reaching[:, 0:3], reaching[:, 3:6]) - r - lo) / box.voxel
     high = (np.maximum(reaching[:, 0:3], reaching[:, 3:6]) + r - lo) / box.voxel
