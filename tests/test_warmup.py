@@ -4,6 +4,8 @@ inline (``depthguard.kernels.jit``)."""
 
 from __future__ import annotations
 
+import importlib
+
 import json
 import os
 import re
@@ -170,6 +172,40 @@ def test_every_kernel_module_compiles_through_jit_kernel():
         if re.search(r"^@kernel\(", source, re.M):
             uses_kernel.add(name)
     assert uses_kernel == set(jit.KERNEL_MODULES)
+
+
+def test_kernels_without_reference_counts_allocate_nothing():
+    """The fused query's kernels called per pixel, walk or run are compiled without numba's reference counting
+    (``jit.kernel(refcounts=False)``), and no other: sound because such a kernel can neither allocate nor return an
+    array, which numba enforces at compile time (checked here, on kernels that would): none can keep an array
+    beyond its call."""
+    import numba
+    import numpy as np
+    from numba.core.dispatcher import Dispatcher
+
+    from depthguard.kernels import depthgrid as grid_kernels
+
+    uncounted = set()
+    for module in jit.KERNEL_MODULES:
+        kernels = importlib.import_module(module)
+        uncounted |= {f"{module}.{name}" for name, value in vars(kernels).items()
+                      if isinstance(value, Dispatcher) and value.targetoptions.get("_nrt") is False}
+    assert uncounted == {f"depthguard.kernels.depthgrid.{name}" for name in (
+        "classify_run", "remembered_cells", "occupied_in", "nearest_confirmed", "fused_rows", "fused_region")}
+    assert grid_kernels.fused_finish.targetoptions.get("_nrt", True)  # allocates: counted
+
+    @numba.njit(_nrt=False)
+    def allocates(n):
+        return np.zeros(n).sum()
+
+    @numba.njit(_nrt=False)
+    def returns_a_view(a):
+        return a[1:]
+
+    with pytest.raises(numba.core.errors.NumbaError):
+        allocates(3)
+    with pytest.raises(numba.core.errors.NumbaError):
+        returns_a_view(np.arange(4.0))
 
 
 def test_kernel_caches_are_stamped_with_the_sources_they_inline():

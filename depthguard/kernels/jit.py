@@ -51,7 +51,7 @@ _PACKAGE = Path(__file__).resolve().parent.parent  # the depthguard package
 _LOG = logging.getLogger("depthguard")
 
 
-def kernel(*, parallel: bool = False, inline: bool = False, error_model: str = "numpy"):
+def kernel(*, parallel: bool = False, inline: bool = False, error_model: str = "numpy", refcounts: bool = True):
     """numba's ``njit`` as every depthguard kernel uses it: cached on disk, stamped with the sources it depends on,
     and a warning when it compiles at run time.
 
@@ -66,9 +66,20 @@ def kernel(*, parallel: bool = False, inline: bool = False, error_model: str = "
     so small helpers and functions with one caller are inlined; larger functions with several callers are not
     (a body inlined into several callers, each inlined into several more, multiplies: that once took a minute and
     a half). LLVM still inlines small functions into their callers when it optimises.
+
+    ``refcounts=False``: numba compiles the kernel without reference counting (its ``_nrt=False``). Every array a
+    kernel takes, and every view it makes, is then used without counting: sound only for a kernel that allocates
+    nothing and returns no array, which numba enforces (such a kernel fails to compile: ``tests/test_warmup.py``);
+    its caller holds every array it passes for the whole call. The fused query's
+    kernels called per pixel, walk or run (``depthgrid.classify_run`` and the walks above it) are compiled so: with
+    counting, each call counted every array of the depth grid's record up and down again (23 increments on
+    ``classify_run``'s entry alone), atomic operations that the query's threads contend on, and the first fused
+    query took 1.7 times as long (``docs/design.md``, "A new set inside a camera period").
     """
     _install()
-    jit = numba.njit(parallel=parallel, error_model=error_model, inline="always" if inline else "never", nogil=True)
+    options = {} if refcounts else {"_nrt": False}
+    jit = numba.njit(parallel=parallel, error_model=error_model, inline="always" if inline else "never", nogil=True,
+                     **options)
 
     def decorate(py_func):
         dispatcher = jit(py_func)
